@@ -1,0 +1,3 @@
+//! Interior elasticity on the lattice: corotational FEM, mass, backward Euler.
+
+pub mod bench;

@@ -1,0 +1,162 @@
+//! Loading a blend-shape rig: the file, its mesh instances in world space, the face mesh and
+//! its morph-weight animation.
+
+use super::accessor::AccessorReader;
+use super::animation::{self, AnimationInfo, WeightTrack};
+use super::container::{self, Container};
+use super::error::{GltfError, GltfResult};
+use super::mesh::{self, MeshInstance};
+use super::scene;
+use nalgebra::Vector3;
+use std::path::{Path, PathBuf};
+
+/// What to pick from a file.
+#[derive(Debug, Clone, Default)]
+pub struct LoadOptions {
+    /// Face mesh by mesh or node name, or by mesh index; default: the most morph targets.
+    pub mesh: Option<String>,
+    /// Animation by name or index; default: the first that animates the face's weights.
+    pub animation: Option<String>,
+}
+
+/// A loaded rig: every mesh instance and the chosen face with its weight animation.
+pub struct Rig {
+    /// The file it came from.
+    pub path: PathBuf,
+    /// The parsed file (JSON kept verbatim for re-export, and decoded buffers).
+    pub container: Container,
+    /// Every node that instances a mesh, in world space.
+    pub instances: Vec<MeshInstance>,
+    /// Index into `instances` of the face.
+    pub face: usize,
+    /// Why that mesh was taken (said to the user).
+    pub face_reason: String,
+    /// Every animation in the file.
+    pub animations: Vec<AnimationInfo>,
+    /// Index of the animation driving the face, if any.
+    pub animation: Option<usize>,
+    /// The face's weight track in that animation.
+    pub track: Option<WeightTrack>,
+    /// Extensions the file uses.
+    pub extensions_used: Vec<String>,
+}
+
+impl Rig {
+    /// The face mesh instance.
+    pub fn face(&self) -> &MeshInstance {
+        &self.instances[self.face]
+    }
+
+    /// Morph weights per frame at `fps` (one frame of default weights without animation).
+    pub fn frame_weights(&self, fps: f64) -> Vec<Vec<f64>> {
+        match &self.track {
+            Some(t) => t.sample_frames(fps),
+            None => vec![self.face().default_weights.clone()],
+        }
+    }
+
+    /// The blended face (world, m) for one weight vector: base + Σ w_t Δ_t.
+    pub fn blend(&self, weights: &[f64]) -> Vec<Vector3<f64>> {
+        let f = self.face();
+        let mut p = f.positions.clone();
+        for (t, &w) in f.targets.iter().zip(weights) {
+            if w != 0.0 {
+                for (pi, d) in p.iter_mut().zip(&t.positions) {
+                    *pi += d * w;
+                }
+            }
+        }
+        p
+    }
+}
+
+fn usize_of(v: &serde_json::Value) -> Option<usize> {
+    v.as_u64().and_then(|x| usize::try_from(x).ok())
+}
+
+/// Load every mesh instance of the file at `path` without choosing a face (for `inspect`).
+pub fn load_instances(path: &Path) -> GltfResult<(Container, Vec<MeshInstance>, Vec<AnimationInfo>)> {
+    let c = container::read(path)?;
+    let (inst, anims) = instances_of(path, &c)?;
+    Ok((c, inst, anims))
+}
+
+fn instances_of(path: &Path, c: &Container) -> GltfResult<(Vec<MeshInstance>, Vec<AnimationInfo>)> {
+    let reader = AccessorReader::new(path, c);
+    let (world, order) = scene::world_matrices(path, &c.json)?;
+    let mut inst = Vec::new();
+    let mut in_scene: Vec<usize> = order.iter().copied().filter(|&n| c.json["nodes"][n]["mesh"].is_u64()).collect();
+    in_scene.sort_unstable();
+    for n in in_scene {
+        inst.push(mesh::extract(path, &reader, &c.json, n, &world)?);
+    }
+    let anims = animation::summarize(path, &reader, &c.json)?;
+    Ok((inst, anims))
+}
+
+/// Load the rig at `path` and choose its face and animation.
+pub fn load(path: &Path, opts: &LoadOptions) -> GltfResult<Rig> {
+    let c = container::read(path)?;
+    let (instances, animations) = instances_of(path, &c)?;
+    let morphs: Vec<usize> = (0..instances.len()).filter(|&i| !instances[i].targets.is_empty()).collect();
+    if morphs.is_empty() {
+        return Err(GltfError::new(path, format!(
+            "no mesh with morph targets (blend shapes) in the displayed scene ({} mesh instances); furrow needs a blend-shape rig",
+            instances.len()
+        )));
+    }
+    let describe = |i: usize| {
+        let m = &instances[i];
+        format!("'{}' (mesh {}, node {}, {} targets)", m.name, m.mesh, m.node, m.targets.len())
+    };
+    let (face, face_reason) = match &opts.mesh {
+        Some(want) => {
+            let found = morphs.iter().copied().find(|&i| {
+                let m = &instances[i];
+                m.name == *want
+                    || c.json["nodes"][m.node]["name"].as_str() == Some(want.as_str())
+                    || want.parse::<usize>().ok() == Some(m.mesh)
+            });
+            match found {
+                Some(i) => (i, format!("face {} chosen by --mesh {want}", describe(i))),
+                None => {
+                    let list: Vec<String> = morphs.iter().map(|&i| describe(i)).collect();
+                    return Err(GltfError::new(path, format!("no mesh with morph targets matches --mesh {want:?}; candidates: {}", list.join(", "))));
+                }
+            }
+        }
+        None => {
+            let best = morphs.iter().copied().max_by_key(|&i| (instances[i].targets.len(), usize::MAX - i)).expect("non-empty");
+            let reason = if morphs.len() > 1 {
+                format!("face {} chosen as the mesh with the most morph targets of {} candidates (use --mesh to pick another)", describe(best), morphs.len())
+            } else {
+                format!("face {}", describe(best))
+            };
+            (best, reason)
+        }
+    };
+    let reader = AccessorReader::new(path, &c);
+    let node = instances[face].node;
+    let nt = instances[face].targets.len();
+    let animation = match &opts.animation {
+        Some(want) => {
+            let a = animations.iter().find(|a| a.name == *want || want.parse::<usize>().ok() == Some(a.index)).ok_or_else(|| {
+                let names: Vec<&str> = animations.iter().map(|a| a.name.as_str()).collect();
+                GltfError::new(path, format!("no animation {want:?}; the file has: {}", names.join(", ")))
+            })?;
+            Some(a.index)
+        }
+        None => animations.iter().map(|a| a.index).find(|&ai| {
+            c.json["animations"][ai]["channels"].as_array().is_some_and(|cs| {
+                cs.iter().any(|ch| ch["target"]["path"] == "weights" && usize_of(&ch["target"]["node"]) == Some(node))
+            })
+        }),
+    };
+    let track = match animation {
+        Some(ai) => animation::weight_track(path, &reader, &c.json, ai, node, nt)?,
+        None => None,
+    };
+    let extensions_used = c.root.extensions_used.clone();
+    drop(reader);
+    Ok(Rig { path: path.to_path_buf(), container: c, instances, face, face_reason, animations, animation, track, extensions_used })
+}

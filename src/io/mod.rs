@@ -1,0 +1,17 @@
+//! glTF in and out: meshes, morph targets and weight animations. Nothing physical.
+
+pub mod accessor;
+pub mod animation;
+pub mod atomic;
+pub mod container;
+pub mod error;
+pub mod export;
+pub mod inspect;
+pub mod load;
+pub mod mesh;
+pub mod meshopt_view;
+pub mod model;
+pub mod scene;
+
+pub use error::{GltfError, GltfResult};
+pub use load::{load, LoadOptions, Rig};

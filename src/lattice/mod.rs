@@ -1,0 +1,1 @@
+//! The coarse interior lattice: hexahedral cells, B-spline bases, superimposed elements, embedding.

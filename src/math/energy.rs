@@ -1,0 +1,23 @@
+//! The interface every potential energy in furrow implements.
+
+/// A potential energy over a flat vector of degrees of freedom (positions in metres, so the
+/// energy is in joules, the gradient in newtons and the Hessian in newtons per metre).
+///
+/// One code path computes value, gradient and Hessian: the kernel fills the optional buffers.
+pub trait Energy: Sync {
+    /// Number of degrees of freedom (3 × number of points).
+    fn dofs(&self) -> usize;
+
+    /// Energy at `x` in joules. When `grad` is given, the gradient (J/m) is **added** to it.
+    /// When `hess` is given, Hessian entries (J/m²) are **appended** as `(row, col, value)`
+    /// triplets (duplicates are summed by the assembler; both triangles of the symmetric
+    /// matrix are emitted). When `project_psd` is true, each element Hessian is projected to
+    /// positive semi-definite before it is emitted.
+    fn eval(
+        &self,
+        x: &[f64],
+        grad: Option<&mut [f64]>,
+        hess: Option<&mut Vec<(usize, usize, f64)>>,
+        project_psd: bool,
+    ) -> f64;
+}

@@ -1,0 +1,8 @@
+//! Numerical building blocks shared by every physical layer: sparse assembly and factorisation,
+//! finite-difference checkers, and the [`Energy`] interface that solvers work on.
+
+pub mod energy;
+pub mod fd;
+pub mod sparse;
+
+pub use energy::Energy;

@@ -1,0 +1,111 @@
+//! Triangle meshes: positions in metres and index triples, plus derived geometry.
+
+use nalgebra::Vector3;
+
+/// A triangle mesh. Positions are in metres (world space); triangles index into `positions`
+/// with counter-clockwise winding seen from outside (the normal side).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct TriMesh {
+    /// Vertex positions (m).
+    pub positions: Vec<Vector3<f64>>,
+    /// Vertex index triples, counter-clockwise.
+    pub triangles: Vec<[usize; 3]>,
+}
+
+impl TriMesh {
+    /// A mesh from positions and triangles.
+    pub fn new(positions: Vec<Vector3<f64>>, triangles: Vec<[usize; 3]>) -> Self {
+        Self { positions, triangles }
+    }
+
+    /// Number of vertices.
+    pub fn vertex_count(&self) -> usize {
+        self.positions.len()
+    }
+
+    /// Number of triangles.
+    pub fn triangle_count(&self) -> usize {
+        self.triangles.len()
+    }
+
+    /// Axis-aligned bounding box (min, max) in metres; `None` for an empty mesh.
+    pub fn bounding_box(&self) -> Option<(Vector3<f64>, Vector3<f64>)> {
+        let first = *self.positions.first()?;
+        Some(self.positions.iter().fold((first, first), |(lo, hi), p| (lo.inf(p), hi.sup(p))))
+    }
+
+    /// Area (m²) of triangle `t`.
+    pub fn triangle_area(&self, t: usize) -> f64 {
+        let [a, b, c] = self.triangles[t];
+        let p = &self.positions;
+        0.5 * (p[b] - p[a]).cross(&(p[c] - p[a])).norm()
+    }
+
+    /// Total surface area (m²).
+    pub fn area(&self) -> f64 {
+        (0..self.triangles.len()).map(|t| self.triangle_area(t)).sum()
+    }
+
+    /// Area-weighted unit vertex normals for the given positions (same topology as `self`).
+    /// Vertices with no non-degenerate incident triangle get +Z.
+    pub fn vertex_normals_of(&self, positions: &[Vector3<f64>]) -> Vec<Vector3<f64>> {
+        let mut n = vec![Vector3::zeros(); positions.len()];
+        for &[a, b, c] in &self.triangles {
+            let fnrm = (positions[b] - positions[a]).cross(&(positions[c] - positions[a]));
+            n[a] += fnrm;
+            n[b] += fnrm;
+            n[c] += fnrm;
+        }
+        n.into_iter()
+            .map(|v| {
+                let l = v.norm();
+                if l > 0.0 && l.is_finite() {
+                    v / l
+                } else {
+                    Vector3::z()
+                }
+            })
+            .collect()
+    }
+
+    /// Area-weighted unit vertex normals of this mesh.
+    pub fn vertex_normals(&self) -> Vec<Vector3<f64>> {
+        self.vertex_normals_of(&self.positions)
+    }
+
+    /// Flat `[x0, y0, z0, x1, …]` copy of the positions (the layout solvers use).
+    pub fn flat_positions(&self) -> Vec<f64> {
+        self.positions.iter().flat_map(|p| [p.x, p.y, p.z]).collect()
+    }
+}
+
+/// Convert a flat `[x0, y0, z0, …]` vector into points.
+pub fn points_from_flat(x: &[f64]) -> Vec<Vector3<f64>> {
+    x.chunks_exact(3).map(|c| Vector3::new(c[0], c[1], c[2])).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn unit_square_area_bbox_and_normals() {
+        let m = TriMesh::new(
+            vec![
+                Vector3::new(0.0, 0.0, 0.0),
+                Vector3::new(1.0, 0.0, 0.0),
+                Vector3::new(1.0, 1.0, 0.0),
+                Vector3::new(0.0, 1.0, 0.0),
+            ],
+            vec![[0, 1, 2], [0, 2, 3]],
+        );
+        assert!((m.area() - 1.0).abs() < 1e-15);
+        let (lo, hi) = m.bounding_box().unwrap();
+        assert_eq!(lo, Vector3::zeros());
+        assert_eq!(hi, Vector3::new(1.0, 1.0, 0.0));
+        for n in m.vertex_normals() {
+            assert!((n - Vector3::z()).norm() < 1e-15);
+        }
+        assert_eq!(points_from_flat(&m.flat_positions()), m.positions);
+    }
+}

@@ -1,0 +1,3 @@
+//! Procedural rigs made by furrow itself (`furrow rig generate`).
+
+pub mod face;

@@ -1,0 +1,3 @@
+//! The skin: discrete thin shell energies (membrane and hinge bending).
+
+pub mod bench;

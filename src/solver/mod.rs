@@ -1,0 +1,1 @@
+//! Nonlinear solvers: Newton with line search, sparse KKT systems, quasi-static equilibrium.
