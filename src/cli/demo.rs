@@ -38,7 +38,7 @@ pub fn run(a: DemoArgs, out: &Output) -> anyhow::Result<()> {
     anyhow::ensure!(a.fps.is_finite() && a.fps > 0.0 && a.fps <= 1000.0, "--fps must be in (0, 1000], got {}", a.fps);
     let t0 = Instant::now();
     let rig_path = a.rig.clone().unwrap_or_else(default_rig);
-    if !rig_path.exists() {
+    if a.rig.is_none() && !rig_path.exists() {
         anyhow::bail!("{}: the demo rig is missing; make it with `furrow rig generate -o {}`", rig_path.display(), rig_path.display());
     }
     let rig = fio::load(&rig_path, &LoadOptions::default())?;

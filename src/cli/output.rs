@@ -2,7 +2,7 @@
 //! progress bars only on an interactive terminal.
 
 use indicatif::{ProgressBar, ProgressStyle};
-use std::io::IsTerminal;
+use std::io::{IsTerminal, Write};
 
 /// Output settings of one run.
 #[derive(Debug, Clone, Copy)]
@@ -22,7 +22,8 @@ impl Output {
     /// Print a line of human text (not in quiet or JSON mode).
     pub fn say(&self, msg: impl AsRef<str>) {
         if !self.quiet && !self.json {
-            println!("{}", msg.as_ref());
+            // A closed pipe (`furrow inspect … | head`) is not an error worth a panic.
+            let _ = writeln!(std::io::stdout(), "{}", msg.as_ref());
         }
     }
 
@@ -36,7 +37,7 @@ impl Output {
     /// Print the JSON result (in JSON mode).
     pub fn json_result(&self, v: &serde_json::Value) {
         if self.json {
-            println!("{}", serde_json::to_string_pretty(v).expect("JSON serialises"));
+            let _ = writeln!(std::io::stdout(), "{}", serde_json::to_string_pretty(v).expect("JSON serialises"));
         }
     }
 

@@ -52,3 +52,70 @@ pub fn assert_valid(reports: &[serde_json::Value]) {
         assert_eq!(r["warnings"], 0, "validator warnings: {r}");
     }
 }
+
+/// A small valid rig for tests: one quad (4 vertices, 2 triangles, u16 indices) with one
+/// morph target (+0.1 m in z on vertex 2) and a LINEAR weights animation 0 → 1 over 1 s.
+/// Returns the JSON and the binary buffer, to be mutated by bad-input tests.
+pub fn tiny_rig() -> (serde_json::Value, Vec<u8>) {
+    let pos: [f32; 12] = [0., 0., 0., 1., 0., 0., 1., 1., 0., 0., 1., 0.];
+    let idx: [u16; 6] = [0, 1, 2, 0, 2, 3];
+    let dpos: [f32; 12] = [0., 0., 0., 0., 0., 0., 0., 0., 0.1, 0., 0., 0.];
+    let times: [f32; 2] = [0.0, 1.0];
+    let weights: [f32; 2] = [0.0, 1.0];
+    let mut bin = Vec::new();
+    bin.extend(pos.iter().flat_map(|v| v.to_le_bytes())); // 0..48
+    bin.extend(idx.iter().flat_map(|v| v.to_le_bytes())); // 48..60
+    bin.extend(dpos.iter().flat_map(|v| v.to_le_bytes())); // 60..108
+    bin.extend(times.iter().flat_map(|v| v.to_le_bytes())); // 108..116
+    bin.extend(weights.iter().flat_map(|v| v.to_le_bytes())); // 116..124
+    let json = serde_json::json!({
+        "asset": { "version": "2.0" },
+        "scene": 0,
+        "scenes": [{ "nodes": [0] }],
+        "nodes": [{ "mesh": 0, "name": "face" }],
+        "meshes": [{ "name": "face", "primitives": [{ "attributes": { "POSITION": 0 }, "indices": 1, "targets": [{ "POSITION": 2 }] }],
+                     "extras": { "targetNames": ["lift"] } }],
+        "buffers": [{ "byteLength": bin.len() }],
+        "bufferViews": [
+            { "buffer": 0, "byteOffset": 0, "byteLength": 48 },
+            { "buffer": 0, "byteOffset": 48, "byteLength": 12 },
+            { "buffer": 0, "byteOffset": 60, "byteLength": 48 },
+            { "buffer": 0, "byteOffset": 108, "byteLength": 8 },
+            { "buffer": 0, "byteOffset": 116, "byteLength": 8 }
+        ],
+        "accessors": [
+            { "bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [0,0,0], "max": [1,1,0] },
+            { "bufferView": 1, "componentType": 5123, "count": 6, "type": "SCALAR" },
+            { "bufferView": 2, "componentType": 5126, "count": 4, "type": "VEC3", "min": [0,0,0], "max": [0,0,0.1] },
+            { "bufferView": 3, "componentType": 5126, "count": 2, "type": "SCALAR", "min": [0], "max": [1] },
+            { "bufferView": 4, "componentType": 5126, "count": 2, "type": "SCALAR" }
+        ],
+        "animations": [{ "name": "lift", "samplers": [{ "input": 3, "output": 4 }],
+                         "channels": [{ "sampler": 0, "target": { "node": 0, "path": "weights" } }] }]
+    });
+    (json, bin)
+}
+
+/// Pack JSON and a binary chunk into GLB bytes.
+pub fn glb_bytes(json: &serde_json::Value, bin: &[u8]) -> Vec<u8> {
+    let mut js = serde_json::to_vec(json).unwrap();
+    while js.len() % 4 != 0 {
+        js.push(b' ');
+    }
+    let mut b = bin.to_vec();
+    while b.len() % 4 != 0 {
+        b.push(0);
+    }
+    let total = 12 + 8 + js.len() + 8 + b.len();
+    let mut out = Vec::new();
+    out.extend(b"glTF");
+    out.extend(2u32.to_le_bytes());
+    out.extend((total as u32).to_le_bytes());
+    out.extend((js.len() as u32).to_le_bytes());
+    out.extend(b"JSON");
+    out.extend(js);
+    out.extend((b.len() as u32).to_le_bytes());
+    out.extend(b"BIN\0");
+    out.extend(b);
+    out
+}
