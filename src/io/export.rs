@@ -184,11 +184,13 @@ fn carried_attributes(rig: &Rig, doc: &mut Document, origin: &[VertexOrigin]) ->
         .map(|a| a.iter().filter(|p| (4..=6).contains(&p["mode"].as_u64().unwrap_or(4))).collect())
         .unwrap_or_default();
     let skinned = matches!(f.to_world, VertexTransform::PerVertex(_));
+    // Attributes present in any primitive are carried (zeros where a primitive lacks one),
+    // because the kept material may sample any texture coordinate set.
     let mut names: Vec<String> = Vec::new();
-    if let Some(first) = prims.first() {
-        for k in first["attributes"].as_object().into_iter().flatten().map(|(k, _)| k) {
+    for p in &prims {
+        for k in p["attributes"].as_object().into_iter().flatten().map(|(k, _)| k) {
             let wanted = k.starts_with("TEXCOORD_") || k == "COLOR_0" || (skinned && (k.starts_with("JOINTS_") || k.starts_with("WEIGHTS_")));
-            if wanted && prims.iter().all(|p| p["attributes"][k].is_u64()) {
+            if wanted && !names.contains(k) {
                 names.push(k.clone());
             }
         }
@@ -198,10 +200,27 @@ fn carried_attributes(rig: &Rig, doc: &mut Document, origin: &[VertexOrigin]) ->
     for name in names {
         let mut all = Vec::new();
         let mut comps = 0;
-        for p in &prims {
-            let d = reader.read(p["attributes"][&name].as_u64().expect("checked") as usize)?;
-            comps = d.components;
-            all.extend(d.data);
+        let mut missing = Vec::new();
+        for (pi, p) in prims.iter().enumerate() {
+            match p["attributes"][&name].as_u64() {
+                Some(a) => {
+                    let d = reader.read(a as usize)?;
+                    comps = d.components;
+                    all.extend(d.data);
+                }
+                None => missing.push(pi),
+            }
+        }
+        if !missing.is_empty() {
+            // Rebuild in primitive order with zeros for primitives that lack the attribute.
+            all.clear();
+            for (pi, p) in prims.iter().enumerate() {
+                let count = f.primitive_ranges.get(pi).map_or(0, |r| r.1);
+                match p["attributes"][&name].as_u64() {
+                    Some(a) => all.extend(reader.read(a as usize)?.data),
+                    None => all.extend(std::iter::repeat_n(0.0, count * comps)),
+                }
+            }
         }
         let total = all.len() / comps.max(1);
         let mut vals = Vec::with_capacity(origin.len() * comps);

@@ -119,3 +119,23 @@ pub fn glb_bytes(json: &serde_json::Value, bin: &[u8]) -> Vec<u8> {
     out.extend(b);
     out
 }
+
+/// Compress `src` with gltfpack (quantization + meshopt, as capture tools ship rigs) into `out`.
+/// Returns false (skip, with a note) when gltfpack is not installed outside CI.
+pub fn gltfpack(src: &Path, out: &Path) -> bool {
+    let Some(nm) = node_modules() else {
+        assert!(!tools_required(), "gltfpack is not installed: npm ci --prefix .ci");
+        eprintln!("note: gltfpack not installed; skipped");
+        return false;
+    };
+    let st = Command::new("node")
+        .arg(nm.join("gltfpack/cli.js"))
+        .args(["-cc", "-kn", "-km", "-ke", "-i"])
+        .arg(src)
+        .arg("-o")
+        .arg(out)
+        .output()
+        .expect("node runs");
+    assert!(st.status.success(), "gltfpack failed on {}: {}", src.display(), String::from_utf8_lossy(&st.stderr));
+    true
+}
