@@ -142,16 +142,18 @@ fn jaw_open(s: &Sample, mouth_y: f64, corner_x: f64) -> Vector3<f64> {
     (rot * r - r) * w
 }
 
-/// Orbicularis oris: radial contraction toward the mouth centre (circumferential compression
-/// of the lips, up to 35 %) and a forward push of the lips.
+/// Orbicularis oris: contraction toward the mouth centre (circumferential compression of the
+/// lips, up to 35 %; vertical pull at half that rate) and a forward push of the lips.
 fn pucker(s: &Sample, mouth_y: f64) -> Vector3<f64> {
     let (dx, dy) = (s.x, s.y - mouth_y);
-    let rho = dx.hypot(1.5 * dy) / 0.05;
+    let rho = dx.hypot(1.5 * dy) / 0.06;
     if rho >= 1.0 {
         return Vector3::zeros();
     }
     let k = 0.35 * (1.0 - rho * rho).powi(2);
-    local(s, -k * dx, -k * dy, 0.007 * bump(rho))
+    // The forward push is a translation along +Z (not along the normal): pushing a strongly
+    // curved lip along its normal would stretch it and cancel the contraction.
+    local(s, -k * dx, -0.5 * k * dy, 0.0) + Vector3::z() * (0.007 * bump(rho))
 }
 
 /// Per-vertex deltas (m) of every shape in [`SHAPE_NAMES`] order.

@@ -342,13 +342,13 @@ pub fn build_mask(k: usize, rows: usize) -> Mask {
         }
     }
     let mut rim = Vec::new();
-    for j in 0..rows {
+    for (j, &start) in row_start.iter().enumerate() {
         let n = row_len(j);
         if j == 0 || j == rows - 1 {
-            rim.extend(row_start[j]..row_start[j] + n);
+            rim.extend(start..start + n);
         } else {
-            rim.push(row_start[j]);
-            rim.push(row_start[j] + n - 1);
+            rim.push(start);
+            rim.push(start + n - 1);
         }
     }
     let positions = samples.iter().map(|s| s.pos).collect();
