@@ -7,7 +7,9 @@ use super::Output;
 pub enum BenchCommand {
     /// Skin solve: a square sheet of about N triangles under in-plane compression, centre
     /// clamped by constraints, solved to equilibrium from a warm start.
-    #[command(after_help = "Example:\n  furrow bench shell --faces 20000\n  furrow bench shell --faces 2000 --json")]
+    #[command(
+        after_help = "Example:\n  furrow bench shell --faces 20000\n  furrow bench shell --faces 2000 --json"
+    )]
     Shell {
         /// Approximate triangle count.
         #[arg(long, default_value_t = 20_000)]
@@ -36,12 +38,26 @@ fn print(out: &Output, title: &str, v: &serde_json::Value) {
 pub fn run(c: BenchCommand, out: &Output) -> anyhow::Result<()> {
     match c {
         BenchCommand::Shell { faces } => {
-            anyhow::ensure!((2..=5_000_000).contains(&faces), "--faces must be between 2 and 5,000,000, got {faces}");
-            print(out, "bench shell", &crate::shell::bench::bench_shell(faces)?);
+            anyhow::ensure!(
+                (2..=5_000_000).contains(&faces),
+                "--faces must be between 2 and 5,000,000, got {faces}"
+            );
+            print(
+                out,
+                "bench shell",
+                &crate::shell::bench::bench_shell(faces)?,
+            );
         }
         BenchCommand::Lattice { elements } => {
-            anyhow::ensure!((1..=1_000_000).contains(&elements), "--elements must be between 1 and 1,000,000, got {elements}");
-            print(out, "bench lattice", &crate::fem::bench::bench_lattice(elements)?);
+            anyhow::ensure!(
+                (1..=1_000_000).contains(&elements),
+                "--elements must be between 1 and 1,000,000, got {elements}"
+            );
+            print(
+                out,
+                "bench lattice",
+                &crate::fem::bench::bench_lattice(elements)?,
+            );
         }
     }
     Ok(())

@@ -35,24 +35,40 @@ pub fn default_rig() -> PathBuf {
 
 /// Run the demo.
 pub fn run(a: DemoArgs, out: &Output) -> anyhow::Result<()> {
-    anyhow::ensure!(a.fps.is_finite() && a.fps > 0.0 && a.fps <= 1000.0, "--fps must be in (0, 1000], got {}", a.fps);
+    anyhow::ensure!(
+        a.fps.is_finite() && a.fps > 0.0 && a.fps <= 1000.0,
+        "--fps must be in (0, 1000], got {}",
+        a.fps
+    );
     let t0 = Instant::now();
     let rig_path = a.rig.clone().unwrap_or_else(default_rig);
     if a.rig.is_none() && !rig_path.exists() {
-        anyhow::bail!("{}: the demo rig is missing; make it with `furrow rig generate -o {}`", rig_path.display(), rig_path.display());
+        anyhow::bail!(
+            "{}: the demo rig is missing; make it with `furrow rig generate -o {}`",
+            rig_path.display(),
+            rig_path.display()
+        );
     }
     let rig = fio::load(&rig_path, &LoadOptions::default())?;
     out.note(&rig.face_reason);
     let weights = rig.frame_weights(a.fps);
     let pb = out.progress(weights.len() as u64, "blending");
-    let frames: Vec<_> = weights.iter().map(|w| {
-        pb.inc(1);
-        rig.blend(w)
-    }).collect();
+    let frames: Vec<_> = weights
+        .iter()
+        .map(|w| {
+            pb.inc(1);
+            rig.blend(w)
+        })
+        .collect();
     pb.finish_and_clear();
     let face = rig.face();
     let origin: Vec<VertexOrigin> = (0..face.positions.len()).map(VertexOrigin::same).collect();
-    let set = FrameSet { triangles: &face.triangles, frames: &frames, origin: &origin, fps: a.fps };
+    let set = FrameSet {
+        triangles: &face.triangles,
+        frames: &frames,
+        origin: &origin,
+        fps: a.fps,
+    };
     let animated = a.out.join("face_frames.glb");
     let replaced = animated.exists();
     export::write_animated(&rig, &set, &animated, Overwrite::Replace)?;
@@ -72,10 +88,27 @@ pub fn run(a: DemoArgs, out: &Output) -> anyhow::Result<()> {
         "animated_glb": animated, "frames_dir": dir, "seconds": secs,
     }));
     if replaced {
-        out.say(format!("replaced the earlier demo outputs in {}", a.out.display()));
+        out.say(format!(
+            "replaced the earlier demo outputs in {}",
+            a.out.display()
+        ));
     }
-    out.say(format!("{} frames at {} fps of '{}' ({} vertices) in {:.2} s", frames.len(), a.fps, face.name, face.positions.len(), secs));
-    out.say(format!("  animated glTF (one morph target per frame): {}", animated.display()));
-    out.say(format!("  one glTF per frame:                          {}/ ({} files)", dir.display(), paths.len()));
+    out.say(format!(
+        "{} frames at {} fps of '{}' ({} vertices) in {:.2} s",
+        frames.len(),
+        a.fps,
+        face.name,
+        face.positions.len(),
+        secs
+    ));
+    out.say(format!(
+        "  animated glTF (one morph target per frame): {}",
+        animated.display()
+    ));
+    out.say(format!(
+        "  one glTF per frame:                          {}/ ({} files)",
+        dir.display(),
+        paths.len()
+    ));
     Ok(())
 }

@@ -28,7 +28,9 @@ pub struct Cli {
 #[derive(Debug, Subcommand)]
 pub enum Command {
     /// Show what a glTF file holds: meshes, counts, morph targets, animations, extensions.
-    #[command(after_help = "Example:\n  furrow inspect rigs/face.glb\n  furrow inspect ../shared/data/RobotExpressive.glb --json")]
+    #[command(
+        after_help = "Example:\n  furrow inspect rigs/face.glb\n  furrow inspect ../shared/data/RobotExpressive.glb --json"
+    )]
     Inspect(inspect::InspectArgs),
     /// Make furrow's own rigs.
     #[command(subcommand)]

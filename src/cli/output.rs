@@ -37,7 +37,11 @@ impl Output {
     /// Print the JSON result (in JSON mode).
     pub fn json_result(&self, v: &serde_json::Value) {
         if self.json {
-            let _ = writeln!(std::io::stdout(), "{}", serde_json::to_string_pretty(v).expect("JSON serialises"));
+            let _ = writeln!(
+                std::io::stdout(),
+                "{}",
+                serde_json::to_string_pretty(v).expect("JSON serialises")
+            );
         }
     }
 
@@ -48,9 +52,11 @@ impl Output {
         }
         let pb = ProgressBar::new(len);
         pb.set_style(
-            ProgressStyle::with_template("{msg:>12} [{bar:40}] {pos}/{len} {elapsed_precise} eta {eta}")
-                .expect("valid template")
-                .progress_chars("=> "),
+            ProgressStyle::with_template(
+                "{msg:>12} [{bar:40}] {pos}/{len} {elapsed_precise} eta {eta}",
+            )
+            .expect("valid template")
+            .progress_chars("=> "),
         );
         pb.set_message(what.to_string());
         pb

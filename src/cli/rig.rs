@@ -29,7 +29,15 @@ pub fn run(c: RigCommand, out: &Output) -> anyhow::Result<()> {
             }
             let rig = crate::rig::face::generate();
             let bytes = crate::io::export::rig_glb("face", &rig.mesh, &rig.targets, &rig.keys)?;
-            atomic::write(&output, &bytes, if force { Overwrite::Replace } else { Overwrite::Refuse })?;
+            atomic::write(
+                &output,
+                &bytes,
+                if force {
+                    Overwrite::Replace
+                } else {
+                    Overwrite::Refuse
+                },
+            )?;
             let duration = rig.keys.times.last().copied().unwrap_or(0.0);
             out.json_result(&serde_json::json!({
                 "ok": true, "output": output, "vertices": rig.mesh.vertex_count(),
@@ -38,8 +46,16 @@ pub fn run(c: RigCommand, out: &Output) -> anyhow::Result<()> {
             }));
             out.say(format!(
                 "wrote {}: {} vertices, {} triangles, {} blend shapes ({}), {:.1} s animation",
-                output.display(), rig.mesh.vertex_count(), rig.mesh.triangle_count(), rig.targets.len(),
-                rig.targets.iter().map(|t| t.name.as_str()).collect::<Vec<_>>().join(", "), duration
+                output.display(),
+                rig.mesh.vertex_count(),
+                rig.mesh.triangle_count(),
+                rig.targets.len(),
+                rig.targets
+                    .iter()
+                    .map(|t| t.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                duration
             ));
             Ok(())
         }

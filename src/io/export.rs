@@ -34,11 +34,16 @@ pub struct VertexOrigin {
 impl VertexOrigin {
     /// The vertex itself.
     pub fn same(i: usize) -> Self {
-        Self { vertices: [i, i, i], weights: [1.0, 0.0, 0.0] }
+        Self {
+            vertices: [i, i, i],
+            weights: [1.0, 0.0, 0.0],
+        }
     }
     /// The source vertex with the largest weight.
     pub fn dominant(&self) -> usize {
-        let k = (0..3).max_by(|&a, &b| self.weights[a].total_cmp(&self.weights[b])).unwrap_or(0);
+        let k = (0..3)
+            .max_by(|&a, &b| self.weights[a].total_cmp(&self.weights[b]))
+            .unwrap_or(0);
         self.vertices[k]
     }
 }
@@ -68,14 +73,21 @@ impl FrameSet<'_> {
             if f.len() != n {
                 bail!("frame {k} has {} vertices, expected {n}", f.len());
             }
-            if let Some(i) = f.iter().position(|p| !(p.x.is_finite() && p.y.is_finite() && p.z.is_finite())) {
+            if let Some(i) = f
+                .iter()
+                .position(|p| !(p.x.is_finite() && p.y.is_finite() && p.z.is_finite()))
+            {
                 bail!("frame {k} vertex {i} is not finite (NaN or infinity); refusing to write it");
             }
         }
         if let Some(t) = self.triangles.iter().find(|t| t.iter().any(|&i| i >= n)) {
             bail!("triangle {t:?} indexes past {n} vertices");
         }
-        if let Some(o) = self.origin.iter().find(|o| o.vertices.iter().any(|&v| v >= face_vertices)) {
+        if let Some(o) = self
+            .origin
+            .iter()
+            .find(|o| o.vertices.iter().any(|&v| v >= face_vertices))
+        {
             bail!("vertex origin {o:?} indexes past the face's {face_vertices} vertices");
         }
         Ok(())
@@ -110,20 +122,41 @@ fn base_document(rig: &Rig) -> anyhow::Result<Document> {
     // Embed images so the GLB stands alone.
     let ni = doc.json["images"].as_array().map_or(0, |a| a.len());
     for i in 0..ni {
-        let Some(uri) = doc.json["images"][i]["uri"].as_str().map(String::from) else { continue };
+        let Some(uri) = doc.json["images"][i]["uri"].as_str().map(String::from) else {
+            continue;
+        };
         let (bytes, mime) = if let Some(rest) = uri.strip_prefix("data:") {
             let comma = rest.find(',').context("malformed image data URI")?;
             let mime = rest[..comma].trim_end_matches(";base64").to_string();
-            (base64::engine::general_purpose::STANDARD.decode(&rest[comma + 1..]).context("bad base64 in image URI")?, mime)
+            (
+                base64::engine::general_purpose::STANDARD
+                    .decode(&rest[comma + 1..])
+                    .context("bad base64 in image URI")?,
+                mime,
+            )
         } else {
             let p = rig.path.parent().unwrap_or(Path::new(".")).join(&uri);
-            let b = std::fs::read(&p).with_context(|| format!("{}: image {i} ({}) cannot be read", rig.path.display(), p.display()))?;
-            let mime = match p.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).as_deref() {
+            let b = std::fs::read(&p).with_context(|| {
+                format!(
+                    "{}: image {i} ({}) cannot be read",
+                    rig.path.display(),
+                    p.display()
+                )
+            })?;
+            let mime = match p
+                .extension()
+                .and_then(|e| e.to_str())
+                .map(|e| e.to_ascii_lowercase())
+                .as_deref()
+            {
                 Some("png") => "image/png",
                 Some("jpg") | Some("jpeg") => "image/jpeg",
                 Some("webp") => "image/webp",
                 Some("ktx2") => "image/ktx2",
-                _ => bail!("{}: image {i} ({uri}) has an unknown type", rig.path.display()),
+                _ => bail!(
+                    "{}: image {i} ({uri}) has an unknown type",
+                    rig.path.display()
+                ),
             };
             (b, mime.to_string())
         };
@@ -157,7 +190,12 @@ impl LocalFrames {
         let mut lin = Vec::with_capacity(origin.len());
         for (i, o) in origin.iter().enumerate() {
             let m = vertex_matrix(t, o);
-            let mi = m.try_inverse().with_context(|| format!("{}: the face's transform at vertex {i} is singular (zero scale?)", rig.path.display()))?;
+            let mi = m.try_inverse().with_context(|| {
+                format!(
+                    "{}: the face's transform at vertex {i} is singular (zero scale?)",
+                    rig.path.display()
+                )
+            })?;
             lin.push(mi.fixed_view::<3, 3>(0, 0).into_owned());
             inv.push(mi);
         }
@@ -168,28 +206,51 @@ impl LocalFrames {
     }
     fn normal(&self, i: usize, n: &Vector3<f64>) -> Vector3<f64> {
         // Normals map by the inverse transpose of the (world→local) linear part.
-        let r = self.lin[i].try_inverse().map(|m| m.transpose()).unwrap_or(self.lin[i]) * n;
+        let r = self.lin[i]
+            .try_inverse()
+            .map(|m| m.transpose())
+            .unwrap_or(self.lin[i])
+            * n;
         let l = r.norm();
-        if l > 0.0 { r / l } else { Vector3::z() }
+        if l > 0.0 {
+            r / l
+        } else {
+            Vector3::z()
+        }
     }
 }
 
 /// Attributes of the original face primitives carried to the exported vertices.
-fn carried_attributes(rig: &Rig, doc: &mut Document, origin: &[VertexOrigin]) -> anyhow::Result<serde_json::Map<String, Value>> {
+fn carried_attributes(
+    rig: &Rig,
+    doc: &mut Document,
+    origin: &[VertexOrigin],
+) -> anyhow::Result<serde_json::Map<String, Value>> {
     let f = rig.face();
     let c = &rig.container;
     let reader = AccessorReader::new(&rig.path, c);
     let prims: Vec<&Value> = c.json["meshes"][f.mesh]["primitives"]
         .as_array()
-        .map(|a| a.iter().filter(|p| (4..=6).contains(&p["mode"].as_u64().unwrap_or(4))).collect())
+        .map(|a| {
+            a.iter()
+                .filter(|p| (4..=6).contains(&p["mode"].as_u64().unwrap_or(4)))
+                .collect()
+        })
         .unwrap_or_default();
     let skinned = matches!(f.to_world, VertexTransform::PerVertex(_));
     // Attributes present in any primitive are carried (zeros where a primitive lacks one),
     // because the kept material may sample any texture coordinate set.
     let mut names: Vec<String> = Vec::new();
     for p in &prims {
-        for k in p["attributes"].as_object().into_iter().flatten().map(|(k, _)| k) {
-            let wanted = k.starts_with("TEXCOORD_") || k == "COLOR_0" || (skinned && (k.starts_with("JOINTS_") || k.starts_with("WEIGHTS_")));
+        for k in p["attributes"]
+            .as_object()
+            .into_iter()
+            .flatten()
+            .map(|(k, _)| k)
+        {
+            let wanted = k.starts_with("TEXCOORD_")
+                || k == "COLOR_0"
+                || (skinned && (k.starts_with("JOINTS_") || k.starts_with("WEIGHTS_")));
             if wanted && !names.contains(k) {
                 names.push(k.clone());
             }
@@ -226,21 +287,33 @@ fn carried_attributes(rig: &Rig, doc: &mut Document, origin: &[VertexOrigin]) ->
         let mut vals = Vec::with_capacity(origin.len() * comps);
         for o in origin {
             if o.vertices.iter().any(|&v| v >= total) {
-                bail!("{}: attribute {name} has fewer entries than the face has vertices", rig.path.display());
+                bail!(
+                    "{}: attribute {name} has fewer entries than the face has vertices",
+                    rig.path.display()
+                );
             }
             if name.starts_with("JOINTS_") || name.starts_with("WEIGHTS_") {
                 let v = o.dominant();
                 vals.extend_from_slice(&all[v * comps..(v + 1) * comps]);
             } else {
                 for k in 0..comps {
-                    vals.push((0..3).map(|j| o.weights[j] * all[o.vertices[j] * comps + k]).sum());
+                    vals.push(
+                        (0..3)
+                            .map(|j| o.weights[j] * all[o.vertices[j] * comps + k])
+                            .sum(),
+                    );
                 }
             }
         }
         let acc = if name.starts_with("JOINTS_") {
-            let bytes: Vec<u8> = vals.iter().flat_map(|&v| (v as u16).to_le_bytes()).collect();
+            let bytes: Vec<u8> = vals
+                .iter()
+                .flat_map(|&v| (v as u16).to_le_bytes())
+                .collect();
             let view = doc.push_view(bytes, Some(ARRAY_BUFFER));
-            let a = doc.json["accessors"].as_array_mut().expect("accessors exist");
+            let a = doc.json["accessors"]
+                .as_array_mut()
+                .expect("accessors exist");
             a.push(json!({ "bufferView": view, "componentType": 5123, "count": origin.len(), "type": "VEC4" }));
             a.len() - 1
         } else {
@@ -272,15 +345,27 @@ fn replace_face(rig: &Rig, set: &FrameSet, animated: bool) -> anyhow::Result<Doc
     let local = LocalFrames::new(rig, set.origin)?;
     let topo = TriMesh::new(Vec::new(), set.triangles.to_vec());
     let n = set.origin.len();
-    let local_pos = |k: usize| -> Vec<Vector3<f64>> { (0..n).map(|i| local.point(i, &set.frames[k][i])).collect() };
+    let local_pos = |k: usize| -> Vec<Vector3<f64>> {
+        (0..n).map(|i| local.point(i, &set.frames[k][i])).collect()
+    };
     let local_nrm = |k: usize| -> Vec<Vector3<f64>> {
-        topo.vertex_normals_of(&set.frames[k]).iter().enumerate().map(|(i, nw)| local.normal(i, nw)).collect()
+        topo.vertex_normals_of(&set.frames[k])
+            .iter()
+            .enumerate()
+            .map(|(i, nw)| local.normal(i, nw))
+            .collect()
     };
     let p0 = local_pos(0);
     let n0 = local_nrm(0);
     let mut attrs = carried_attributes(rig, &mut doc, set.origin)?;
-    attrs.insert("POSITION".into(), json!(doc.push_f32(&flat(&p0), 3, Some(ARRAY_BUFFER))));
-    attrs.insert("NORMAL".into(), json!(doc.push_f32(&flat(&n0), 3, Some(ARRAY_BUFFER))));
+    attrs.insert(
+        "POSITION".into(),
+        json!(doc.push_f32(&flat(&p0), 3, Some(ARRAY_BUFFER))),
+    );
+    attrs.insert(
+        "NORMAL".into(),
+        json!(doc.push_f32(&flat(&n0), 3, Some(ARRAY_BUFFER))),
+    );
     let indices = doc.push_indices(set.triangles);
     let mut prim = json!({ "attributes": attrs, "indices": indices, "mode": 4 });
     if let Some(m) = rig.container.json["meshes"][f.mesh]["primitives"][0].get("material") {
@@ -307,7 +392,11 @@ fn replace_face(rig: &Rig, set: &FrameSet, animated: bool) -> anyhow::Result<Doc
     }
     mesh["primitives"] = json!([prim]);
     // The face node gets the new mesh; the old one stays only if another node uses it.
-    let shared = rig.container.json["nodes"].as_array().into_iter().flatten().enumerate()
+    let shared = rig.container.json["nodes"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .enumerate()
         .any(|(i, nd)| i != f.node && nd["mesh"].as_u64() == Some(f.mesh as u64));
     let mesh_index = if shared {
         let ms = doc.json["meshes"].as_array_mut().expect("meshes exist");
@@ -317,7 +406,9 @@ fn replace_face(rig: &Rig, set: &FrameSet, animated: bool) -> anyhow::Result<Doc
         doc.json["meshes"][f.mesh] = mesh;
         f.mesh
     };
-    let node = doc.json["nodes"][f.node].as_object_mut().expect("node object");
+    let node = doc.json["nodes"][f.node]
+        .as_object_mut()
+        .expect("node object");
     node.insert("mesh".into(), json!(mesh_index));
     node.remove("weights");
     // Animations: drop the face's old weight channels (and everything, for a still frame).
@@ -331,7 +422,12 @@ fn replace_face(rig: &Rig, set: &FrameSet, animated: bool) -> anyhow::Result<Doc
             }
             let input = doc.push_f32(&times, 1, None);
             let output = doc.push_f32(&onehot, 1, None);
-            let anims = doc.json.as_object_mut().expect("object").entry("animations").or_insert(json!([]));
+            let anims = doc
+                .json
+                .as_object_mut()
+                .expect("object")
+                .entry("animations")
+                .or_insert(json!([]));
             anims.as_array_mut().expect("array").push(json!({
                 "name": "furrow_wrinkles",
                 "samplers": [{ "input": input, "output": output, "interpolation": "LINEAR" }],
@@ -339,7 +435,10 @@ fn replace_face(rig: &Rig, set: &FrameSet, animated: bool) -> anyhow::Result<Doc
             }));
         }
     } else {
-        doc.json.as_object_mut().expect("object").remove("animations");
+        doc.json
+            .as_object_mut()
+            .expect("object")
+            .remove("animations");
     }
     hoist_skinned_meshes(&mut doc.json);
     doc.prune();
@@ -354,7 +453,12 @@ fn hoist_skinned_meshes(json: &mut Value) {
     let nodes = json["nodes"].as_array().cloned().unwrap_or_default();
     let mut parent = vec![None; nodes.len()];
     for (i, n) in nodes.iter().enumerate() {
-        for c in n["children"].as_array().into_iter().flatten().filter_map(|c| c.as_u64()) {
+        for c in n["children"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .filter_map(|c| c.as_u64())
+        {
             if let Some(p) = parent.get_mut(c as usize) {
                 *p = Some(i);
             }
@@ -384,16 +488,33 @@ fn hoist_skinned_meshes(json: &mut Value) {
         old.remove("mesh");
         old.remove("skin");
         old.remove("weights");
-        for sc in json.get_mut("scenes").and_then(|v| v.as_array_mut()).into_iter().flatten() {
+        for sc in json
+            .get_mut("scenes")
+            .and_then(|v| v.as_array_mut())
+            .into_iter()
+            .flatten()
+        {
             if let Some(list) = sc.get_mut("nodes").and_then(|v| v.as_array_mut()) {
                 if list.iter().any(|v| v.as_u64() == Some(root as u64)) {
                     list.push(json!(new_index));
                 }
             }
         }
-        for a in json.get_mut("animations").and_then(|v| v.as_array_mut()).into_iter().flatten() {
-            for c in a.get_mut("channels").and_then(|v| v.as_array_mut()).into_iter().flatten() {
-                if c["target"]["path"] == "weights" && c["target"]["node"].as_u64() == Some(i as u64) {
+        for a in json
+            .get_mut("animations")
+            .and_then(|v| v.as_array_mut())
+            .into_iter()
+            .flatten()
+        {
+            for c in a
+                .get_mut("channels")
+                .and_then(|v| v.as_array_mut())
+                .into_iter()
+                .flatten()
+            {
+                if c["target"]["path"] == "weights"
+                    && c["target"]["node"].as_u64() == Some(i as u64)
+                {
                     c["target"]["node"] = json!(new_index);
                 }
             }
@@ -403,18 +524,30 @@ fn hoist_skinned_meshes(json: &mut Value) {
 
 /// Remove `weights` channels that target `node` (their samplers too), and empty animations.
 fn strip_face_weight_channels(json: &mut Value, node: usize) {
-    let Some(anims) = json.get_mut("animations").and_then(|v| v.as_array_mut()) else { return };
+    let Some(anims) = json.get_mut("animations").and_then(|v| v.as_array_mut()) else {
+        return;
+    };
     for a in anims.iter_mut() {
         let chans: Vec<Value> = a["channels"].as_array().cloned().unwrap_or_default();
         let keep: Vec<Value> = chans
             .into_iter()
-            .filter(|c| !(c["target"]["path"] == "weights" && c["target"]["node"].as_u64() == Some(node as u64)))
+            .filter(|c| {
+                !(c["target"]["path"] == "weights"
+                    && c["target"]["node"].as_u64() == Some(node as u64))
+            })
             .collect();
         let samplers = a["samplers"].as_array().cloned().unwrap_or_default();
-        let mut used: Vec<usize> = keep.iter().filter_map(|c| c["sampler"].as_u64()).map(|s| s as usize).collect();
+        let mut used: Vec<usize> = keep
+            .iter()
+            .filter_map(|c| c["sampler"].as_u64())
+            .map(|s| s as usize)
+            .collect();
         used.sort_unstable();
         used.dedup();
-        let new_samplers: Vec<Value> = used.iter().filter_map(|&s| samplers.get(s).cloned()).collect();
+        let new_samplers: Vec<Value> = used
+            .iter()
+            .filter_map(|&s| samplers.get(s).cloned())
+            .collect();
         let keep: Vec<Value> = keep
             .into_iter()
             .map(|mut c| {
@@ -437,22 +570,42 @@ pub fn animated_glb(rig: &Rig, set: &FrameSet) -> anyhow::Result<Vec<u8>> {
 /// The scene with the face at frame `k` (no animation), as GLB bytes.
 pub fn frame_glb(rig: &Rig, set: &FrameSet, k: usize) -> anyhow::Result<Vec<u8>> {
     let one = std::slice::from_ref(set.frames.get(k).context("frame index out of range")?);
-    let single = FrameSet { triangles: set.triangles, frames: one, origin: set.origin, fps: set.fps };
+    let single = FrameSet {
+        triangles: set.triangles,
+        frames: one,
+        origin: set.origin,
+        fps: set.fps,
+    };
     Ok(replace_face(rig, &single, false)?.to_glb())
 }
 
 /// Write the animated GLB to `path` (atomically).
-pub fn write_animated(rig: &Rig, set: &FrameSet, path: &Path, overwrite: Overwrite) -> anyhow::Result<()> {
+pub fn write_animated(
+    rig: &Rig,
+    set: &FrameSet,
+    path: &Path,
+    overwrite: Overwrite,
+) -> anyhow::Result<()> {
     let bytes = animated_glb(rig, set)?;
     atomic::write(path, &bytes, overwrite)
 }
 
 /// Write one GLB per frame into `dir` as `frame_00000.glb`, … (each atomically); returns the paths.
-pub fn write_frames_dir(rig: &Rig, set: &FrameSet, dir: &Path, overwrite: Overwrite) -> anyhow::Result<Vec<PathBuf>> {
-    let paths: Vec<PathBuf> = (0..set.frames.len()).map(|k| dir.join(format!("frame_{k:05}.glb"))).collect();
+pub fn write_frames_dir(
+    rig: &Rig,
+    set: &FrameSet,
+    dir: &Path,
+    overwrite: Overwrite,
+) -> anyhow::Result<Vec<PathBuf>> {
+    let paths: Vec<PathBuf> = (0..set.frames.len())
+        .map(|k| dir.join(format!("frame_{k:05}.glb")))
+        .collect();
     if overwrite == Overwrite::Refuse {
         if let Some(p) = paths.iter().find(|p| p.exists()) {
-            bail!("{}: already exists; furrow does not overwrite files unless told to (pass --force)", p.display());
+            bail!(
+                "{}: already exists; furrow does not overwrite files unless told to (pass --force)",
+                p.display()
+            );
         }
     }
     for (k, p) in paths.iter().enumerate() {
@@ -463,19 +616,43 @@ pub fn write_frames_dir(rig: &Rig, set: &FrameSet, dir: &Path, overwrite: Overwr
 
 /// A fresh blend-shape rig file: one mesh with morph targets (names in `extras.targetNames`)
 /// and a linear weights animation, as GLB bytes. Positions in metres.
-pub fn rig_glb(name: &str, mesh: &TriMesh, targets: &[MorphTarget], keys: &WeightKeys) -> anyhow::Result<Vec<u8>> {
+pub fn rig_glb(
+    name: &str,
+    mesh: &TriMesh,
+    targets: &[MorphTarget],
+    keys: &WeightKeys,
+) -> anyhow::Result<Vec<u8>> {
     let n = mesh.positions.len();
     if let Some(t) = targets.iter().find(|t| t.positions.len() != n) {
-        bail!("target {} has {} deltas for {n} vertices", t.name, t.positions.len());
+        bail!(
+            "target {} has {} deltas for {n} vertices",
+            t.name,
+            t.positions.len()
+        );
     }
-    if keys.weights.len() != keys.times.len() || keys.weights.iter().any(|w| w.len() != targets.len()) {
-        bail!("weight keys do not match the times and the {} targets", targets.len());
+    if keys.weights.len() != keys.times.len()
+        || keys.weights.iter().any(|w| w.len() != targets.len())
+    {
+        bail!(
+            "weight keys do not match the times and the {} targets",
+            targets.len()
+        );
     }
     let mut doc = Document::new();
     let pos = doc.push_f32(&flat(&mesh.positions), 3, Some(ARRAY_BUFFER));
     let nrm = doc.push_f32(&flat(&mesh.vertex_normals()), 3, Some(ARRAY_BUFFER));
     let idx = doc.push_indices(&mesh.triangles);
-    let tj: Vec<Value> = targets.iter().map(|t| json!({ "POSITION": doc.push_f32(&flat(&t.positions), 3, Some(ARRAY_BUFFER)) })).collect();
+    let tj: Vec<Value> = targets
+        .iter()
+        .map(|t| {
+            let mut o =
+                json!({ "POSITION": doc.push_f32(&flat(&t.positions), 3, Some(ARRAY_BUFFER)) });
+            if let Some(n) = t.normals.as_ref().filter(|n| n.len() == t.positions.len()) {
+                o["NORMAL"] = json!(doc.push_f32(&flat(n), 3, Some(ARRAY_BUFFER)));
+            }
+            o
+        })
+        .collect();
     let mut prim = json!({ "attributes": { "POSITION": pos, "NORMAL": nrm }, "indices": idx, "material": 0, "mode": 4 });
     if !tj.is_empty() {
         prim["targets"] = json!(tj);
@@ -484,7 +661,8 @@ pub fn rig_glb(name: &str, mesh: &TriMesh, targets: &[MorphTarget], keys: &Weigh
     let mut m = json!({ "name": name, "primitives": [prim] });
     if !targets.is_empty() {
         m["weights"] = json!(vec![0.0; targets.len()]);
-        m["extras"] = json!({ "targetNames": targets.iter().map(|t| t.name.clone()).collect::<Vec<_>>() });
+        m["extras"] =
+            json!({ "targetNames": targets.iter().map(|t| t.name.clone()).collect::<Vec<_>>() });
     }
     doc.json["meshes"] = json!([m]);
     doc.json["nodes"] = json!([{ "name": name, "mesh": 0 }]);

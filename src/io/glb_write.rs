@@ -74,7 +74,8 @@ impl Document {
         }
         let bytes: Vec<u8> = f.iter().flat_map(|v| v.to_le_bytes()).collect();
         let view = self.push_view(bytes, target);
-        let mut acc = json!({ "bufferView": view, "componentType": 5126, "count": count, "type": ty });
+        let mut acc =
+            json!({ "bufferView": view, "componentType": 5126, "count": count, "type": ty });
         if count > 0 && components <= 4 {
             acc["min"] = json!(min);
             acc["max"] = json!(max);
@@ -86,9 +87,23 @@ impl Document {
     pub fn push_indices(&mut self, triangles: &[[usize; 3]]) -> usize {
         let max = triangles.iter().flatten().copied().max().unwrap_or(0);
         let (bytes, ct): (Vec<u8>, u32) = if max < 65535 {
-            (triangles.iter().flatten().flat_map(|&i| (i as u16).to_le_bytes()).collect(), 5123)
+            (
+                triangles
+                    .iter()
+                    .flatten()
+                    .flat_map(|&i| (i as u16).to_le_bytes())
+                    .collect(),
+                5123,
+            )
         } else {
-            (triangles.iter().flatten().flat_map(|&i| (i as u32).to_le_bytes()).collect(), 5125)
+            (
+                triangles
+                    .iter()
+                    .flatten()
+                    .flat_map(|&i| (i as u32).to_le_bytes())
+                    .collect(),
+                5125,
+            )
         };
         let view = self.push_view(bytes, Some(ELEMENT_ARRAY_BUFFER));
         self.push_accessor(json!({ "bufferView": view, "componentType": ct, "count": triangles.len() * 3, "type": "SCALAR" }))
@@ -135,34 +150,74 @@ impl Document {
                 *v = json!(map[i as usize].expect("referenced object is kept"));
             }
         };
-        for m in j.get_mut("meshes").and_then(|v| v.as_array_mut()).into_iter().flatten() {
-            for p in m.get_mut("primitives").and_then(|v| v.as_array_mut()).into_iter().flatten() {
-                for a in p.get_mut("attributes").and_then(|v| v.as_object_mut()).into_iter().flatten() {
+        for m in j
+            .get_mut("meshes")
+            .and_then(|v| v.as_array_mut())
+            .into_iter()
+            .flatten()
+        {
+            for p in m
+                .get_mut("primitives")
+                .and_then(|v| v.as_array_mut())
+                .into_iter()
+                .flatten()
+            {
+                for a in p
+                    .get_mut("attributes")
+                    .and_then(|v| v.as_object_mut())
+                    .into_iter()
+                    .flatten()
+                {
                     remap(a.1, &acc_map);
                 }
                 if p.get("indices").is_some() {
                     remap(&mut p["indices"], &acc_map);
                 }
-                for t in p.get_mut("targets").and_then(|v| v.as_array_mut()).into_iter().flatten() {
+                for t in p
+                    .get_mut("targets")
+                    .and_then(|v| v.as_array_mut())
+                    .into_iter()
+                    .flatten()
+                {
                     for a in t.as_object_mut().into_iter().flatten() {
                         remap(a.1, &acc_map);
                     }
                 }
             }
         }
-        for s in j.get_mut("skins").and_then(|v| v.as_array_mut()).into_iter().flatten() {
+        for s in j
+            .get_mut("skins")
+            .and_then(|v| v.as_array_mut())
+            .into_iter()
+            .flatten()
+        {
             if s.get("inverseBindMatrices").is_some() {
                 remap(&mut s["inverseBindMatrices"], &acc_map);
             }
         }
-        for a in j.get_mut("animations").and_then(|v| v.as_array_mut()).into_iter().flatten() {
-            for s in a.get_mut("samplers").and_then(|v| v.as_array_mut()).into_iter().flatten() {
+        for a in j
+            .get_mut("animations")
+            .and_then(|v| v.as_array_mut())
+            .into_iter()
+            .flatten()
+        {
+            for s in a
+                .get_mut("samplers")
+                .and_then(|v| v.as_array_mut())
+                .into_iter()
+                .flatten()
+            {
                 remap(&mut s["input"], &acc_map);
                 remap(&mut s["output"], &acc_map);
             }
         }
         if let Some(accs) = j.get_mut("accessors").and_then(|v| v.as_array_mut()) {
-            let kept: Vec<Value> = accs.drain(..).enumerate().filter(|(i, _)| used_acc[*i]).map(|(_, a)| a).collect();
+            let kept: Vec<Value> = accs
+                .drain(..)
+                .enumerate()
+                .filter(|(i, _)| used_acc[*i])
+                .map(|(_, a)| a)
+                .collect();
             *accs = kept;
         }
         // Buffer views referenced by kept accessors and images.
@@ -177,7 +232,12 @@ impl Document {
             mark(&im["bufferView"], &mut used_view);
         }
         let view_map = renumber(&used_view);
-        for a in j.get_mut("accessors").and_then(|v| v.as_array_mut()).into_iter().flatten() {
+        for a in j
+            .get_mut("accessors")
+            .and_then(|v| v.as_array_mut())
+            .into_iter()
+            .flatten()
+        {
             if a.get("bufferView").is_some() {
                 remap(&mut a["bufferView"], &view_map);
             }
@@ -186,23 +246,42 @@ impl Document {
                 remap(&mut a["sparse"]["values"]["bufferView"], &view_map);
             }
         }
-        for im in j.get_mut("images").and_then(|v| v.as_array_mut()).into_iter().flatten() {
+        for im in j
+            .get_mut("images")
+            .and_then(|v| v.as_array_mut())
+            .into_iter()
+            .flatten()
+        {
             if im.get("bufferView").is_some() {
                 remap(&mut im["bufferView"], &view_map);
             }
         }
         if let Some(views) = j.get_mut("bufferViews").and_then(|v| v.as_array_mut()) {
-            let kept: Vec<Value> = views.drain(..).enumerate().filter(|(i, _)| used_view[*i]).map(|(_, v)| v).collect();
+            let kept: Vec<Value> = views
+                .drain(..)
+                .enumerate()
+                .filter(|(i, _)| used_view[*i])
+                .map(|(_, v)| v)
+                .collect();
             *views = kept;
         }
         let bytes = std::mem::take(&mut self.view_bytes);
-        self.view_bytes = bytes.into_iter().enumerate().filter(|(i, _)| used_view[*i]).map(|(_, b)| b).collect();
+        self.view_bytes = bytes
+            .into_iter()
+            .enumerate()
+            .filter(|(i, _)| used_view[*i])
+            .map(|(_, b)| b)
+            .collect();
     }
 
     /// Lay out the binary buffer (views 4-byte aligned), fill offsets, and write a GLB.
     pub fn to_glb(&mut self) -> Vec<u8> {
         let mut bin = Vec::new();
-        if let Some(views) = self.json.get_mut("bufferViews").and_then(|v| v.as_array_mut()) {
+        if let Some(views) = self
+            .json
+            .get_mut("bufferViews")
+            .and_then(|v| v.as_array_mut())
+        {
             for (v, bytes) in views.iter_mut().zip(&self.view_bytes) {
                 while bin.len() % 4 != 0 {
                     bin.push(0);
@@ -224,8 +303,27 @@ impl Document {
         } else {
             obj.insert("buffers".into(), json!([{ "byteLength": bin.len() }]));
         }
-        for k in ["accessors", "bufferViews", "animations", "meshes", "nodes", "images", "samplers", "textures", "materials", "skins", "cameras", "scenes", "extensionsUsed", "extensionsRequired"] {
-            if obj.get(k).and_then(|v| v.as_array()).is_some_and(|a| a.is_empty()) {
+        for k in [
+            "accessors",
+            "bufferViews",
+            "animations",
+            "meshes",
+            "nodes",
+            "images",
+            "samplers",
+            "textures",
+            "materials",
+            "skins",
+            "cameras",
+            "scenes",
+            "extensionsUsed",
+            "extensionsRequired",
+        ] {
+            if obj
+                .get(k)
+                .and_then(|v| v.as_array())
+                .is_some_and(|a| a.is_empty())
+            {
                 obj.remove(k);
             }
         }

@@ -70,7 +70,8 @@ pub fn summarize(path: &Path) -> GltfResult<Summary> {
                 vertices: m.positions.len(),
                 triangles: m.triangles.len(),
                 targets: m.targets.iter().map(|t| t.name.clone()).collect(),
-                normal_deltas: !m.targets.is_empty() && m.targets.iter().all(|t| t.normals.is_some()),
+                normal_deltas: !m.targets.is_empty()
+                    && m.targets.iter().all(|t| t.normals.is_some()),
                 skinned: matches!(m.to_world, VertexTransform::PerVertex(_)),
                 size_m: [d.x, d.y, d.z],
             }
@@ -78,7 +79,11 @@ pub fn summarize(path: &Path) -> GltfResult<Summary> {
         .collect();
     Ok(Summary {
         file: path.display().to_string(),
-        container: if c.binary { "glb".into() } else { "gltf".into() },
+        container: if c.binary {
+            "glb".into()
+        } else {
+            "gltf".into()
+        },
         generator: c.root.asset.generator.clone(),
         extensions_used: c.root.extensions_used.clone(),
         extensions_required: c.root.extensions_required.clone(),
@@ -89,12 +94,25 @@ pub fn summarize(path: &Path) -> GltfResult<Summary> {
 
 impl std::fmt::Display for Summary {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        writeln!(f, "{} ({}{})", self.file, self.container, self.generator.as_ref().map(|g| format!(", made by {g}")).unwrap_or_default())?;
+        writeln!(
+            f,
+            "{} ({}{})",
+            self.file,
+            self.container,
+            self.generator
+                .as_ref()
+                .map(|g| format!(", made by {g}"))
+                .unwrap_or_default()
+        )?;
         if !self.extensions_used.is_empty() {
             writeln!(f, "extensions used: {}", self.extensions_used.join(", "))?;
         }
         if !self.extensions_required.is_empty() {
-            writeln!(f, "extensions required: {}", self.extensions_required.join(", "))?;
+            writeln!(
+                f,
+                "extensions required: {}",
+                self.extensions_required.join(", ")
+            )?;
         }
         writeln!(f, "meshes ({} instances):", self.meshes.len())?;
         for m in &self.meshes {
@@ -105,13 +123,30 @@ impl std::fmt::Display for Summary {
                 if m.skinned { " skinned" } else { "" }, m.size_m[0], m.size_m[1], m.size_m[2]
             )?;
             if !m.targets.is_empty() {
-                writeln!(f, "      {} morph targets{}: {}", m.targets.len(), if m.normal_deltas { " (with normals)" } else { "" }, m.targets.join(", "))?;
+                writeln!(
+                    f,
+                    "      {} morph targets{}: {}",
+                    m.targets.len(),
+                    if m.normal_deltas {
+                        " (with normals)"
+                    } else {
+                        ""
+                    },
+                    m.targets.join(", ")
+                )?;
             }
         }
         writeln!(f, "animations ({}):", self.animations.len())?;
         for a in &self.animations {
             let ch: Vec<String> = a.channels.iter().map(|(p, n)| format!("{n} {p}")).collect();
-            writeln!(f, "  {:>3} {:<20} {:>7.3} s  channels: {}", a.index, format!("'{}'", a.name), a.duration_s, ch.join(", "))?;
+            writeln!(
+                f,
+                "  {:>3} {:<20} {:>7.3} s  channels: {}",
+                a.index,
+                format!("'{}'", a.name),
+                a.duration_s,
+                ch.join(", ")
+            )?;
         }
         Ok(())
     }

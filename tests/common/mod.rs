@@ -6,7 +6,9 @@ use std::process::Command;
 
 /// `../shared/data/NAME` (outside test data; never copied into the project).
 pub fn shared_data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data").join(name)
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data")
+        .join(name)
 }
 
 /// All `.glb` files in `../shared/data/`.
@@ -35,14 +37,25 @@ pub fn tools_required() -> bool {
 /// Returns None (test skipped, with a note) when the validator is not installed outside CI.
 pub fn validate(files: &[PathBuf]) -> Option<Vec<serde_json::Value>> {
     if node_modules().is_none() {
-        assert!(!tools_required(), "gltf-validator is not installed: run `npm ci --prefix .ci`");
+        assert!(
+            !tools_required(),
+            "gltf-validator is not installed: run `npm ci --prefix .ci`"
+        );
         eprintln!("note: gltf-validator not installed (npm ci --prefix .ci); validation skipped");
         return None;
     }
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join(".ci/validate.mjs");
-    let out = Command::new("node").arg(script).args(files).output().expect("node runs");
+    let out = Command::new("node")
+        .arg(script)
+        .args(files)
+        .output()
+        .expect("node runs");
     let text = String::from_utf8_lossy(&out.stdout);
-    Some(text.lines().map(|l| serde_json::from_str(l).expect("validator prints JSON")).collect())
+    Some(
+        text.lines()
+            .map(|l| serde_json::from_str(l).expect("validator prints JSON"))
+            .collect(),
+    )
 }
 
 /// Assert that every report has no errors and no warnings.
@@ -124,7 +137,10 @@ pub fn glb_bytes(json: &serde_json::Value, bin: &[u8]) -> Vec<u8> {
 /// Returns false (skip, with a note) when gltfpack is not installed outside CI.
 pub fn gltfpack(src: &Path, out: &Path) -> bool {
     let Some(nm) = node_modules() else {
-        assert!(!tools_required(), "gltfpack is not installed: npm ci --prefix .ci");
+        assert!(
+            !tools_required(),
+            "gltfpack is not installed: npm ci --prefix .ci"
+        );
         eprintln!("note: gltfpack not installed; skipped");
         return false;
     };
@@ -136,6 +152,11 @@ pub fn gltfpack(src: &Path, out: &Path) -> bool {
         .arg(out)
         .output()
         .expect("node runs");
-    assert!(st.status.success(), "gltfpack failed on {}: {}", src.display(), String::from_utf8_lossy(&st.stderr));
+    assert!(
+        st.status.success(),
+        "gltfpack failed on {}: {}",
+        src.display(),
+        String::from_utf8_lossy(&st.stderr)
+    );
     true
 }
