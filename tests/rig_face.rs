@@ -603,3 +603,66 @@ fn animation_exercises_every_shape() {
         assert!(w[0].iter().zip(&w[1]).all(|(a, b)| (a - b).abs() < 0.25));
     }
 }
+
+/// (min angle in degrees, min cos between deformed and neutral normal, min and max area ratio)
+/// over all triangles for the deformed positions `def`.
+fn deformed_quality(r: &FaceRig, def: &[Vector3<f64>]) -> (f64, f64, f64, f64) {
+    let p = &r.mesh.positions;
+    let (mut min_angle, mut min_cos, mut amin, mut amax) = (f64::MAX, f64::MAX, f64::MAX, 0.0f64);
+    for &[a, b, c] in &r.mesh.triangles {
+        let n0 = (p[b] - p[a]).cross(&(p[c] - p[a]));
+        let n1 = (def[b] - def[a]).cross(&(def[c] - def[a]));
+        min_cos = min_cos.min(n0.normalize().dot(&n1.normalize()));
+        let ratio = n1.norm() / n0.norm();
+        amin = amin.min(ratio);
+        amax = amax.max(ratio);
+        for (o, u, v) in [(a, b, c), (b, c, a), (c, a, b)] {
+            min_angle = min_angle.min((def[u] - def[o]).angle(&(def[v] - def[o])).to_degrees());
+        }
+    }
+    (min_angle, min_cos, amin, amax)
+}
+
+#[test]
+fn deformed_meshes_stay_well_shaped() {
+    let r = rig();
+    let check = |label: &str, def: &[Vector3<f64>], verbose: bool| {
+        let (angle, cos, amin, amax) = deformed_quality(r, def);
+        if verbose {
+            println!(
+                "{label:>13}: min angle {angle:.1} deg, min normal cos {cos:.3}, area ratio {amin:.2}..{amax:.2}"
+            );
+        }
+        assert!(angle > 10.0, "{label}: min angle {angle} deg");
+        assert!(
+            cos > 0.5,
+            "{label}: a triangle turns by more than 60 degrees"
+        );
+        assert!(
+            amin > 0.4 && amax < 2.5,
+            "{label}: area ratio {amin}..{amax}"
+        );
+    };
+    for t in &r.targets {
+        check(&t.name, &deformed(r, &t.name), true);
+    }
+    // Every key of the animation (linear blend of the targets).
+    let mut worst = (f64::MAX, 0.0);
+    for (row, &time) in r.keys.weights.iter().zip(&r.keys.times) {
+        let mut def = r.mesh.positions.clone();
+        for (t, &w) in r.targets.iter().zip(row) {
+            for (d, dp) in def.iter_mut().zip(&t.positions) {
+                *d += dp * w;
+            }
+        }
+        let (angle, ..) = deformed_quality(r, &def);
+        if angle < worst.0 {
+            worst = (angle, time);
+        }
+        check(&format!("t = {time:.2} s"), &def, false);
+    }
+    println!(
+        "animation: min angle {:.1} deg at t = {:.2} s",
+        worst.0, worst.1
+    );
+}

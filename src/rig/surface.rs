@@ -62,11 +62,11 @@ pub struct Sample {
     pub side: Side,
     /// Neutral position, m.
     pub pos: Vector3<f64>,
-    /// Unit tangent along increasing θ (≈ +X on the front of the face).
+    /// Unit tangent of the base head along increasing θ (≈ +X on the front of the face).
     pub e_u: Vector3<f64>,
-    /// Unit tangent orthogonal to `e_u`, ≈ +Y ("up the face").
+    /// Unit tangent of the base head orthogonal to `e_u`, ≈ +Y ("up the face").
     pub e_v: Vector3<f64>,
-    /// Unit outward normal.
+    /// Unit outward normal of the base head (not of the relief: see [`base_frame`]).
     pub n: Vector3<f64>,
 }
 
@@ -121,7 +121,7 @@ fn half_width(y: f64) -> f64 {
         let r = (y / 0.16).powf(2.5);
         HALF_WIDTH * (1.0 - r).powf(0.4)
     } else {
-        HALF_WIDTH * (1.0 - 0.22 * smoothstep(-0.01, -0.1, y))
+        HALF_WIDTH * (1.0 - 0.28 * smoothstep(-0.01, -0.1, y))
     }
 }
 
@@ -135,6 +135,18 @@ fn half_depth(y: f64) -> f64 {
         let r = (-y / 0.128).powi(3);
         HALF_DEPTH * (1.0 - r).cbrt()
     }
+}
+
+/// Orthonormal frame `(e_u, e_v, n)` of the smooth base head at `(theta, y)`: `e_u` along
+/// increasing θ, `n` outward, `e_v = n × e_u` (≈ +Y). It varies slowly (radii ≥ 7 cm), so
+/// displacements written in it stay smooth over the nose, lips and brows.
+pub fn base_frame(theta: f64, y: f64) -> (Vector3<f64>, Vector3<f64>, Vector3<f64>) {
+    let h = 1e-6;
+    let pt = (base_point(theta + h, y) - base_point(theta - h, y)) / (2.0 * h);
+    let py = (base_point(theta, y + h) - base_point(theta, y - h)) / (2.0 * h);
+    let n = pt.cross(&py).normalize();
+    let e_u = pt.normalize();
+    (e_u, n.cross(&e_u), n)
 }
 
 /// Point of the base head at azimuth `theta` and height `y`, m.
@@ -187,10 +199,20 @@ pub fn relief(x: f64, y: f64, mouth_y: f64) -> f64 {
     // Muzzle over the dental arch.
     h += 0.008 * gauss2(ax / 0.03, (y - mouth_y) / 0.028);
     // Lips: upper and lower vermilion, a shallow groove along the mouth line.
-    let lip_w = 1.0 - smoothstep(0.012, 0.028, ax);
-    h += 0.004 * lip_w * (-0.5 * ((y - mouth_y - 0.0055) / 0.0045).powi(2)).exp();
-    h += 0.0045 * lip_w * (-0.5 * ((y - mouth_y + 0.0065) / 0.005).powi(2)).exp();
+    // The vermilion is fullest at the centre and thins toward the corners; the upper lip has a
+    // Cupid's bow (two peaks either side of the philtrum).
+    let lip_w = 1.0 - smoothstep(0.006, 0.028, ax);
+    let bow = 0.0012 * gauss2((ax - 0.006) / 0.004, 0.0);
+    let upper_c = mouth_y + 0.002 + 0.0035 * lip_w + bow;
+    let lower_c = mouth_y - 0.002 - 0.0045 * lip_w;
+    h += 0.004 * lip_w * (-0.5 * ((y - upper_c) / (0.0025 + 0.002 * lip_w)).powi(2)).exp();
+    h += 0.0045 * lip_w * (-0.5 * ((y - lower_c) / (0.0025 + 0.0025 * lip_w)).powi(2)).exp();
     h -= 0.0012 * lip_w * (-0.5 * ((y - mouth_y) / 0.003).powi(2)).exp();
+    // Philtrum: two faint ridges from the nose base to the upper lip.
+    h += 0.0008 * gauss2((ax - 0.005) / 0.0025, (y - mouth_y - 0.014) / 0.006);
+    // Nasolabial folds: shallow creases from the nostril wings to beside the mouth corners.
+    let (fx, fy) = (ax - 0.021 - 0.012 * ((-0.02 - y) / 0.04), y + 0.04);
+    h -= 0.0015 * gauss2(fx / 0.004, fy / 0.02);
     // Mentolabial sulcus and chin.
     h -= 0.002 * gauss2(ax / 0.018, (y - mouth_y + 0.019) / 0.0045);
     h += 0.009 * gauss2(ax / 0.017, (y + 0.083) / 0.011);
@@ -367,7 +389,7 @@ pub fn build_mask(k: usize, rows: usize) -> Mask {
 
 /// Evaluate position and frame of the surface at `(theta, y)`.
 fn make_sample(surface: &FaceSurface, theta: f64, y: f64, side: Side) -> Sample {
-    let (e_u, e_v, n) = surface.frame(theta, y);
+    let (e_u, e_v, n) = base_frame(theta, y);
     Sample {
         theta,
         y,
