@@ -401,3 +401,93 @@ fn make_sample(surface: &FaceSurface, theta: f64, y: f64, side: Side) -> Sample 
         n,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn smoothstep_and_bump_have_the_stated_ends() {
+        assert_eq!(smoothstep(0.0, 1.0, -1.0), 0.0);
+        assert_eq!(smoothstep(0.0, 1.0, 0.5), 0.5);
+        assert_eq!(smoothstep(0.0, 1.0, 2.0), 1.0);
+        assert_eq!(smoothstep(1.0, 0.0, 0.0), 1.0);
+        assert_eq!(bump(0.0), 1.0);
+        assert_eq!(bump(1.0), 0.0);
+        assert_eq!(bump(-1.5), 0.0);
+        // C² at r = 1: value, slope and curvature vanish (finite differences, O(h³)).
+        let h = 1e-3;
+        assert!(bump(1.0 - h) < 10.0 * h.powi(3));
+    }
+
+    #[test]
+    fn arclength_table_inverts_the_profile() {
+        let table = profile_arclength(4000);
+        let total = table.last().unwrap().1;
+        // The central profile is longer than the chord and shorter than twice the height.
+        assert!(total > Y_TOP - Y_BOTTOM && total < 2.0 * (Y_TOP - Y_BOTTOM));
+        for k in [0, 1, 17, 2000, 3999, 4000] {
+            let (y, s) = table[k];
+            assert!((y_at_arclength(&table, s) - y).abs() < 1e-12);
+        }
+        // Monotone in between.
+        let ys: Vec<f64> = (0..=100)
+            .map(|i| y_at_arclength(&table, total * i as f64 / 100.0))
+            .collect();
+        assert!(ys.windows(2).all(|w| w[1] > w[0]));
+    }
+
+    #[test]
+    fn base_frame_is_orthonormal_and_tangent() {
+        for &(theta, y) in &[(0.0, 0.0), (0.7, 0.05), (-1.2, -0.08), (1.3, 0.095)] {
+            let (e_u, e_v, n) = base_frame(theta, y);
+            for (a, b) in [(e_u, e_v), (e_v, n), (n, e_u)] {
+                assert!(a.dot(&b).abs() < 1e-12);
+            }
+            for v in [e_u, e_v, n] {
+                assert!((v.norm() - 1.0).abs() < 1e-12);
+            }
+            // Tangent: moving along the surface is orthogonal to n (to first order).
+            let h = 1e-7;
+            let dt = base_point(theta + h, y) - base_point(theta - h, y);
+            let dy = base_point(theta, y + h) - base_point(theta, y - h);
+            let (ct, cy) = (n.dot(&dt) / dt.norm(), n.dot(&dy) / dy.norm());
+            assert!(
+                ct.abs() < 1e-6 && cy.abs() < 1e-6,
+                "({theta}, {y}): {ct:e} {cy:e}"
+            );
+            // Outward: away from the head's vertical axis.
+            let p = base_point(theta, y);
+            assert!(n.x * p.x + n.z * p.z > 0.0);
+            assert!(e_v.y > 0.5);
+        }
+    }
+
+    #[test]
+    fn small_lattice_has_the_expected_counts_and_topology() {
+        let (k, rows) = (20, 40);
+        let m = build_mask(k, rows);
+        let n_even = 2 * k + 1;
+        let lattice: usize = (0..rows)
+            .map(|j| if j % 2 == 0 { n_even } else { n_even + 1 })
+            .sum();
+        let slit = m.slit_upper.len();
+        assert!(slit >= 2);
+        assert_eq!(m.mesh.vertex_count(), lattice + slit);
+        // Each strip between rows of n and n + 1 vertices holds 2n − 1 triangles.
+        assert_eq!(m.mesh.triangle_count(), (rows - 1) * (2 * n_even - 1));
+        // Euler characteristic of a disc with one hole (the mouth): V − E + F = 0.
+        let mut edges = std::collections::HashSet::new();
+        for t in &m.mesh.triangles {
+            for i in 0..3 {
+                let (a, b) = (t[i], t[(i + 1) % 3]);
+                edges.insert((a.min(b), a.max(b)));
+            }
+        }
+        let chi =
+            m.mesh.vertex_count() as i64 - edges.len() as i64 + m.mesh.triangle_count() as i64;
+        assert_eq!(chi, 0);
+        // The mirror map is an involution.
+        assert!((0..m.mirror.len()).all(|v| m.mirror[m.mirror[v]] == v));
+    }
+}
