@@ -687,3 +687,54 @@ fn normal_deltas_match_the_deformed_surface() {
         assert!(err < 1e-12, "{}: normal delta error {err}", t.name);
     }
 }
+
+#[test]
+fn other_resolutions_keep_the_structure() {
+    use furrow::rig::face::{generate_with, FaceRigSettings};
+    for settings in [
+        FaceRigSettings {
+            columns_half: 10,
+            rows: 24,
+        },
+        FaceRigSettings::scaled(1.5),
+    ] {
+        let r = generate_with(&settings).expect("valid settings");
+        let n = r.mesh.vertex_count();
+        let edges = edge_counts(&r.mesh.triangles);
+        let chi = n as i64 - edges.len() as i64 + r.mesh.triangle_count() as i64;
+        let (su, sl) = (
+            region(&r, "mouth_slit_upper"),
+            region(&r, "mouth_slit_lower"),
+        );
+        let p = &r.mesh.positions;
+        let gap = su
+            .iter()
+            .zip(sl)
+            .map(|(&a, &b)| (p[a] - p[b]).norm())
+            .fold(0.0, f64::max);
+        let (lo, hi) = r.mesh.bounding_box().unwrap();
+        println!(
+            "{settings:?}: {n} vertices, chi {chi}, slit pairs {}, height {:.3} m",
+            su.len(),
+            hi.y - lo.y
+        );
+        assert_eq!(chi, 0);
+        assert!(!su.is_empty() && su.len() == sl.len() && gap < 1e-9);
+        assert!((0.18..=0.22).contains(&(hi.y - lo.y)));
+        assert_eq!(r.targets.len(), 9);
+        assert!(r.targets.iter().all(|t| t.positions.len() == n));
+    }
+    // Out-of-range settings are refused with the field named.
+    let err = generate_with(&FaceRigSettings {
+        columns_half: 3,
+        rows: 110,
+    })
+    .unwrap_err();
+    assert!(err.to_string().contains("columns_half"), "{err}");
+    let err = generate_with(&FaceRigSettings {
+        columns_half: 45,
+        rows: 5,
+    })
+    .unwrap_err();
+    assert!(err.to_string().contains("rows"), "{err}");
+}
