@@ -176,8 +176,10 @@ pub fn relief(x: f64, y: f64, mouth_y: f64) -> f64 {
     // Eye sockets with closed lids over the eyeballs.
     let ex = ax - EYE_X;
     let ey = y - EYE_Y;
-    h -= 0.013 * gauss2(ex / 0.016, ey / 0.011);
-    h += 0.0065 * gauss2(ex / 0.011, ey / 0.0068);
+    h -= 0.016 * gauss2(ex / 0.016, ey / 0.011);
+    h += 0.0085 * gauss2(ex / 0.0115, ey / 0.0065);
+    // Lid line: a faint crease where the closed lids meet, slightly below the eye centre.
+    h -= 0.0008 * gauss2(ex / 0.009, (ey + 0.002) / 0.0025);
     // Nose: dorsum from the nasion (y ≈ 0.028) to the tip (y ≈ −0.016), steep drop below it.
     let (y_nasion, y_tip) = (0.03, -0.016);
     let along = smoothstep(y_nasion + 0.008, y_tip, y);
