@@ -244,6 +244,45 @@ fn manifold_connected_and_open_at_the_back() {
         "boundary: {rim_count} rim vertices, {} slit vertices; zmax {zmax:.4} m",
         slit.len()
     );
+    // Exactly two boundary loops: the outer rim and the mouth slit (upper + lower copies and the
+    // two corners).
+    let mut next: HashMap<usize, Vec<usize>> = HashMap::new();
+    for (&(a, b), &c) in &edges {
+        if c == 1 {
+            next.entry(a).or_default().push(b);
+            next.entry(b).or_default().push(a);
+        }
+    }
+    assert!(
+        next.values().all(|v| v.len() == 2),
+        "boundary is not a set of simple loops"
+    );
+    let mut visited = HashSet::new();
+    let mut loops = Vec::new();
+    for &start in next.keys() {
+        if visited.contains(&start) {
+            continue;
+        }
+        let mut comp = HashSet::new();
+        let mut stack = vec![start];
+        while let Some(v) = stack.pop() {
+            if comp.insert(v) {
+                stack.extend(next[&v].iter().copied());
+            }
+        }
+        visited.extend(comp.iter().copied());
+        loops.push(comp);
+    }
+    assert_eq!(
+        loops.len(),
+        2,
+        "expected rim + mouth slit, found {} boundary loops",
+        loops.len()
+    );
+    assert!(
+        loops.iter().any(|l| *l == slit),
+        "the mouth slit is not one boundary loop"
+    );
     // Every boundary vertex that is not on the slit is in the published rim region.
     let rim: HashSet<usize> = region(r, "rim").iter().copied().collect();
     assert!(boundary.iter().all(|v| slit.contains(v) || rim.contains(v)));

@@ -156,10 +156,7 @@ fn base_point(theta: f64, y: f64) -> Vector3<f64> {
 
 /// Unit outward normal of the base head.
 fn base_normal(theta: f64, y: f64) -> Vector3<f64> {
-    let h = 1e-6;
-    let pt = (base_point(theta + h, y) - base_point(theta - h, y)) / (2.0 * h);
-    let py = (base_point(theta, y + h) - base_point(theta, y - h)) / (2.0 * h);
-    pt.cross(&py).normalize()
+    base_frame(theta, y).2
 }
 
 /// Relief of the face above the base head along its normal, m, at base lateral coordinate `x`
@@ -261,22 +258,19 @@ impl FaceSurface {
         let x = half_width(y) * theta.sin();
         base_point(theta, y) + relief(x, y, self.mouth_y) * base_normal(theta, y)
     }
-
-    /// Local orthonormal frame `(e_u, e_v, n)` at `(theta, y)`: `e_u` along θ, `n` outward.
-    pub fn frame(&self, theta: f64, y: f64) -> (Vector3<f64>, Vector3<f64>, Vector3<f64>) {
-        let h = 1e-6;
-        let pt = (self.point(theta + h, y) - self.point(theta - h, y)) / (2.0 * h);
-        let py = (self.point(theta, y + h) - self.point(theta, y - h)) / (2.0 * h);
-        let n = pt.cross(&py).normalize();
-        let e_u = pt.normalize();
-        let e_v = n.cross(&e_u);
-        (e_u, e_v, n)
-    }
 }
 
-/// Sample the mask on a triangular lattice with `2k + 1` vertices on even rows and about
-/// `rows` rows, and cut the mouth slit.
+/// Sample the mask on a triangular lattice of `rows` rows with `2k + 1` vertices on even rows
+/// and `2k + 2` on odd rows, and cut the mouth slit.
+///
+/// # Panics
+/// If the lattice is too coarse to hold a mouth slit (`k < 10` or `rows < 24`; use
+/// [`crate::rig::face::generate_with`], which validates its settings).
 pub fn build_mask(k: usize, rows: usize) -> Mask {
+    assert!(
+        k >= 10 && rows >= 24,
+        "face mask lattice too coarse: k = {k}, rows = {rows}"
+    );
     let n_even = 2 * k + 1;
     let dtheta = THETA_MAX / k as f64;
     let table = profile_arclength(4000);
