@@ -280,7 +280,7 @@ fn manifold_connected_and_open_at_the_back() {
         loops.len()
     );
     assert!(
-        loops.iter().any(|l| *l == slit),
+        loops.contains(&slit),
         "the mouth slit is not one boundary loop"
     );
     // Every boundary vertex that is not on the slit is in the published rim region.
