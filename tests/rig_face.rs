@@ -352,10 +352,17 @@ fn triangle_quality() {
         emin = emin.min(lo);
         emax = emax.max(hi);
     }
+    let lengths: Vec<f64> = edge_counts(&r.mesh.triangles)
+        .keys()
+        .map(|&(a, b)| (p[a] - p[b]).norm())
+        .collect();
+    let mean = lengths.iter().sum::<f64>() / lengths.len() as f64;
     println!(
-        "min angle {min_angle:.1} deg, max per-triangle edge ratio {max_ratio:.2}, edges {:.2}..{:.2} mm",
+        "min angle {min_angle:.1} deg, max per-triangle edge ratio {max_ratio:.2}, edges {:.2}..{:.2} mm, mean {:.2} mm, area {:.4} m^2",
         emin * 1e3,
-        emax * 1e3
+        emax * 1e3,
+        mean * 1e3,
+        r.mesh.area()
     );
     assert!(min_angle > 25.0);
     assert!(max_ratio < 2.2);
