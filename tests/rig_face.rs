@@ -197,6 +197,13 @@ fn manifold_connected_and_open_at_the_back() {
         }
     }
     assert!(seen.iter().all(|&s| s), "mesh is not one connected surface");
+    // Euler characteristic V − E + F = 2 − 2g − b: a disc (genus 0) with the mouth as the one
+    // hole besides the outer rim gives 0.
+    let chi = n as i64 - edges.len() as i64 + r.mesh.triangle_count() as i64;
+    assert_eq!(
+        chi, 0,
+        "Euler characteristic {chi}: not a disc with one hole"
+    );
 
     let slit: HashSet<usize> = region(r, "mouth_slit_upper")
         .iter()
@@ -236,6 +243,45 @@ fn manifold_connected_and_open_at_the_back() {
     println!(
         "boundary: {rim_count} rim vertices, {} slit vertices; zmax {zmax:.4} m",
         slit.len()
+    );
+    // Exactly two boundary loops: the outer rim and the mouth slit (upper + lower copies and the
+    // two corners).
+    let mut next: HashMap<usize, Vec<usize>> = HashMap::new();
+    for (&(a, b), &c) in &edges {
+        if c == 1 {
+            next.entry(a).or_default().push(b);
+            next.entry(b).or_default().push(a);
+        }
+    }
+    assert!(
+        next.values().all(|v| v.len() == 2),
+        "boundary is not a set of simple loops"
+    );
+    let mut visited = HashSet::new();
+    let mut loops = Vec::new();
+    for &start in next.keys() {
+        if visited.contains(&start) {
+            continue;
+        }
+        let mut comp = HashSet::new();
+        let mut stack = vec![start];
+        while let Some(v) = stack.pop() {
+            if comp.insert(v) {
+                stack.extend(next[&v].iter().copied());
+            }
+        }
+        visited.extend(comp.iter().copied());
+        loops.push(comp);
+    }
+    assert_eq!(
+        loops.len(),
+        2,
+        "expected rim + mouth slit, found {} boundary loops",
+        loops.len()
+    );
+    assert!(
+        loops.contains(&slit),
+        "the mouth slit is not one boundary loop"
     );
     // Every boundary vertex that is not on the slit is in the published rim region.
     let rim: HashSet<usize> = region(r, "rim").iter().copied().collect();
@@ -306,14 +352,21 @@ fn triangle_quality() {
         emin = emin.min(lo);
         emax = emax.max(hi);
     }
+    let lengths: Vec<f64> = edge_counts(&r.mesh.triangles)
+        .keys()
+        .map(|&(a, b)| (p[a] - p[b]).norm())
+        .collect();
+    let mean = lengths.iter().sum::<f64>() / lengths.len() as f64;
     println!(
-        "min angle {min_angle:.1} deg, max per-triangle edge ratio {max_ratio:.2}, edges {:.2}..{:.2} mm",
+        "min angle {min_angle:.1} deg, max per-triangle edge ratio {max_ratio:.2}, edges {:.2}..{:.2} mm, mean {:.2} mm, area {:.4} m^2",
         emin * 1e3,
-        emax * 1e3
+        emax * 1e3,
+        mean * 1e3,
+        r.mesh.area()
     );
-    assert!(min_angle > 20.0);
-    assert!(max_ratio < 3.0);
-    assert!(emax / emin < 6.0);
+    assert!(min_angle > 25.0);
+    assert!(max_ratio < 2.2);
+    assert!(emax / emin < 4.0);
 }
 
 #[test]
@@ -602,4 +655,132 @@ fn animation_exercises_every_shape() {
     for w in k.weights.windows(2) {
         assert!(w[0].iter().zip(&w[1]).all(|(a, b)| (a - b).abs() < 0.25));
     }
+}
+
+/// (min angle in degrees, min cos between deformed and neutral normal, min and max area ratio)
+/// over all triangles for the deformed positions `def`.
+fn deformed_quality(r: &FaceRig, def: &[Vector3<f64>]) -> (f64, f64, f64, f64) {
+    let p = &r.mesh.positions;
+    let (mut min_angle, mut min_cos, mut amin, mut amax) = (f64::MAX, f64::MAX, f64::MAX, 0.0f64);
+    for &[a, b, c] in &r.mesh.triangles {
+        let n0 = (p[b] - p[a]).cross(&(p[c] - p[a]));
+        let n1 = (def[b] - def[a]).cross(&(def[c] - def[a]));
+        min_cos = min_cos.min(n0.normalize().dot(&n1.normalize()));
+        let ratio = n1.norm() / n0.norm();
+        amin = amin.min(ratio);
+        amax = amax.max(ratio);
+        for (o, u, v) in [(a, b, c), (b, c, a), (c, a, b)] {
+            min_angle = min_angle.min((def[u] - def[o]).angle(&(def[v] - def[o])).to_degrees());
+        }
+    }
+    (min_angle, min_cos, amin, amax)
+}
+
+#[test]
+fn deformed_meshes_stay_well_shaped() {
+    let r = rig();
+    let check = |label: &str, def: &[Vector3<f64>], verbose: bool| {
+        let (angle, cos, amin, amax) = deformed_quality(r, def);
+        if verbose {
+            println!(
+                "{label:>13}: min angle {angle:.1} deg, min normal cos {cos:.3}, area ratio {amin:.2}..{amax:.2}"
+            );
+        }
+        assert!(angle > 15.0, "{label}: min angle {angle} deg");
+        assert!(
+            cos > 0.7,
+            "{label}: a triangle turns by more than 45 degrees"
+        );
+        assert!(
+            amin > 0.4 && amax < 2.2,
+            "{label}: area ratio {amin}..{amax}"
+        );
+    };
+    for t in &r.targets {
+        check(&t.name, &deformed(r, &t.name), true);
+    }
+    // Every key of the animation (linear blend of the targets).
+    let mut worst = (f64::MAX, 0.0);
+    for (row, &time) in r.keys.weights.iter().zip(&r.keys.times) {
+        let mut def = r.mesh.positions.clone();
+        for (t, &w) in r.targets.iter().zip(row) {
+            for (d, dp) in def.iter_mut().zip(&t.positions) {
+                *d += dp * w;
+            }
+        }
+        let (angle, ..) = deformed_quality(r, &def);
+        if angle < worst.0 {
+            worst = (angle, time);
+        }
+        check(&format!("t = {time:.2} s"), &def, false);
+    }
+    println!(
+        "animation: min angle {:.1} deg at t = {:.2} s",
+        worst.0, worst.1
+    );
+}
+
+#[test]
+fn normal_deltas_match_the_deformed_surface() {
+    let r = rig();
+    let n0 = r.mesh.vertex_normals();
+    for t in &r.targets {
+        let dn = t.normals.as_ref().expect("normal deltas");
+        let n1 = r.mesh.vertex_normals_of(&deformed(r, &t.name));
+        let err = (0..n0.len())
+            .map(|v| (n0[v] + dn[v] - n1[v]).norm())
+            .fold(0.0, f64::max);
+        assert!(err < 1e-12, "{}: normal delta error {err}", t.name);
+    }
+}
+
+#[test]
+fn other_resolutions_keep_the_structure() {
+    use furrow::rig::face::{generate_with, FaceRigSettings};
+    for settings in [
+        FaceRigSettings {
+            columns_half: 10,
+            rows: 24,
+        },
+        FaceRigSettings::scaled(1.5),
+    ] {
+        let r = generate_with(&settings).expect("valid settings");
+        let n = r.mesh.vertex_count();
+        let edges = edge_counts(&r.mesh.triangles);
+        let chi = n as i64 - edges.len() as i64 + r.mesh.triangle_count() as i64;
+        let (su, sl) = (
+            region(&r, "mouth_slit_upper"),
+            region(&r, "mouth_slit_lower"),
+        );
+        let p = &r.mesh.positions;
+        let gap = su
+            .iter()
+            .zip(sl)
+            .map(|(&a, &b)| (p[a] - p[b]).norm())
+            .fold(0.0, f64::max);
+        let (lo, hi) = r.mesh.bounding_box().unwrap();
+        println!(
+            "{settings:?}: {n} vertices, chi {chi}, slit pairs {}, height {:.3} m",
+            su.len(),
+            hi.y - lo.y
+        );
+        assert_eq!(chi, 0);
+        assert!(!su.is_empty() && su.len() == sl.len() && gap < 1e-9);
+        assert!((0.18..=0.22).contains(&(hi.y - lo.y)));
+        assert_eq!(r.targets.len(), 9);
+        assert!(r.targets.iter().all(|t| t.positions.len() == n));
+    }
+    // Out-of-range settings are refused with the field named.
+    let err = generate_with(&FaceRigSettings {
+        columns_half: 3,
+        rows: 110,
+    })
+    .unwrap_err();
+    assert!(err.to_string().contains("columns_half"), "{err}");
+    let err = generate_with(&FaceRigSettings {
+        columns_half: 45,
+        rows: 5,
+    })
+    .unwrap_err();
+    assert!(err.to_string().contains("rows"), "{err}");
 }

@@ -32,8 +32,9 @@ fn envelope(u: f64) -> f64 {
 }
 
 /// Keys sampled at [`FPS`] for `n_targets` targets whose names are `names` (used to build the
-/// combinations): each target alone for 0.6 s, then both smiles, brow raise with jaw open, both
-/// squints with the nose wrinkle, and pucker with a frown (0.7 s each). Total 8 s.
+/// combinations): a quarter second of neutral, each target alone for 0.6 s, then both smiles, brow
+/// raise with jaw open, both squints with the nose wrinkle, and pucker with a frown (0.7 s each,
+/// each at 0.8), and a quarter second of neutral: 8.7 s for nine targets, never under 4 s.
 pub fn demo_keys(names: &[&str]) -> WeightKeys {
     let n = names.len();
     let id = |name: &str| names.iter().position(|&m| m == name);
@@ -59,6 +60,9 @@ pub fn demo_keys(names: &[&str]) -> WeightKeys {
             .filter_map(|&c| id(c))
             .map(|k| (k, 0.8))
             .collect();
+        if targets.len() < 2 {
+            continue;
+        }
         events.push(Event {
             start: t,
             duration: 0.7,
@@ -83,4 +87,43 @@ pub fn demo_keys(names: &[&str]) -> WeightKeys {
         weights.push(w.into_iter().map(|x| x.clamp(0.0, 1.0)).collect());
     }
     WeightKeys { times, weights }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn envelope_rises_holds_and_falls_continuously() {
+        assert_eq!(envelope(-0.1), 0.0);
+        assert_eq!(envelope(0.0), 0.0);
+        assert_eq!(envelope(0.5), 1.0);
+        assert_eq!(envelope(1.0), 0.0);
+        assert_eq!(envelope(1.1), 0.0);
+        // Continuous (no jump above the slope bound 1.5 / 0.4 per unit time) and within [0, 1].
+        let n = 10_000;
+        for k in 0..n {
+            let (a, b) = (
+                envelope(k as f64 / n as f64),
+                envelope((k + 1) as f64 / n as f64),
+            );
+            assert!((0.0..=1.0).contains(&a));
+            assert!((b - a).abs() <= 3.75 / n as f64 + 1e-12);
+        }
+    }
+
+    #[test]
+    fn keys_cover_each_target_and_the_combinations() {
+        let names = ["smile_left", "smile_right", "other"];
+        let k = demo_keys(&names);
+        assert_eq!(k.times.len(), k.weights.len());
+        let end = k.times.last().copied().unwrap_or(0.0);
+        // 0.25 + 3 × 0.6 + one matching combination (the smiles) × 0.7 + 0.25, at least 4 s.
+        assert!((end - 4.0).abs() < 1e-9, "end {end}");
+        let both = k
+            .weights
+            .iter()
+            .any(|w| w[0] >= 0.79 && w[1] >= 0.79 && w[2] == 0.0);
+        assert!(both);
+    }
 }

@@ -113,10 +113,13 @@ fn smile_left(s: &Sample, mouth_y: f64, corner_x: f64) -> Vector3<f64> {
     local(s, a * px, a * py, 0.003 * cheek)
 }
 
-/// Jaw opening weight of a vertex: 1 on the jaw, 0 above the mouth line, and across the slit a
-/// lens profile that is 1 at the mouth centre and 0 at the corners.
+/// Jaw opening weight of a vertex: 1 on the jaw, 0 on the upper lip and above the cheeks, and
+/// across the slit a lens profile that is 1 at the mouth centre and 0 at the corners.
 fn jaw_weight(s: &Sample, mouth_y: f64, corner_x: f64) -> f64 {
-    let below = smoothstep(0.0, 0.022, mouth_y - s.y);
+    // The jaw's influence fades over 3 cm below the mouth line and, beside the mouth corners,
+    // reaches up to 2.5 cm above it (the cheeks follow the jaw partly), so the stretch spreads.
+    let top = mouth_y + 0.025 * smoothstep(corner_x, corner_x + 0.025, s.x.abs());
+    let below = smoothstep(top, mouth_y - 0.03, s.y);
     if s.side == Side::Upper || s.y > mouth_y {
         return below;
     }

@@ -62,11 +62,11 @@ pub struct Sample {
     pub side: Side,
     /// Neutral position, m.
     pub pos: Vector3<f64>,
-    /// Unit tangent along increasing θ (≈ +X on the front of the face).
+    /// Unit tangent of the base head along increasing θ (≈ +X on the front of the face).
     pub e_u: Vector3<f64>,
-    /// Unit tangent orthogonal to `e_u`, ≈ +Y ("up the face").
+    /// Unit tangent of the base head orthogonal to `e_u`, ≈ +Y ("up the face").
     pub e_v: Vector3<f64>,
-    /// Unit outward normal.
+    /// Unit outward normal of the base head (not of the relief: see [`base_frame`]).
     pub n: Vector3<f64>,
 }
 
@@ -121,7 +121,7 @@ fn half_width(y: f64) -> f64 {
         let r = (y / 0.16).powf(2.5);
         HALF_WIDTH * (1.0 - r).powf(0.4)
     } else {
-        HALF_WIDTH * (1.0 - 0.22 * smoothstep(-0.01, -0.1, y))
+        HALF_WIDTH * (1.0 - 0.28 * smoothstep(-0.01, -0.1, y))
     }
 }
 
@@ -137,6 +137,18 @@ fn half_depth(y: f64) -> f64 {
     }
 }
 
+/// Orthonormal frame `(e_u, e_v, n)` of the smooth base head at `(theta, y)`: `e_u` along
+/// increasing θ, `n` outward, `e_v = n × e_u` (≈ +Y). It varies slowly (radii ≥ 7 cm), so
+/// displacements written in it stay smooth over the nose, lips and brows.
+pub fn base_frame(theta: f64, y: f64) -> (Vector3<f64>, Vector3<f64>, Vector3<f64>) {
+    let h = 1e-6;
+    let pt = (base_point(theta + h, y) - base_point(theta - h, y)) / (2.0 * h);
+    let py = (base_point(theta, y + h) - base_point(theta, y - h)) / (2.0 * h);
+    let n = pt.cross(&py).normalize();
+    let e_u = pt.normalize();
+    (e_u, n.cross(&e_u), n)
+}
+
 /// Point of the base head at azimuth `theta` and height `y`, m.
 fn base_point(theta: f64, y: f64) -> Vector3<f64> {
     Vector3::new(half_width(y) * theta.sin(), y, half_depth(y) * theta.cos())
@@ -144,10 +156,7 @@ fn base_point(theta: f64, y: f64) -> Vector3<f64> {
 
 /// Unit outward normal of the base head.
 fn base_normal(theta: f64, y: f64) -> Vector3<f64> {
-    let h = 1e-6;
-    let pt = (base_point(theta + h, y) - base_point(theta - h, y)) / (2.0 * h);
-    let py = (base_point(theta, y + h) - base_point(theta, y - h)) / (2.0 * h);
-    pt.cross(&py).normalize()
+    base_frame(theta, y).2
 }
 
 /// Relief of the face above the base head along its normal, m, at base lateral coordinate `x`
@@ -164,8 +173,10 @@ pub fn relief(x: f64, y: f64, mouth_y: f64) -> f64 {
     // Eye sockets with closed lids over the eyeballs.
     let ex = ax - EYE_X;
     let ey = y - EYE_Y;
-    h -= 0.013 * gauss2(ex / 0.016, ey / 0.011);
-    h += 0.0065 * gauss2(ex / 0.011, ey / 0.0068);
+    h -= 0.016 * gauss2(ex / 0.016, ey / 0.011);
+    h += 0.0085 * gauss2(ex / 0.0115, ey / 0.0065);
+    // Lid line: a faint crease where the closed lids meet, slightly below the eye centre.
+    h -= 0.0008 * gauss2(ex / 0.009, (ey + 0.002) / 0.0025);
     // Nose: dorsum from the nasion (y ≈ 0.028) to the tip (y ≈ −0.016), steep drop below it.
     let (y_nasion, y_tip) = (0.03, -0.016);
     let along = smoothstep(y_nasion + 0.008, y_tip, y);
@@ -187,10 +198,20 @@ pub fn relief(x: f64, y: f64, mouth_y: f64) -> f64 {
     // Muzzle over the dental arch.
     h += 0.008 * gauss2(ax / 0.03, (y - mouth_y) / 0.028);
     // Lips: upper and lower vermilion, a shallow groove along the mouth line.
-    let lip_w = 1.0 - smoothstep(0.012, 0.028, ax);
-    h += 0.004 * lip_w * (-0.5 * ((y - mouth_y - 0.0055) / 0.0045).powi(2)).exp();
-    h += 0.0045 * lip_w * (-0.5 * ((y - mouth_y + 0.0065) / 0.005).powi(2)).exp();
+    // The vermilion is fullest at the centre and thins toward the corners; the upper lip has a
+    // Cupid's bow (two peaks either side of the philtrum).
+    let lip_w = 1.0 - smoothstep(0.006, 0.028, ax);
+    let bow = 0.0012 * gauss2((ax - 0.006) / 0.004, 0.0);
+    let upper_c = mouth_y + 0.002 + 0.0035 * lip_w + bow;
+    let lower_c = mouth_y - 0.002 - 0.0045 * lip_w;
+    h += 0.004 * lip_w * (-0.5 * ((y - upper_c) / (0.0025 + 0.002 * lip_w)).powi(2)).exp();
+    h += 0.0045 * lip_w * (-0.5 * ((y - lower_c) / (0.0025 + 0.0025 * lip_w)).powi(2)).exp();
     h -= 0.0012 * lip_w * (-0.5 * ((y - mouth_y) / 0.003).powi(2)).exp();
+    // Philtrum: two faint ridges from the nose base to the upper lip.
+    h += 0.0008 * gauss2((ax - 0.005) / 0.0025, (y - mouth_y - 0.014) / 0.006);
+    // Nasolabial folds: shallow creases from the nostril wings to beside the mouth corners.
+    let (fx, fy) = (ax - 0.021 - 0.012 * ((-0.02 - y) / 0.04), y + 0.04);
+    h -= 0.0015 * gauss2(fx / 0.004, fy / 0.02);
     // Mentolabial sulcus and chin.
     h -= 0.002 * gauss2(ax / 0.018, (y - mouth_y + 0.019) / 0.0045);
     h += 0.009 * gauss2(ax / 0.017, (y + 0.083) / 0.011);
@@ -237,22 +258,19 @@ impl FaceSurface {
         let x = half_width(y) * theta.sin();
         base_point(theta, y) + relief(x, y, self.mouth_y) * base_normal(theta, y)
     }
-
-    /// Local orthonormal frame `(e_u, e_v, n)` at `(theta, y)`: `e_u` along θ, `n` outward.
-    pub fn frame(&self, theta: f64, y: f64) -> (Vector3<f64>, Vector3<f64>, Vector3<f64>) {
-        let h = 1e-6;
-        let pt = (self.point(theta + h, y) - self.point(theta - h, y)) / (2.0 * h);
-        let py = (self.point(theta, y + h) - self.point(theta, y - h)) / (2.0 * h);
-        let n = pt.cross(&py).normalize();
-        let e_u = pt.normalize();
-        let e_v = n.cross(&e_u);
-        (e_u, e_v, n)
-    }
 }
 
-/// Sample the mask on a triangular lattice with `2k + 1` vertices on even rows and about
-/// `rows` rows, and cut the mouth slit.
+/// Sample the mask on a triangular lattice of `rows` rows with `2k + 1` vertices on even rows
+/// and `2k + 2` on odd rows, and cut the mouth slit.
+///
+/// # Panics
+/// If the lattice is too coarse to hold a mouth slit (`k < 10` or `rows < 24`; use
+/// [`crate::rig::face::generate_with`], which validates its settings).
 pub fn build_mask(k: usize, rows: usize) -> Mask {
+    assert!(
+        k >= 10 && rows >= 24,
+        "face mask lattice too coarse: k = {k}, rows = {rows}"
+    );
     let n_even = 2 * k + 1;
     let dtheta = THETA_MAX / k as f64;
     let table = profile_arclength(4000);
@@ -367,7 +385,7 @@ pub fn build_mask(k: usize, rows: usize) -> Mask {
 
 /// Evaluate position and frame of the surface at `(theta, y)`.
 fn make_sample(surface: &FaceSurface, theta: f64, y: f64, side: Side) -> Sample {
-    let (e_u, e_v, n) = surface.frame(theta, y);
+    let (e_u, e_v, n) = base_frame(theta, y);
     Sample {
         theta,
         y,
@@ -377,5 +395,95 @@ fn make_sample(surface: &FaceSurface, theta: f64, y: f64, side: Side) -> Sample 
         e_u,
         e_v,
         n,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn smoothstep_and_bump_have_the_stated_ends() {
+        assert_eq!(smoothstep(0.0, 1.0, -1.0), 0.0);
+        assert_eq!(smoothstep(0.0, 1.0, 0.5), 0.5);
+        assert_eq!(smoothstep(0.0, 1.0, 2.0), 1.0);
+        assert_eq!(smoothstep(1.0, 0.0, 0.0), 1.0);
+        assert_eq!(bump(0.0), 1.0);
+        assert_eq!(bump(1.0), 0.0);
+        assert_eq!(bump(-1.5), 0.0);
+        // C² at r = 1: value, slope and curvature vanish (finite differences, O(h³)).
+        let h = 1e-3;
+        assert!(bump(1.0 - h) < 10.0 * h.powi(3));
+    }
+
+    #[test]
+    fn arclength_table_inverts_the_profile() {
+        let table = profile_arclength(4000);
+        let total = table.last().unwrap().1;
+        // The central profile is longer than the chord and shorter than twice the height.
+        assert!(total > Y_TOP - Y_BOTTOM && total < 2.0 * (Y_TOP - Y_BOTTOM));
+        for k in [0, 1, 17, 2000, 3999, 4000] {
+            let (y, s) = table[k];
+            assert!((y_at_arclength(&table, s) - y).abs() < 1e-12);
+        }
+        // Monotone in between.
+        let ys: Vec<f64> = (0..=100)
+            .map(|i| y_at_arclength(&table, total * i as f64 / 100.0))
+            .collect();
+        assert!(ys.windows(2).all(|w| w[1] > w[0]));
+    }
+
+    #[test]
+    fn base_frame_is_orthonormal_and_tangent() {
+        for &(theta, y) in &[(0.0, 0.0), (0.7, 0.05), (-1.2, -0.08), (1.3, 0.095)] {
+            let (e_u, e_v, n) = base_frame(theta, y);
+            for (a, b) in [(e_u, e_v), (e_v, n), (n, e_u)] {
+                assert!(a.dot(&b).abs() < 1e-12);
+            }
+            for v in [e_u, e_v, n] {
+                assert!((v.norm() - 1.0).abs() < 1e-12);
+            }
+            // Tangent: moving along the surface is orthogonal to n (to first order).
+            let h = 1e-7;
+            let dt = base_point(theta + h, y) - base_point(theta - h, y);
+            let dy = base_point(theta, y + h) - base_point(theta, y - h);
+            let (ct, cy) = (n.dot(&dt) / dt.norm(), n.dot(&dy) / dy.norm());
+            assert!(
+                ct.abs() < 1e-6 && cy.abs() < 1e-6,
+                "({theta}, {y}): {ct:e} {cy:e}"
+            );
+            // Outward: away from the head's vertical axis.
+            let p = base_point(theta, y);
+            assert!(n.x * p.x + n.z * p.z > 0.0);
+            assert!(e_v.y > 0.5);
+        }
+    }
+
+    #[test]
+    fn small_lattice_has_the_expected_counts_and_topology() {
+        let (k, rows) = (20, 40);
+        let m = build_mask(k, rows);
+        let n_even = 2 * k + 1;
+        let lattice: usize = (0..rows)
+            .map(|j| if j % 2 == 0 { n_even } else { n_even + 1 })
+            .sum();
+        let slit = m.slit_upper.len();
+        assert!(slit >= 2);
+        assert_eq!(m.mesh.vertex_count(), lattice + slit);
+        // Each strip between rows of n and n + 1 vertices holds 2n − 1 triangles.
+        assert_eq!(m.mesh.triangle_count(), (rows - 1) * (2 * n_even - 1));
+        // Euler characteristic of a disc with one hole (the mouth): V − E + F = 0.
+        let mut edges = std::collections::HashSet::new();
+        for t in &m.mesh.triangles {
+            for i in 0..3 {
+                let (a, b) = (t[i], t[(i + 1) % 3]);
+                edges.insert((a.min(b), a.max(b)));
+            }
+        }
+        let chi =
+            m.mesh.vertex_count() as i64 - edges.len() as i64 + m.mesh.triangle_count() as i64;
+        assert_eq!(chi, 0);
+        // The mirror map is an involution.
+        assert!((0..m.mirror.len()).all(|v| m.mirror[m.mirror[v]] == v));
     }
 }
