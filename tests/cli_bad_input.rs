@@ -242,3 +242,58 @@ fn existing_output_is_not_overwritten_without_force() {
     assert!(String::from_utf8_lossy(&o.stderr).contains("--force"));
     assert_eq!(std::fs::read(&target).unwrap(), b"precious");
 }
+
+#[test]
+fn every_subcommand_has_help_with_an_example() {
+    let bin = env!("CARGO_BIN_EXE_furrow");
+    for args in [
+        vec![],
+        vec!["inspect"],
+        vec!["rig"],
+        vec!["rig", "generate"],
+        vec!["demo"],
+        vec!["bench"],
+        vec!["bench", "shell"],
+        vec!["bench", "lattice"],
+    ] {
+        let o = Command::new(bin)
+            .args(&args)
+            .arg("--help")
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{args:?} --help failed");
+        let text = String::from_utf8_lossy(&o.stdout);
+        assert!(
+            text.contains("Example:\n  furrow "),
+            "{args:?} --help has no example:\n{text}"
+        );
+    }
+}
+
+#[test]
+fn absurd_settings_are_refused_with_the_flag_named() {
+    let bin = env!("CARGO_BIN_EXE_furrow");
+    let d = tempfile::tempdir().unwrap();
+    for (args, flag) in [
+        (vec!["demo", "--fps", "0"], "--fps"),
+        (vec!["demo", "--fps", "NaN"], "--fps"),
+        (vec!["bench", "shell", "--faces", "0"], "--faces"),
+    ] {
+        let o = Command::new(bin)
+            .args(&args)
+            .arg("--out")
+            .arg(d.path().join("x"))
+            .output();
+        let o = match o {
+            Ok(o) if args[0] == "demo" => o,
+            _ => Command::new(bin).args(&args).output().unwrap(),
+        };
+        assert_eq!(o.status.code(), Some(2), "{args:?}");
+        assert!(
+            String::from_utf8_lossy(&o.stderr).contains(flag),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+    }
+    assert!(!d.path().join("x").exists());
+}

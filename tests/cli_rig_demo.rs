@@ -10,17 +10,35 @@ use std::process::Command;
 fn committed_face_rig_is_what_rig_generate_makes_and_is_valid() {
     let d = tempfile::tempdir().unwrap();
     let out = d.path().join("face.glb");
-    let o = Command::new(env!("CARGO_BIN_EXE_furrow")).args(["--json", "rig", "generate", "-o"]).arg(&out).output().unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_furrow"))
+        .args(["--json", "rig", "generate", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(v["targets"].as_array().unwrap().len(), 9);
     assert!(v["duration_s"].as_f64().unwrap() >= 4.0);
     let committed = Path::new(env!("CARGO_MANIFEST_DIR")).join("rigs/face.glb");
-    assert_eq!(std::fs::read(&out).unwrap(), std::fs::read(&committed).unwrap(), "rigs/face.glb is stale: run `furrow rig generate -o rigs/face.glb --force`");
+    assert_eq!(
+        std::fs::read(&out).unwrap(),
+        std::fs::read(&committed).unwrap(),
+        "rigs/face.glb is stale: run `furrow rig generate -o rigs/face.glb --force`"
+    );
     // The rig reads back with its names, and sampled at 30 fps covers ≥ 4 s.
     let rig = furrow::io::load(&committed, &Default::default()).unwrap();
     let names: Vec<&str> = rig.face().targets.iter().map(|t| t.name.as_str()).collect();
-    for want in ["brow_raise", "brow_frown", "squint_left", "squint_right", "nose_wrinkle", "smile_left", "smile_right", "jaw_open", "pucker"] {
+    for want in [
+        "brow_raise",
+        "brow_frown",
+        "squint_left",
+        "squint_right",
+        "nose_wrinkle",
+        "smile_left",
+        "smile_right",
+        "jaw_open",
+        "pucker",
+    ] {
         assert!(names.contains(&want), "{want} missing from {names:?}");
     }
     assert!(rig.frame_weights(30.0).len() > 4 * 30);
@@ -33,12 +51,19 @@ fn committed_face_rig_is_what_rig_generate_makes_and_is_valid() {
 fn demo_writes_valid_animated_and_per_frame_files() {
     let d = tempfile::tempdir().unwrap();
     let out = d.path().join("demo");
-    let o = Command::new(env!("CARGO_BIN_EXE_furrow")).args(["--json", "demo", "--fps", "2", "--out"]).arg(&out).output().unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_furrow"))
+        .args(["--json", "demo", "--fps", "2", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     let frames = v["frames"].as_u64().unwrap() as usize;
     assert_eq!(frames, 18, "8.7 s at 2 fps is frames 0..=17");
-    let files: Vec<_> = std::fs::read_dir(out.join("frames")).unwrap().map(|e| e.unwrap().path()).collect();
+    let files: Vec<_> = std::fs::read_dir(out.join("frames"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
     assert_eq!(files.len(), frames);
     // Frame k of the animated file equals the per-frame file k.
     let anim = furrow::io::load(&out.join("face_frames.glb"), &Default::default()).unwrap();
@@ -46,12 +71,24 @@ fn demo_writes_valid_animated_and_per_frame_files() {
     let w = anim.frame_weights(2.0);
     let k = 7;
     let from_anim = anim.blend(&w[k]);
-    let (_, still, _) = furrow::io::load::load_instances(&out.join(format!("frames/frame_{k:05}.glb"))).unwrap();
+    let (_, still, _) =
+        furrow::io::load::load_instances(&out.join(format!("frames/frame_{k:05}.glb"))).unwrap();
     let still = &still[0].positions;
-    let err = from_anim.iter().zip(still).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
-    assert!(err < 1e-6, "frame {k}: animated and still differ by {err} m");
+    let err = from_anim
+        .iter()
+        .zip(still)
+        .map(|(a, b)| (a - b).norm())
+        .fold(0.0, f64::max);
+    assert!(
+        err < 1e-6,
+        "frame {k}: animated and still differ by {err} m"
+    );
     // A second run replaces its own outputs and says so.
-    let o2 = Command::new(env!("CARGO_BIN_EXE_furrow")).args(["demo", "--fps", "2", "--out"]).arg(&out).output().unwrap();
+    let o2 = Command::new(env!("CARGO_BIN_EXE_furrow"))
+        .args(["demo", "--fps", "2", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
     assert!(o2.status.success());
     assert!(String::from_utf8_lossy(&o2.stdout).contains("replaced"));
     let mut check = vec![out.join("face_frames.glb")];

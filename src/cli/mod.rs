@@ -11,7 +11,14 @@ pub use output::Output;
 
 /// furrow: physically wrinkled skin for blend-shape face animation (embedded thin shells).
 #[derive(Debug, Parser)]
-#[command(name = "furrow", version, about, long_about = None, propagate_version = true)]
+#[command(
+    name = "furrow",
+    version,
+    about,
+    long_about = None,
+    propagate_version = true,
+    after_help = "Example:\n  furrow demo --out out/demo\n  furrow inspect rigs/face.glb"
+)]
 pub struct Cli {
     /// Print nothing but errors (for pipelines).
     #[arg(long, global = true)]
@@ -33,13 +40,19 @@ pub enum Command {
     )]
     Inspect(inspect::InspectArgs),
     /// Make furrow's own rigs.
-    #[command(subcommand)]
+    #[command(
+        subcommand,
+        after_help = "Example:\n  furrow rig generate -o rigs/face.glb --force"
+    )]
     Rig(rig::RigCommand),
     /// Run the main job on rigs/face.glb and print where the files went.
     #[command(after_help = "Example:\n  furrow demo --out out/demo")]
     Demo(demo::DemoArgs),
     /// Benchmarks that print or write their measurements.
-    #[command(subcommand)]
+    #[command(
+        subcommand,
+        after_help = "Example:\n  furrow bench shell --faces 20000\n  furrow bench lattice --elements 1000 --json"
+    )]
     Bench(bench::BenchCommand),
 }
 
