@@ -98,7 +98,8 @@ fn read_component(bytes: &[u8], ct: u64, normalized: bool) -> f64 {
     }
 }
 
-fn usize_of(v: &serde_json::Value) -> Option<usize> {
+/// A JSON value as an index or count (`None` when it is not a non-negative integer).
+pub fn usize_of(v: &serde_json::Value) -> Option<usize> {
     v.as_u64().and_then(|x| usize::try_from(x).ok())
 }
 

@@ -1,7 +1,7 @@
 //! Morph-weight animation: `weights` channels with LINEAR, STEP and CUBICSPLINE samplers,
 //! sampled at a chosen frame rate.
 
-use super::accessor::AccessorReader;
+use super::accessor::{usize_of, AccessorReader};
 use super::error::{GltfError, GltfResult};
 use std::path::Path;
 
@@ -49,10 +49,6 @@ pub struct AnimationInfo {
 
 /// Longest key time accepted (s): one hour of animation.
 pub const MAX_KEY_TIME_S: f64 = 3600.0;
-
-fn usize_of(v: &serde_json::Value) -> Option<usize> {
-    v.as_u64().and_then(|x| usize::try_from(x).ok())
-}
 
 /// Check every animation's channels and samplers refer to things that exist, and summarise.
 pub fn summarize(

@@ -1,7 +1,7 @@
 //! Loading a blend-shape rig: the file, its mesh instances in world space, the face mesh and
 //! its morph-weight animation.
 
-use super::accessor::AccessorReader;
+use super::accessor::{usize_of, AccessorReader};
 use super::animation::{self, AnimationInfo, WeightTrack};
 use super::container::{self, Container};
 use super::error::{GltfError, GltfResult};
@@ -68,10 +68,6 @@ impl Rig {
         }
         p
     }
-}
-
-fn usize_of(v: &serde_json::Value) -> Option<usize> {
-    v.as_u64().and_then(|x| usize::try_from(x).ok())
 }
 
 /// Load every mesh instance of the file at `path` without choosing a face (for `inspect`).

@@ -1,6 +1,6 @@
 //! Mesh extraction: every primitive of a mesh instance, in world space, with morph targets.
 
-use super::accessor::AccessorReader;
+use super::accessor::{usize_of, AccessorReader};
 use super::error::{GltfError, GltfResult};
 use super::model::MorphTarget;
 use super::scene::{transform_normal, transform_point, transform_vector};
@@ -51,10 +51,6 @@ pub struct MeshInstance {
     pub primitive_ranges: Vec<(usize, usize)>,
     /// Primitives skipped because they are not triangles (mode 0–3).
     pub skipped_primitives: usize,
-}
-
-fn usize_of(v: &serde_json::Value) -> Option<usize> {
-    v.as_u64().and_then(|x| usize::try_from(x).ok())
 }
 
 fn check_finite(path: &Path, what: &str, v: &[f64]) -> GltfResult<()> {
