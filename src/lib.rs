@@ -7,6 +7,7 @@
 //! [`solver`], [`io`], [`lattice`], [`fem`], [`shell`], [`rig`], [`cli`].
 
 pub mod cli;
+pub mod coupling;
 pub mod fem;
 pub mod io;
 pub mod lattice;

@@ -297,3 +297,41 @@ fn absurd_settings_are_refused_with_the_flag_named() {
     }
     assert!(!d.path().join("x").exists());
 }
+
+#[test]
+fn wavelength_command_gives_the_papers_value_and_names_bad_fields() {
+    let bin = env!("CARGO_BIN_EXE_furrow");
+    let o = Command::new(bin)
+        .args([
+            "--json",
+            "wavelength",
+            "--thickness",
+            "0.0002",
+            "--skin-modulus",
+            "1e6",
+            "--interior-modulus",
+            "1e4",
+        ])
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(
+        (v["wavelength_m"].as_f64().unwrap() - 4.04e-3).abs() < 0.005e-3,
+        "{v}"
+    );
+    let o = Command::new(bin)
+        .args([
+            "wavelength",
+            "--thickness",
+            "0.0002",
+            "--skin-modulus",
+            "1e6",
+            "--interior-modulus",
+            "-1",
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("interior modulus"));
+}

@@ -5,6 +5,7 @@ mod demo;
 mod inspect;
 mod output;
 mod rig;
+mod wavelength;
 
 use clap::{Parser, Subcommand};
 pub use output::Output;
@@ -48,6 +49,12 @@ pub enum Command {
     /// Run the main job on rigs/face.glb and print where the files went.
     #[command(after_help = "Example:\n  furrow demo --out out/demo")]
     Demo(demo::DemoArgs),
+    /// The critical wrinkle wavelength λ of a skin on a soft interior (SI units).
+    #[command(
+        allow_negative_numbers = true,
+        after_help = "Example:\n  furrow wavelength --thickness 0.0002 --skin-modulus 1e6 --interior-modulus 1e4"
+    )]
+    Wavelength(wavelength::WavelengthArgs),
     /// Benchmarks that print or write their measurements.
     #[command(
         subcommand,
@@ -65,6 +72,7 @@ pub fn main() -> i32 {
         Command::Inspect(a) => inspect::run(a, &out),
         Command::Rig(c) => rig::run(c, &out),
         Command::Demo(a) => demo::run(a, &out),
+        Command::Wavelength(a) => wavelength::run(a, &out),
         Command::Bench(c) => bench::run(c, &out),
     };
     match result {

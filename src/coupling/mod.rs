@@ -1,0 +1,4 @@
+//! Coupling of the skin to the interior: the critical wrinkle wavelength that sets the
+//! frequency limit of the constraints.
+
+pub mod wavelength;
