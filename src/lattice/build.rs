@@ -39,8 +39,9 @@ impl UnionFind {
     }
 }
 
-/// Is every edge shared by exactly two triangles?
-fn is_closed(mesh: &TriMesh) -> bool {
+/// Edges used by exactly one triangle (the boundary of an open mesh), as (a, b) vertex
+/// pairs; the mesh is closed when there are none and every edge has two triangles.
+fn boundary_edges(mesh: &TriMesh) -> (bool, Vec<(usize, usize)>) {
     let mut count: HashMap<(usize, usize), u32> = HashMap::new();
     for t in &mesh.triangles {
         for k in 0..3 {
@@ -48,7 +49,11 @@ fn is_closed(mesh: &TriMesh) -> bool {
             *count.entry((a.min(b), a.max(b))).or_default() += 1;
         }
     }
-    !count.is_empty() && count.values().all(|&c| c == 2)
+    let closed = !count.is_empty() && count.values().all(|&c| c == 2);
+    let mut edges: Vec<(usize, usize)> =
+        count.iter().filter(|(_, &c)| c == 1).map(|(&e, _)| e).collect();
+    edges.sort_unstable();
+    (closed, edges)
 }
 
 fn check_mesh(mesh: &TriMesh) -> Result<(), LatticeError> {
@@ -74,7 +79,7 @@ pub(crate) fn build(mesh: &TriMesh, s: &LatticeSettings) -> Result<Lattice, Latt
     if diag <= 0.0 {
         return Err(LatticeError::Mesh("all vertices coincide".into()));
     }
-    let closed = is_closed(mesh);
+    let (closed, boundary) = boundary_edges(mesh);
     let depth = s.depth.unwrap_or(0.1 * diag);
     let pad = if closed { 0.0 } else { depth };
     let lo = lo0 - V::repeat(pad);
@@ -134,6 +139,41 @@ pub(crate) fn build(mesh: &TriMesh, s: &LatticeSettings) -> Result<Lattice, Latt
             cell_tris[c].push(t);
         }
     }
+
+    // 1b. Cuts: each boundary edge of an open mesh extruded backwards (against the vertex
+    //     normals) by the flesh depth. Flesh may not connect across a cut, so the two sides of
+    //     a slit (mouth, eyelids) get separate flesh down to the bone.
+    let normals = mesh.vertex_normals();
+    let mut cuts: Vec<[V; 3]> = Vec::new();
+    for &(a, b) in &boundary {
+        let (pa, pb) = (pos[a], pos[b]);
+        let (qa, qb) = (pa - normals[a] * depth, pb - normals[b] * depth);
+        cuts.push([pa, pb, qb]);
+        cuts.push([pa, qb, qa]);
+    }
+    let mut cell_cuts: Vec<Vec<usize>> = vec![Vec::new(); ncell];
+    for (t, [a, b, c]) in cuts.iter().enumerate() {
+        let (tlo, thi) = (a.inf(b).inf(c), a.sup(b).sup(c));
+        let (c0, c1) = (clamp_cell(&(tlo - V::repeat(eps))), clamp_cell(&(thi + V::repeat(eps))));
+        for kz in c0[2]..=c1[2] {
+            for ky in c0[1]..=c1[1] {
+                for kx in c0[0]..=c1[0] {
+                    let (bl, bh) = cell_box([kx, ky, kz]);
+                    if triangle_box_overlap(a, b, c, &bl, &bh) {
+                        cell_cuts[cidx([kx, ky, kz])].push(t);
+                    }
+                }
+            }
+        }
+    }
+    let cut_between = |p: &V, q: &V, cells: [usize; 2]| {
+        cells.iter().any(|&ci| {
+            cell_cuts[ci].iter().any(|&t| {
+                let [a, b, c] = &cuts[t];
+                segment_crosses_triangle(p, q, a, b, c, 1e-9)
+            })
+        })
+    };
 
     // 2. Connected pieces of the cut surface in each cell: triangles joined by a shared edge
     //    that passes through the cell, or a shared vertex inside it.
@@ -253,7 +293,9 @@ pub(crate) fn build(mesh: &TriMesh, s: &LatticeSettings) -> Result<Lattice, Latt
                 cn[d] = nb as usize;
                 let ni = cidx(cn);
                 if empty_flesh[ni] {
-                    graph.push((ev.min(cell_first[ni]), ev.max(cell_first[ni])));
+                    if !cut_between(&cv, &center(cn), [ci, ni]) {
+                        graph.push((ev.min(cell_first[ni]), ev.max(cell_first[ni])));
+                    }
                     continue;
                 }
                 if cell_tris[ni].is_empty() {
@@ -281,7 +323,7 @@ pub(crate) fn build(mesh: &TriMesh, s: &LatticeSettings) -> Result<Lattice, Latt
                         pieces[ni].1[l] != piece
                             && segment_crosses_triangle(&cv, &q, &pos[a], &pos[b], &pos[cc], 1e-9)
                     });
-                    if behind && !screened {
+                    if behind && !screened && !cut_between(&cv, &q, [ci, ni]) {
                         let ep = cell_first[ni] + piece;
                         graph.push((ev.min(ep), ev.max(ep)));
                     }
@@ -291,6 +333,35 @@ pub(crate) fn build(mesh: &TriMesh, s: &LatticeSettings) -> Result<Lattice, Latt
     }
     graph.sort_unstable();
     graph.dedup();
+
+    // 4c. Keep only the parts of the element graph that hold surface: flesh cells connected to
+    //     no skin cannot move the skin and would only float.
+    let mut comp = UnionFind::new(ne);
+    for &(a, b) in &graph {
+        comp.union(a, b);
+    }
+    let mut has_surface = vec![false; ne];
+    for (e, el) in elements.iter().enumerate() {
+        if el.kind == ElementKind::Surface {
+            let r = comp.find(e);
+            has_surface[r] = true;
+        }
+    }
+    let mut renumber = vec![usize::MAX; ne];
+    let mut kept = Vec::new();
+    for (e, el) in elements.into_iter().enumerate() {
+        if has_surface[comp.find(e)] {
+            renumber[e] = kept.len();
+            kept.push(el);
+        }
+    }
+    let mut elements = kept;
+    let ne = elements.len();
+    let graph: Vec<(usize, usize)> = graph
+        .into_iter()
+        .filter(|&(a, b)| renumber[a] != usize::MAX && renumber[b] != usize::MAX)
+        .map(|(a, b)| (renumber[a], renumber[b]))
+        .collect();
 
     // 5. Node merging: every element starts with its own k³ nodes; for each graph edge the
     //    nodes at the same grid position (two layers for quadratic, one for trilinear) merge.
@@ -353,7 +424,7 @@ pub(crate) fn build(mesh: &TriMesh, s: &LatticeSettings) -> Result<Lattice, Latt
                 "vertex {v} at {p:?} could not be placed in a lattice cell (degenerate triangle {t}?)"
             )));
         };
-        let e = elem_of(ci, l);
+        let e = renumber[elem_of(ci, l)];
         let r = (p - (lo + V::new(c[0] as f64, c[1] as f64, c[2] as f64) * h)) / h;
         vertex_points.push(MaterialPoint { element: e, xi: [0, 1, 2].map(|d| r[d].clamp(0.0, 1.0)) });
     }
