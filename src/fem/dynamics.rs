@@ -607,6 +607,15 @@ impl BackwardEuler {
                     accepted = true;
                     break;
                 }
+                // Near the solution Φ changes by less than its round-off: accept the step when
+                // it does not raise Φ beyond round-off and it lowers the residual.
+                if p.is_finite() && p - phi <= 1e-12 * phi.abs().max(1e-300) {
+                    let (_, gt) = self.potential(&trial, x0, inertia, &force, extra, true);
+                    if self.free_norm(&gt) < res {
+                        accepted = true;
+                        break;
+                    }
+                }
                 alpha *= 0.5;
             }
             if !accepted {
