@@ -303,7 +303,7 @@ pub(crate) fn build(mesh: &TriMesh, s: &LatticeSettings) -> Result<Lattice, Latt
                 }
                 let tris = &cell_tris[ni];
                 for piece in 0..pieces[ni].0 {
-                    let mut best = (f64::INFINITY, V::zeros(), V::zeros());
+                    let mut best = (f64::INFINITY, V::zeros(), V::zeros(), V::zeros());
                     for (l, &t) in tris.iter().enumerate() {
                         if pieces[ni].1[l] != piece {
                             continue;
@@ -313,11 +313,16 @@ pub(crate) fn build(mesh: &TriMesh, s: &LatticeSettings) -> Result<Lattice, Latt
                         let dist = (q - cv).norm();
                         if dist < best.0 {
                             let n = (pos[b] - pos[a]).cross(&(pos[cc] - pos[a]));
-                            best = (dist, q, n);
+                            let centroid = (pos[a] + pos[b] + pos[cc]) / 3.0;
+                            best = (dist, q, n, centroid);
                         }
                     }
-                    let (_, q, n) = best;
-                    let behind = (cv - q).dot(&n) <= 0.0;
+                    let (_, q0, n, centroid) = best;
+                    let behind = (cv - q0).dot(&n) <= 0.0;
+                    // Screening and cuts are tested on the segment to the centroid of the
+                    // nearest triangle: the nearest point itself may lie on a slit edge,
+                    // exactly on the cut that should separate this piece.
+                    let q = centroid;
                     let screened = tris.iter().enumerate().any(|(l, &t)| {
                         let [a, b, cc] = mesh.triangles[t];
                         pieces[ni].1[l] != piece
