@@ -43,6 +43,23 @@ pub struct StepSettings {
     pub lumped_mass: bool,
     /// Gravity acceleration (m/s²), +Y up.
     pub gravity: [f64; 3],
+    /// How each Newton system is solved.
+    pub linear_solver: LinearSolver,
+}
+
+/// Linear solver for the Newton systems [M + h²K] Δy = r.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub enum LinearSolver {
+    /// Sparse Cholesky (faer, symbolic analysis cached): exact, cost grows fast in 3D.
+    Cholesky,
+    /// Conjugate gradients with a 3 × 3 block-Jacobi preconditioner, stopped at
+    /// ‖r‖ ≤ `rel_tol` ‖b‖ or `max_iter` iterations (inexact Newton).
+    ConjugateGradient {
+        /// Relative residual at which CG stops.
+        rel_tol: f64,
+        /// Iteration cap.
+        max_iter: usize,
+    },
 }
 
 impl Default for StepSettings {
@@ -53,6 +70,7 @@ impl Default for StepSettings {
             tolerance: 1e-8,
             lumped_mass: false,
             gravity: [0.0, -super::GRAVITY, 0.0],
+            linear_solver: LinearSolver::Cholesky,
         }
     }
 }
@@ -72,6 +90,11 @@ impl StepSettings {
         }
         if !self.gravity.iter().all(|g| g.is_finite()) {
             return bad("gravity", "must be finite (m/s²)".into());
+        }
+        if let LinearSolver::ConjugateGradient { rel_tol, max_iter } = self.linear_solver {
+            if !(rel_tol.is_finite() && rel_tol > 0.0 && rel_tol < 1.0) || max_iter == 0 {
+                return bad("linear_solver", "CG needs 0 < rel_tol < 1 and max_iter ≥ 1".into());
+            }
         }
         Ok(())
     }
@@ -114,6 +137,8 @@ pub struct SolveReport {
     pub assembly_s: f64,
     /// Time spent factorising and solving (s).
     pub solve_s: f64,
+    /// Conjugate-gradient iterations summed over the Newton iterations (0 for Cholesky).
+    pub cg_iterations: usize,
 }
 
 /// Compressed lower-triangle pattern over free DOFs with 3 × 3 node blocks.
@@ -550,6 +575,7 @@ impl BackwardEuler {
             relative_residual: res / reference,
             assembly_s: 0.0,
             solve_s: 0.0,
+            cg_iterations: 0,
         };
         let cell = self.interior.cell_size;
         for _ in 0..self.settings.max_newton {
@@ -568,14 +594,6 @@ impl BackwardEuler {
             sys.assemble(&self.interior, &rotations, mass_coef, lumped, stiff_coef, ex_trip);
             report.assembly_s += t0.elapsed().as_secs_f64();
             let t1 = Instant::now();
-            if let Err(e) = self.solver.factorize(&sys.mat) {
-                return Err(match inertia {
-                    None => FemError::Input(format!(
-                        "quasi-static solve: the stiffness is singular ({e}); pin nodes to remove rigid motions"
-                    )),
-                    Some(_) => FemError::Sparse(e),
-                });
-            }
             let mut rhs = vec![0.0; 3 * sys.nfree];
             for (n, &f) in sys.free.iter().enumerate() {
                 if f != NONE {
@@ -584,7 +602,24 @@ impl BackwardEuler {
                     }
                 }
             }
-            self.solver.solve_in_place(&mut rhs);
+            match self.settings.linear_solver {
+                LinearSolver::Cholesky => {
+                    if let Err(e) = self.solver.factorize(&sys.mat) {
+                        return Err(match inertia {
+                            None => FemError::Input(format!(
+                                "quasi-static solve: the stiffness is singular ({e}); pin nodes to remove rigid motions"
+                            )),
+                            Some(_) => FemError::Sparse(e),
+                        });
+                    }
+                    self.solver.solve_in_place(&mut rhs);
+                }
+                LinearSolver::ConjugateGradient { rel_tol, max_iter } => {
+                    let (x, it) = pcg(&sys.mat, sys.nfree, &rhs, rel_tol, max_iter);
+                    report.cg_iterations += it;
+                    rhs = x;
+                }
+            }
             report.solve_s += t1.elapsed().as_secs_f64();
             report.iterations += 1;
             let sys = self.system.as_ref().expect("system built");
@@ -647,4 +682,106 @@ impl BackwardEuler {
         }
         Ok(report)
     }
+}
+
+/// y = A x for a symmetric matrix stored as its lower triangle (CSC), in parallel over column
+/// chunks with per-chunk accumulators.
+fn sym_lower_mul(a: &SparseColMat<usize, f64>, x: &[f64]) -> Vec<f64> {
+    let n = x.len();
+    let ar = a.as_ref();
+    let cp = ar.symbolic().col_ptr();
+    let ri = ar.symbolic().row_idx();
+    let v = ar.val();
+    let chunk = n.div_ceil(rayon::current_num_threads().max(1)).max(64);
+    (0..n)
+        .into_par_iter()
+        .step_by(chunk)
+        .map(|c0| {
+            let mut y = vec![0.0; n];
+            for c in c0..(c0 + chunk).min(n) {
+                let xc = x[c];
+                let mut acc = 0.0;
+                for k in cp[c]..cp[c + 1] {
+                    let r = ri[k];
+                    y[r] += v[k] * xc;
+                    if r != c {
+                        acc += v[k] * x[r];
+                    }
+                }
+                y[c] += acc;
+            }
+            y
+        })
+        .reduce(
+            || vec![0.0; n],
+            |mut a, b| {
+                a.iter_mut().zip(&b).for_each(|(p, q)| *p += q);
+                a
+            },
+        )
+}
+
+/// Preconditioned conjugate gradients with 3 × 3 block-Jacobi on a lower-stored SPD matrix
+/// with node blocks (the layout of `System`). Returns the solution and the iterations.
+fn pcg(a: &SparseColMat<usize, f64>, nodes: usize, b: &[f64], rel_tol: f64, max_iter: usize) -> (Vec<f64>, usize) {
+    let ar = a.as_ref();
+    let cp = ar.symbolic().col_ptr();
+    let v = ar.val();
+    // Diagonal blocks: column 3n+j starts with rows 3n+j..3n+2.
+    let inv: Vec<M3> = (0..nodes)
+        .map(|nd| {
+            let mut m = M3::zeros();
+            for j in 0..3 {
+                for i in j..3 {
+                    let val = v[cp[3 * nd + j] + i - j];
+                    m[(i, j)] = val;
+                    m[(j, i)] = val;
+                }
+            }
+            m.try_inverse().unwrap_or_else(|| M3::from_diagonal(&m.diagonal().map(|d| 1.0 / d.abs().max(1e-300))))
+        })
+        .collect();
+    let precond = |r: &[f64]| -> Vec<f64> {
+        let mut z = vec![0.0; r.len()];
+        for (nd, m) in inv.iter().enumerate() {
+            let rv = nalgebra::Vector3::new(r[3 * nd], r[3 * nd + 1], r[3 * nd + 2]);
+            let zv = m * rv;
+            z[3 * nd..3 * nd + 3].copy_from_slice(zv.as_slice());
+        }
+        z
+    };
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let n = b.len();
+    let mut x = vec![0.0; n];
+    let mut r = b.to_vec();
+    let bn = dot(b, b).sqrt();
+    if bn == 0.0 {
+        return (x, 0);
+    }
+    let mut z = precond(&r);
+    let mut p = z.clone();
+    let mut rz = dot(&r, &z);
+    for it in 1..=max_iter {
+        let ap = sym_lower_mul(a, &p);
+        let pap = dot(&p, &ap);
+        if pap <= 0.0 {
+            return (x, it);
+        }
+        let alpha = rz / pap;
+        for i in 0..n {
+            x[i] += alpha * p[i];
+            r[i] -= alpha * ap[i];
+        }
+        if dot(&r, &r).sqrt() <= rel_tol * bn {
+            return (x, it);
+        }
+        z = precond(&r);
+        let rz2 = dot(&r, &z);
+        let beta = rz2 / rz;
+        rz = rz2;
+        for i in 0..n {
+            p[i] = z[i] + beta * p[i];
+        }
+    }
+    (x, max_iter)
 }

@@ -5,7 +5,7 @@ pub mod corot;
 pub mod dynamics;
 pub mod interior;
 
-pub use dynamics::{BackwardEuler, ExtraTerms, SolveReport, SolveStatus, StepSettings};
+pub use dynamics::{BackwardEuler, ExtraTerms, LinearSolver, SolveReport, SolveStatus, StepSettings};
 pub use interior::{FrozenInterior, Interior};
 
 use serde::{Deserialize, Serialize};
