@@ -202,7 +202,7 @@ impl<'a> AccessorReader<'a> {
         if normalized && (ct == 5125 || ct == 5126) {
             return Err(self.err(format!("{what}: normalized is only allowed for 8- and 16-bit integers")));
         }
-        if count > (1 << 28) {
+        if count > (1 << 24) || (count * ncomp > (1 << 26)) {
             return Err(self.err(format!("{what}: count {count} is implausibly large")));
         }
         let offset = usize_of(&acc["byteOffset"]).unwrap_or(0);

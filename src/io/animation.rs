@@ -47,6 +47,9 @@ pub struct AnimationInfo {
     pub duration_s: f64,
 }
 
+/// Longest key time accepted (s): one hour of animation.
+pub const MAX_KEY_TIME_S: f64 = 3600.0;
+
 fn usize_of(v: &serde_json::Value) -> Option<usize> {
     v.as_u64().and_then(|x| usize::try_from(x).ok())
 }
@@ -123,8 +126,10 @@ pub fn weight_track(
     if let Some(w) = times.windows(2).position(|w| !(w[1] >= w[0])) {
         return Err(GltfError::new(path, format!("animation {anim} sampler {si}: key times must increase (key {})", w + 1)));
     }
-    if times.iter().any(|t| !t.is_finite()) {
-        return Err(GltfError::new(path, format!("animation {anim} sampler {si}: non-finite key time")));
+    if let Some(t) = times.iter().find(|t| !(t.is_finite() && (0.0..=MAX_KEY_TIME_S).contains(*t))) {
+        return Err(GltfError::new(path, format!(
+            "animation {anim} sampler {si}: key time {t} s is outside 0 … {MAX_KEY_TIME_S} s"
+        )));
     }
     let per_key = if interpolation == Interpolation::CubicSpline { 3 * targets } else { targets };
     if targets == 0 || output.data.len() != times.len() * per_key {
@@ -199,9 +204,10 @@ impl WeightTrack {
     }
 }
 
-/// Frame times k / fps for k = 0 … ⌊duration · fps⌋ (s).
+/// Frame times k / fps for k = 0 … ⌊duration · fps⌋ (s). Key times stored as f32 carry a
+/// relative error of ~6e-8, so a duration within 1e-6 (relative) of a whole frame counts as it.
 pub fn frame_times(duration: f64, fps: f64) -> Vec<f64> {
-    let n = (duration * fps + 1e-6).floor().max(0.0) as usize + 1;
+    let n = (duration * fps * (1.0 + 1e-6) + 1e-6).floor().max(0.0) as usize + 1;
     (0..n).map(|k| k as f64 / fps).collect()
 }
 

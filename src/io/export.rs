@@ -1,1 +1,503 @@
-//! Writing glTF.
+//! Writing wrinkled frames back to glTF.
+//!
+//! The original scene is kept (other meshes, skins, materials, other animation channels); the
+//! face mesh is replaced by the frame sequence. In the animated form every frame is one morph
+//! target and a weights animation shows frame k at time k / fps; in the per-frame form each file
+//! holds the scene with the face at one frame and no animation. Buffers are re-packed into one
+//! GLB buffer (meshopt views decompressed, external images embedded), and what nothing uses any
+//! more is pruned.
+
+use super::accessor::AccessorReader;
+use super::atomic::{self, Overwrite};
+use super::glb_write::{generator, Document, ARRAY_BUFFER};
+use super::load::Rig;
+use super::mesh::VertexTransform;
+use super::model::{MorphTarget, WeightKeys};
+use crate::mesh::TriMesh;
+use anyhow::{bail, Context};
+use base64::Engine;
+use nalgebra::{Matrix3, Matrix4, Vector3};
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+
+/// Where an output vertex came from: a convex combination of up to three vertices of the
+/// loaded face (indices into its merged vertex arrays). Used to carry texture coordinates,
+/// skin weights and the local frame to refined meshes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VertexOrigin {
+    /// Source vertices.
+    pub vertices: [usize; 3],
+    /// Their weights (sum to one).
+    pub weights: [f64; 3],
+}
+
+impl VertexOrigin {
+    /// The vertex itself.
+    pub fn same(i: usize) -> Self {
+        Self { vertices: [i, i, i], weights: [1.0, 0.0, 0.0] }
+    }
+    /// The source vertex with the largest weight.
+    pub fn dominant(&self) -> usize {
+        let k = (0..3).max_by(|&a, &b| self.weights[a].total_cmp(&self.weights[b])).unwrap_or(0);
+        self.vertices[k]
+    }
+}
+
+/// A sequence of face frames to export, all sharing one topology.
+pub struct FrameSet<'a> {
+    /// Triangles of the exported face (counter-clockwise).
+    pub triangles: &'a [[usize; 3]],
+    /// World-space positions (m) per frame.
+    pub frames: &'a [Vec<Vector3<f64>>],
+    /// Origin of each exported vertex in the loaded face.
+    pub origin: &'a [VertexOrigin],
+    /// Frames per second (frame k is shown at k / fps seconds).
+    pub fps: f64,
+}
+
+impl FrameSet<'_> {
+    fn check(&self, face_vertices: usize) -> anyhow::Result<()> {
+        let n = self.origin.len();
+        if self.frames.is_empty() {
+            bail!("no frames to export");
+        }
+        if !(self.fps.is_finite() && self.fps > 0.0) {
+            bail!("fps must be positive, got {}", self.fps);
+        }
+        for (k, f) in self.frames.iter().enumerate() {
+            if f.len() != n {
+                bail!("frame {k} has {} vertices, expected {n}", f.len());
+            }
+            if let Some(i) = f.iter().position(|p| !(p.x.is_finite() && p.y.is_finite() && p.z.is_finite())) {
+                bail!("frame {k} vertex {i} is not finite (NaN or infinity); refusing to write it");
+            }
+        }
+        if let Some(t) = self.triangles.iter().find(|t| t.iter().any(|&i| i >= n)) {
+            bail!("triangle {t:?} indexes past {n} vertices");
+        }
+        if let Some(o) = self.origin.iter().find(|o| o.vertices.iter().any(|&v| v >= face_vertices)) {
+            bail!("vertex origin {o:?} indexes past the face's {face_vertices} vertices");
+        }
+        Ok(())
+    }
+}
+
+/// The loaded file as a writable document: views decompressed, images embedded.
+fn base_document(rig: &Rig) -> anyhow::Result<Document> {
+    let c = &rig.container;
+    let reader = AccessorReader::new(&rig.path, c);
+    let mut json = c.json.clone();
+    let nv = json["bufferViews"].as_array().map_or(0, |a| a.len());
+    let mut view_bytes = Vec::with_capacity(nv);
+    for v in 0..nv {
+        let bytes = reader.view_bytes(v)?;
+        view_bytes.push((*bytes).clone());
+        let view = &mut json["bufferViews"][v];
+        if let Some(ext) = view.get_mut("extensions").and_then(|e| e.as_object_mut()) {
+            ext.remove("EXT_meshopt_compression");
+            if ext.is_empty() {
+                view.as_object_mut().expect("object").remove("extensions");
+            }
+        }
+    }
+    let mut doc = Document { json, view_bytes };
+    for key in ["extensionsUsed", "extensionsRequired"] {
+        if let Some(a) = doc.json.get_mut(key).and_then(|v| v.as_array_mut()) {
+            a.retain(|e| e != "EXT_meshopt_compression");
+        }
+    }
+    doc.json["asset"]["generator"] = json!(generator());
+    // Embed images so the GLB stands alone.
+    let ni = doc.json["images"].as_array().map_or(0, |a| a.len());
+    for i in 0..ni {
+        let Some(uri) = doc.json["images"][i]["uri"].as_str().map(String::from) else { continue };
+        let (bytes, mime) = if let Some(rest) = uri.strip_prefix("data:") {
+            let comma = rest.find(',').context("malformed image data URI")?;
+            let mime = rest[..comma].trim_end_matches(";base64").to_string();
+            (base64::engine::general_purpose::STANDARD.decode(&rest[comma + 1..]).context("bad base64 in image URI")?, mime)
+        } else {
+            let p = rig.path.parent().unwrap_or(Path::new(".")).join(&uri);
+            let b = std::fs::read(&p).with_context(|| format!("{}: image {i} ({}) cannot be read", rig.path.display(), p.display()))?;
+            let mime = match p.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).as_deref() {
+                Some("png") => "image/png",
+                Some("jpg") | Some("jpeg") => "image/jpeg",
+                Some("webp") => "image/webp",
+                Some("ktx2") => "image/ktx2",
+                _ => bail!("{}: image {i} ({uri}) has an unknown type", rig.path.display()),
+            };
+            (b, mime.to_string())
+        };
+        let v = doc.push_view(bytes, None);
+        let im = doc.json["images"][i].as_object_mut().expect("image object");
+        im.remove("uri");
+        im.insert("bufferView".into(), json!(v));
+        im.insert("mimeType".into(), json!(mime));
+    }
+    Ok(doc)
+}
+
+/// Local-to-world affine map of an exported vertex (blended for skinned faces).
+fn vertex_matrix(t: &VertexTransform, o: &VertexOrigin) -> Matrix4<f64> {
+    match t {
+        VertexTransform::Node(m) => *m,
+        VertexTransform::PerVertex(_) => (0..3).map(|k| t.of(o.vertices[k]) * o.weights[k]).sum(),
+    }
+}
+
+/// Per exported vertex: world→local point map (inverse affine) and its linear part.
+struct LocalFrames {
+    inv: Vec<Matrix4<f64>>,
+    lin: Vec<Matrix3<f64>>,
+}
+
+impl LocalFrames {
+    fn new(rig: &Rig, origin: &[VertexOrigin]) -> anyhow::Result<Self> {
+        let t = &rig.face().to_world;
+        let mut inv = Vec::with_capacity(origin.len());
+        let mut lin = Vec::with_capacity(origin.len());
+        for (i, o) in origin.iter().enumerate() {
+            let m = vertex_matrix(t, o);
+            let mi = m.try_inverse().with_context(|| format!("{}: the face's transform at vertex {i} is singular (zero scale?)", rig.path.display()))?;
+            lin.push(mi.fixed_view::<3, 3>(0, 0).into_owned());
+            inv.push(mi);
+        }
+        Ok(Self { inv, lin })
+    }
+    fn point(&self, i: usize, p: &Vector3<f64>) -> Vector3<f64> {
+        (self.inv[i] * p.push(1.0)).xyz()
+    }
+    fn normal(&self, i: usize, n: &Vector3<f64>) -> Vector3<f64> {
+        // Normals map by the inverse transpose of the (world→local) linear part.
+        let r = self.lin[i].try_inverse().map(|m| m.transpose()).unwrap_or(self.lin[i]) * n;
+        let l = r.norm();
+        if l > 0.0 { r / l } else { Vector3::z() }
+    }
+}
+
+/// Attributes of the original face primitives carried to the exported vertices.
+fn carried_attributes(rig: &Rig, doc: &mut Document, origin: &[VertexOrigin]) -> anyhow::Result<serde_json::Map<String, Value>> {
+    let f = rig.face();
+    let c = &rig.container;
+    let reader = AccessorReader::new(&rig.path, c);
+    let prims: Vec<&Value> = c.json["meshes"][f.mesh]["primitives"]
+        .as_array()
+        .map(|a| a.iter().filter(|p| (4..=6).contains(&p["mode"].as_u64().unwrap_or(4))).collect())
+        .unwrap_or_default();
+    let skinned = matches!(f.to_world, VertexTransform::PerVertex(_));
+    // Attributes present in any primitive are carried (zeros where a primitive lacks one),
+    // because the kept material may sample any texture coordinate set.
+    let mut names: Vec<String> = Vec::new();
+    for p in &prims {
+        for k in p["attributes"].as_object().into_iter().flatten().map(|(k, _)| k) {
+            let wanted = k.starts_with("TEXCOORD_") || k == "COLOR_0" || (skinned && (k.starts_with("JOINTS_") || k.starts_with("WEIGHTS_")));
+            if wanted && !names.contains(k) {
+                names.push(k.clone());
+            }
+        }
+    }
+    names.sort();
+    let mut out = serde_json::Map::new();
+    for name in names {
+        let mut all = Vec::new();
+        let mut comps = 0;
+        let mut missing = Vec::new();
+        for (pi, p) in prims.iter().enumerate() {
+            match p["attributes"][&name].as_u64() {
+                Some(a) => {
+                    let d = reader.read(a as usize)?;
+                    comps = d.components;
+                    all.extend(d.data);
+                }
+                None => missing.push(pi),
+            }
+        }
+        if !missing.is_empty() {
+            // Rebuild in primitive order with zeros for primitives that lack the attribute.
+            all.clear();
+            for (pi, p) in prims.iter().enumerate() {
+                let count = f.primitive_ranges.get(pi).map_or(0, |r| r.1);
+                match p["attributes"][&name].as_u64() {
+                    Some(a) => all.extend(reader.read(a as usize)?.data),
+                    None => all.extend(std::iter::repeat_n(0.0, count * comps)),
+                }
+            }
+        }
+        let total = all.len() / comps.max(1);
+        let mut vals = Vec::with_capacity(origin.len() * comps);
+        for o in origin {
+            if o.vertices.iter().any(|&v| v >= total) {
+                bail!("{}: attribute {name} has fewer entries than the face has vertices", rig.path.display());
+            }
+            if name.starts_with("JOINTS_") || name.starts_with("WEIGHTS_") {
+                let v = o.dominant();
+                vals.extend_from_slice(&all[v * comps..(v + 1) * comps]);
+            } else {
+                for k in 0..comps {
+                    vals.push((0..3).map(|j| o.weights[j] * all[o.vertices[j] * comps + k]).sum());
+                }
+            }
+        }
+        let acc = if name.starts_with("JOINTS_") {
+            let bytes: Vec<u8> = vals.iter().flat_map(|&v| (v as u16).to_le_bytes()).collect();
+            let view = doc.push_view(bytes, Some(ARRAY_BUFFER));
+            let a = doc.json["accessors"].as_array_mut().expect("accessors exist");
+            a.push(json!({ "bufferView": view, "componentType": 5123, "count": origin.len(), "type": "VEC4" }));
+            a.len() - 1
+        } else {
+            if name.starts_with("WEIGHTS_") {
+                for w in vals.chunks_exact_mut(comps) {
+                    let s: f64 = w.iter().sum();
+                    if s > 0.0 {
+                        w.iter_mut().for_each(|x| *x /= s);
+                    }
+                }
+            }
+            doc.push_f32(&vals, comps, Some(ARRAY_BUFFER))
+        };
+        out.insert(name, json!(acc));
+    }
+    Ok(out)
+}
+
+fn flat(v: &[Vector3<f64>]) -> Vec<f64> {
+    v.iter().flat_map(|p| [p.x, p.y, p.z]).collect()
+}
+
+/// Replace the face by the frames: `animated` true gives morph targets + weights animation,
+/// false gives the single frame `frames[0]` with no animation at all.
+fn replace_face(rig: &Rig, set: &FrameSet, animated: bool) -> anyhow::Result<Document> {
+    let f = rig.face();
+    set.check(f.positions.len())?;
+    let mut doc = base_document(rig)?;
+    let local = LocalFrames::new(rig, set.origin)?;
+    let topo = TriMesh::new(Vec::new(), set.triangles.to_vec());
+    let n = set.origin.len();
+    let local_pos = |k: usize| -> Vec<Vector3<f64>> { (0..n).map(|i| local.point(i, &set.frames[k][i])).collect() };
+    let local_nrm = |k: usize| -> Vec<Vector3<f64>> {
+        topo.vertex_normals_of(&set.frames[k]).iter().enumerate().map(|(i, nw)| local.normal(i, nw)).collect()
+    };
+    let p0 = local_pos(0);
+    let n0 = local_nrm(0);
+    let mut attrs = carried_attributes(rig, &mut doc, set.origin)?;
+    attrs.insert("POSITION".into(), json!(doc.push_f32(&flat(&p0), 3, Some(ARRAY_BUFFER))));
+    attrs.insert("NORMAL".into(), json!(doc.push_f32(&flat(&n0), 3, Some(ARRAY_BUFFER))));
+    let indices = doc.push_indices(set.triangles);
+    let mut prim = json!({ "attributes": attrs, "indices": indices, "mode": 4 });
+    if let Some(m) = rig.container.json["meshes"][f.mesh]["primitives"][0].get("material") {
+        prim["material"] = m.clone();
+    }
+    let frames = set.frames.len();
+    let with_targets = animated && frames > 1;
+    let mut mesh = json!({ "name": format!("{} (furrow)", f.name), "primitives": [] });
+    if with_targets {
+        let mut targets = Vec::with_capacity(frames);
+        for k in 0..frames {
+            let pk = local_pos(k);
+            let nk = local_nrm(k);
+            let dp: Vec<Vector3<f64>> = pk.iter().zip(&p0).map(|(a, b)| a - b).collect();
+            let dn: Vec<Vector3<f64>> = nk.iter().zip(&n0).map(|(a, b)| a - b).collect();
+            targets.push(json!({
+                "POSITION": doc.push_f32(&flat(&dp), 3, Some(ARRAY_BUFFER)),
+                "NORMAL": doc.push_f32(&flat(&dn), 3, Some(ARRAY_BUFFER)),
+            }));
+        }
+        prim["targets"] = json!(targets);
+        mesh["weights"] = json!(vec![0.0; frames]);
+        mesh["extras"] = json!({ "targetNames": (0..frames).map(|k| format!("frame_{k:05}")).collect::<Vec<_>>() });
+    }
+    mesh["primitives"] = json!([prim]);
+    // The face node gets the new mesh; the old one stays only if another node uses it.
+    let shared = rig.container.json["nodes"].as_array().into_iter().flatten().enumerate()
+        .any(|(i, nd)| i != f.node && nd["mesh"].as_u64() == Some(f.mesh as u64));
+    let mesh_index = if shared {
+        let ms = doc.json["meshes"].as_array_mut().expect("meshes exist");
+        ms.push(mesh);
+        ms.len() - 1
+    } else {
+        doc.json["meshes"][f.mesh] = mesh;
+        f.mesh
+    };
+    let node = doc.json["nodes"][f.node].as_object_mut().expect("node object");
+    node.insert("mesh".into(), json!(mesh_index));
+    node.remove("weights");
+    // Animations: drop the face's old weight channels (and everything, for a still frame).
+    if animated {
+        strip_face_weight_channels(&mut doc.json, f.node);
+        if with_targets {
+            let times: Vec<f64> = (0..frames).map(|k| k as f64 / set.fps).collect();
+            let mut onehot = vec![0.0; frames * frames];
+            for k in 0..frames {
+                onehot[k * frames + k] = 1.0;
+            }
+            let input = doc.push_f32(&times, 1, None);
+            let output = doc.push_f32(&onehot, 1, None);
+            let anims = doc.json.as_object_mut().expect("object").entry("animations").or_insert(json!([]));
+            anims.as_array_mut().expect("array").push(json!({
+                "name": "furrow_wrinkles",
+                "samplers": [{ "input": input, "output": output, "interpolation": "LINEAR" }],
+                "channels": [{ "sampler": 0, "target": { "node": f.node, "path": "weights" } }],
+            }));
+        }
+    } else {
+        doc.json.as_object_mut().expect("object").remove("animations");
+    }
+    hoist_skinned_meshes(&mut doc.json);
+    doc.prune();
+    Ok(doc)
+}
+
+/// A skinned mesh ignores its node's parents (glTF 2.0 §3.7.3), and the validator warns when
+/// such a node is not a root. Move each one's mesh and skin to a new root node in the same
+/// scenes (the original node keeps its place and children), retargeting its weight channels:
+/// the picture is unchanged.
+fn hoist_skinned_meshes(json: &mut Value) {
+    let nodes = json["nodes"].as_array().cloned().unwrap_or_default();
+    let mut parent = vec![None; nodes.len()];
+    for (i, n) in nodes.iter().enumerate() {
+        for c in n["children"].as_array().into_iter().flatten().filter_map(|c| c.as_u64()) {
+            if let Some(p) = parent.get_mut(c as usize) {
+                *p = Some(i);
+            }
+        }
+    }
+    for (i, n) in nodes.iter().enumerate() {
+        if parent[i].is_none() || !n["skin"].is_u64() || !n["mesh"].is_u64() {
+            continue;
+        }
+        let mut root = i;
+        while let Some(p) = parent[root] {
+            root = p;
+        }
+        let mut hoisted = json!({ "mesh": n["mesh"], "skin": n["skin"] });
+        if let Some(name) = n["name"].as_str() {
+            hoisted["name"] = json!(format!("{name} (skinned mesh)"));
+        }
+        if n.get("weights").is_some() {
+            hoisted["weights"] = n["weights"].clone();
+        }
+        let new_index = {
+            let ns = json["nodes"].as_array_mut().expect("nodes exist");
+            ns.push(hoisted);
+            ns.len() - 1
+        };
+        let old = json["nodes"][i].as_object_mut().expect("node object");
+        old.remove("mesh");
+        old.remove("skin");
+        old.remove("weights");
+        for sc in json.get_mut("scenes").and_then(|v| v.as_array_mut()).into_iter().flatten() {
+            if let Some(list) = sc.get_mut("nodes").and_then(|v| v.as_array_mut()) {
+                if list.iter().any(|v| v.as_u64() == Some(root as u64)) {
+                    list.push(json!(new_index));
+                }
+            }
+        }
+        for a in json.get_mut("animations").and_then(|v| v.as_array_mut()).into_iter().flatten() {
+            for c in a.get_mut("channels").and_then(|v| v.as_array_mut()).into_iter().flatten() {
+                if c["target"]["path"] == "weights" && c["target"]["node"].as_u64() == Some(i as u64) {
+                    c["target"]["node"] = json!(new_index);
+                }
+            }
+        }
+    }
+}
+
+/// Remove `weights` channels that target `node` (their samplers too), and empty animations.
+fn strip_face_weight_channels(json: &mut Value, node: usize) {
+    let Some(anims) = json.get_mut("animations").and_then(|v| v.as_array_mut()) else { return };
+    for a in anims.iter_mut() {
+        let chans: Vec<Value> = a["channels"].as_array().cloned().unwrap_or_default();
+        let keep: Vec<Value> = chans
+            .into_iter()
+            .filter(|c| !(c["target"]["path"] == "weights" && c["target"]["node"].as_u64() == Some(node as u64)))
+            .collect();
+        let samplers = a["samplers"].as_array().cloned().unwrap_or_default();
+        let mut used: Vec<usize> = keep.iter().filter_map(|c| c["sampler"].as_u64()).map(|s| s as usize).collect();
+        used.sort_unstable();
+        used.dedup();
+        let new_samplers: Vec<Value> = used.iter().filter_map(|&s| samplers.get(s).cloned()).collect();
+        let keep: Vec<Value> = keep
+            .into_iter()
+            .map(|mut c| {
+                let s = c["sampler"].as_u64().unwrap_or(0) as usize;
+                c["sampler"] = json!(used.iter().position(|&u| u == s).unwrap_or(0));
+                c
+            })
+            .collect();
+        a["channels"] = json!(keep);
+        a["samplers"] = json!(new_samplers);
+    }
+    anims.retain(|a| a["channels"].as_array().is_some_and(|c| !c.is_empty()));
+}
+
+/// The whole scene with the face replaced by the animated frame sequence, as GLB bytes.
+pub fn animated_glb(rig: &Rig, set: &FrameSet) -> anyhow::Result<Vec<u8>> {
+    Ok(replace_face(rig, set, true)?.to_glb())
+}
+
+/// The scene with the face at frame `k` (no animation), as GLB bytes.
+pub fn frame_glb(rig: &Rig, set: &FrameSet, k: usize) -> anyhow::Result<Vec<u8>> {
+    let one = std::slice::from_ref(set.frames.get(k).context("frame index out of range")?);
+    let single = FrameSet { triangles: set.triangles, frames: one, origin: set.origin, fps: set.fps };
+    Ok(replace_face(rig, &single, false)?.to_glb())
+}
+
+/// Write the animated GLB to `path` (atomically).
+pub fn write_animated(rig: &Rig, set: &FrameSet, path: &Path, overwrite: Overwrite) -> anyhow::Result<()> {
+    let bytes = animated_glb(rig, set)?;
+    atomic::write(path, &bytes, overwrite)
+}
+
+/// Write one GLB per frame into `dir` as `frame_00000.glb`, … (each atomically); returns the paths.
+pub fn write_frames_dir(rig: &Rig, set: &FrameSet, dir: &Path, overwrite: Overwrite) -> anyhow::Result<Vec<PathBuf>> {
+    let paths: Vec<PathBuf> = (0..set.frames.len()).map(|k| dir.join(format!("frame_{k:05}.glb"))).collect();
+    if overwrite == Overwrite::Refuse {
+        if let Some(p) = paths.iter().find(|p| p.exists()) {
+            bail!("{}: already exists; furrow does not overwrite files unless told to (pass --force)", p.display());
+        }
+    }
+    for (k, p) in paths.iter().enumerate() {
+        atomic::write(p, &frame_glb(rig, set, k)?, overwrite)?;
+    }
+    Ok(paths)
+}
+
+/// A fresh blend-shape rig file: one mesh with morph targets (names in `extras.targetNames`)
+/// and a linear weights animation, as GLB bytes. Positions in metres.
+pub fn rig_glb(name: &str, mesh: &TriMesh, targets: &[MorphTarget], keys: &WeightKeys) -> anyhow::Result<Vec<u8>> {
+    let n = mesh.positions.len();
+    if let Some(t) = targets.iter().find(|t| t.positions.len() != n) {
+        bail!("target {} has {} deltas for {n} vertices", t.name, t.positions.len());
+    }
+    if keys.weights.len() != keys.times.len() || keys.weights.iter().any(|w| w.len() != targets.len()) {
+        bail!("weight keys do not match the times and the {} targets", targets.len());
+    }
+    let mut doc = Document::new();
+    let pos = doc.push_f32(&flat(&mesh.positions), 3, Some(ARRAY_BUFFER));
+    let nrm = doc.push_f32(&flat(&mesh.vertex_normals()), 3, Some(ARRAY_BUFFER));
+    let idx = doc.push_indices(&mesh.triangles);
+    let tj: Vec<Value> = targets.iter().map(|t| json!({ "POSITION": doc.push_f32(&flat(&t.positions), 3, Some(ARRAY_BUFFER)) })).collect();
+    let mut prim = json!({ "attributes": { "POSITION": pos, "NORMAL": nrm }, "indices": idx, "material": 0, "mode": 4 });
+    if !tj.is_empty() {
+        prim["targets"] = json!(tj);
+    }
+    doc.json["materials"] = json!([{ "name": "skin", "pbrMetallicRoughness": { "baseColorFactor": [0.87, 0.68, 0.58, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.6 } }]);
+    let mut m = json!({ "name": name, "primitives": [prim] });
+    if !targets.is_empty() {
+        m["weights"] = json!(vec![0.0; targets.len()]);
+        m["extras"] = json!({ "targetNames": targets.iter().map(|t| t.name.clone()).collect::<Vec<_>>() });
+    }
+    doc.json["meshes"] = json!([m]);
+    doc.json["nodes"] = json!([{ "name": name, "mesh": 0 }]);
+    doc.json["scenes"] = json!([{ "nodes": [0] }]);
+    doc.json["scene"] = json!(0);
+    if !keys.times.is_empty() && !targets.is_empty() {
+        let input = doc.push_f32(&keys.times, 1, None);
+        let output = doc.push_f32(&keys.weights.concat(), 1, None);
+        doc.json["animations"] = json!([{
+            "name": "performance",
+            "samplers": [{ "input": input, "output": output, "interpolation": "LINEAR" }],
+            "channels": [{ "sampler": 0, "target": { "node": 0, "path": "weights" } }],
+        }]);
+    }
+    Ok(doc.to_glb())
+}

@@ -1,1 +1,118 @@
-//! Summaries of glTF files.
+//! `furrow inspect`: what a glTF file holds (meshes, counts, morph targets, animations,
+//! extensions), as text or JSON.
+
+use super::animation::AnimationInfo;
+use super::error::GltfResult;
+use super::load::load_instances;
+use super::mesh::VertexTransform;
+use serde::Serialize;
+use std::path::Path;
+
+/// One mesh instance in the summary.
+#[derive(Debug, Clone, Serialize)]
+pub struct MeshSummary {
+    /// Node index.
+    pub node: usize,
+    /// Mesh index.
+    pub mesh: usize,
+    /// Mesh name.
+    pub name: String,
+    /// Triangle primitives merged.
+    pub primitives: usize,
+    /// Vertices (all primitives).
+    pub vertices: usize,
+    /// Triangles (all primitives).
+    pub triangles: usize,
+    /// Morph target names.
+    pub targets: Vec<String>,
+    /// Whether normal deltas are present in every target.
+    pub normal_deltas: bool,
+    /// Whether the mesh is skinned.
+    pub skinned: bool,
+    /// World-space bounding box size (m).
+    pub size_m: [f64; 3],
+}
+
+/// Summary of a file.
+#[derive(Debug, Clone, Serialize)]
+pub struct Summary {
+    /// The file.
+    pub file: String,
+    /// "glb" or "gltf".
+    pub container: String,
+    /// `asset.generator`, if any.
+    pub generator: Option<String>,
+    /// Extensions used.
+    pub extensions_used: Vec<String>,
+    /// Extensions required.
+    pub extensions_required: Vec<String>,
+    /// Mesh instances in the displayed scene.
+    pub meshes: Vec<MeshSummary>,
+    /// Animations.
+    pub animations: Vec<AnimationInfo>,
+}
+
+/// Read `path` and summarise it.
+pub fn summarize(path: &Path) -> GltfResult<Summary> {
+    let (c, inst, animations) = load_instances(path)?;
+    let meshes = inst
+        .iter()
+        .map(|m| {
+            let (lo, hi) = crate::mesh::TriMesh::new(m.positions.clone(), vec![])
+                .bounding_box()
+                .unwrap_or_default();
+            let d = hi - lo;
+            MeshSummary {
+                node: m.node,
+                mesh: m.mesh,
+                name: m.name.clone(),
+                primitives: m.primitive_ranges.len(),
+                vertices: m.positions.len(),
+                triangles: m.triangles.len(),
+                targets: m.targets.iter().map(|t| t.name.clone()).collect(),
+                normal_deltas: !m.targets.is_empty() && m.targets.iter().all(|t| t.normals.is_some()),
+                skinned: matches!(m.to_world, VertexTransform::PerVertex(_)),
+                size_m: [d.x, d.y, d.z],
+            }
+        })
+        .collect();
+    Ok(Summary {
+        file: path.display().to_string(),
+        container: if c.binary { "glb".into() } else { "gltf".into() },
+        generator: c.root.asset.generator.clone(),
+        extensions_used: c.root.extensions_used.clone(),
+        extensions_required: c.root.extensions_required.clone(),
+        meshes,
+        animations,
+    })
+}
+
+impl std::fmt::Display for Summary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        writeln!(f, "{} ({}{})", self.file, self.container, self.generator.as_ref().map(|g| format!(", made by {g}")).unwrap_or_default())?;
+        if !self.extensions_used.is_empty() {
+            writeln!(f, "extensions used: {}", self.extensions_used.join(", "))?;
+        }
+        if !self.extensions_required.is_empty() {
+            writeln!(f, "extensions required: {}", self.extensions_required.join(", "))?;
+        }
+        writeln!(f, "meshes ({} instances):", self.meshes.len())?;
+        for m in &self.meshes {
+            writeln!(
+                f,
+                "  node {:>3} mesh {:>3} {:<24} {:>7} vertices {:>7} triangles {:>2} primitives{}  size {:.3} x {:.3} x {:.3} m",
+                m.node, m.mesh, format!("'{}'", m.name), m.vertices, m.triangles, m.primitives,
+                if m.skinned { " skinned" } else { "" }, m.size_m[0], m.size_m[1], m.size_m[2]
+            )?;
+            if !m.targets.is_empty() {
+                writeln!(f, "      {} morph targets{}: {}", m.targets.len(), if m.normal_deltas { " (with normals)" } else { "" }, m.targets.join(", "))?;
+            }
+        }
+        writeln!(f, "animations ({}):", self.animations.len())?;
+        for a in &self.animations {
+            let ch: Vec<String> = a.channels.iter().map(|(p, n)| format!("{n} {p}")).collect();
+            writeln!(f, "  {:>3} {:<20} {:>7.3} s  channels: {}", a.index, format!("'{}'", a.name), a.duration_s, ch.join(", "))?;
+        }
+        Ok(())
+    }
+}

@@ -97,6 +97,16 @@ fn instances_of(path: &Path, c: &Container) -> GltfResult<(Vec<MeshInstance>, Ve
 /// Load the rig at `path` and choose its face and animation.
 pub fn load(path: &Path, opts: &LoadOptions) -> GltfResult<Rig> {
     let c = container::read(path)?;
+    load_container(path, c, opts)
+}
+
+/// Load a rig from bytes that came from `path` (which names errors and anchors relative URIs).
+pub fn load_bytes(path: &Path, bytes: &[u8], opts: &LoadOptions) -> GltfResult<Rig> {
+    let c = container::parse(path, bytes)?;
+    load_container(path, c, opts)
+}
+
+fn load_container(path: &Path, c: Container, opts: &LoadOptions) -> GltfResult<Rig> {
     let (instances, animations) = instances_of(path, &c)?;
     let morphs: Vec<usize> = (0..instances.len()).filter(|&i| !instances[i].targets.is_empty()).collect();
     if morphs.is_empty() {

@@ -27,7 +27,7 @@ pub fn decode(
     let src = src.get(offset..end).ok_or_else(|| {
         err(format!("compressed bytes {offset}..{end} lie outside buffer {buffer} ({} bytes)", src.len()))
     })?;
-    let size = count.checked_mul(stride).filter(|&s| s <= 1 << 31).ok_or_else(|| {
+    let size = count.checked_mul(stride).filter(|&s| s <= 1 << 28).ok_or_else(|| {
         err(format!("count {count} × byteStride {stride} is too large"))
     })?;
     let mut dst = vec![0u8; size];

@@ -6,6 +6,7 @@ pub mod atomic;
 pub mod container;
 pub mod error;
 pub mod export;
+pub mod glb_write;
 pub mod inspect;
 pub mod load;
 pub mod mesh;

@@ -1,0 +1,15 @@
+//! Fuzz the glTF loader: any bytes must give a rig or a clean error, never a panic or abort.
+#![no_main]
+
+use libfuzzer_sys::fuzz_target;
+use std::path::Path;
+
+fuzz_target!(|data: &[u8]| {
+    let path = Path::new("/nonexistent-fuzz-dir/input.glb");
+    if let Ok(rig) = furrow::io::load::load_bytes(path, data, &Default::default()) {
+        let w = rig.frame_weights(30.0);
+        if let Some(first) = w.first() {
+            let _ = rig.blend(first);
+        }
+    }
+});

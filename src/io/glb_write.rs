@@ -1,0 +1,277 @@
+//! Building glTF binary output: buffer views, accessors with exact min/max, pruning of what
+//! nothing references, and the GLB container.
+
+use serde_json::{json, Value};
+
+/// GL buffer-view targets.
+pub const ARRAY_BUFFER: u32 = 34962;
+/// GL element-array target (indices).
+pub const ELEMENT_ARRAY_BUFFER: u32 = 34963;
+
+/// A document under construction: the glTF JSON plus the bytes of each buffer view
+/// (the single binary buffer is laid out at [`Document::to_glb`]).
+pub struct Document {
+    /// The glTF JSON; `bufferViews` byte offsets are filled in when written.
+    pub json: Value,
+    /// Bytes of each buffer view, same order as `json["bufferViews"]`.
+    pub view_bytes: Vec<Vec<u8>>,
+}
+
+fn arr<'a>(json: &'a mut Value, key: &str) -> &'a mut Vec<Value> {
+    if !json[key].is_array() {
+        json[key] = json!([]);
+    }
+    json[key].as_array_mut().expect("set above")
+}
+
+impl Document {
+    /// An empty glTF 2.0 document.
+    pub fn new() -> Self {
+        Self {
+            json: json!({ "asset": { "version": "2.0", "generator": generator() } }),
+            view_bytes: Vec::new(),
+        }
+    }
+
+    /// Append a buffer view holding `bytes`; returns its index.
+    pub fn push_view(&mut self, bytes: Vec<u8>, target: Option<u32>) -> usize {
+        let mut v = json!({ "buffer": 0, "byteLength": bytes.len() });
+        if let Some(t) = target {
+            v["target"] = json!(t);
+        }
+        let views = arr(&mut self.json, "bufferViews");
+        views.push(v);
+        self.view_bytes.push(bytes);
+        views.len() - 1
+    }
+
+    fn push_accessor(&mut self, acc: Value) -> usize {
+        let a = arr(&mut self.json, "accessors");
+        a.push(acc);
+        a.len() - 1
+    }
+
+    /// Append a float accessor of `components`-vectors (VEC3, SCALAR, …) with exact min/max
+    /// (computed on the f32 values written). `target` is the buffer-view target.
+    pub fn push_f32(&mut self, values: &[f64], components: usize, target: Option<u32>) -> usize {
+        let ty = match components {
+            1 => "SCALAR",
+            2 => "VEC2",
+            3 => "VEC3",
+            4 => "VEC4",
+            16 => "MAT4",
+            _ => panic!("unsupported component count {components}"),
+        };
+        let f: Vec<f32> = values.iter().map(|&v| v as f32).collect();
+        let count = f.len() / components;
+        let mut min = vec![f32::INFINITY; components];
+        let mut max = vec![f32::NEG_INFINITY; components];
+        for e in f.chunks_exact(components) {
+            for k in 0..components {
+                min[k] = min[k].min(e[k]);
+                max[k] = max[k].max(e[k]);
+            }
+        }
+        let bytes: Vec<u8> = f.iter().flat_map(|v| v.to_le_bytes()).collect();
+        let view = self.push_view(bytes, target);
+        let mut acc = json!({ "bufferView": view, "componentType": 5126, "count": count, "type": ty });
+        if count > 0 && components <= 4 {
+            acc["min"] = json!(min);
+            acc["max"] = json!(max);
+        }
+        self.push_accessor(acc)
+    }
+
+    /// Append a triangle index accessor (u16 when every index fits below 65535, else u32).
+    pub fn push_indices(&mut self, triangles: &[[usize; 3]]) -> usize {
+        let max = triangles.iter().flatten().copied().max().unwrap_or(0);
+        let (bytes, ct): (Vec<u8>, u32) = if max < 65535 {
+            (triangles.iter().flatten().flat_map(|&i| (i as u16).to_le_bytes()).collect(), 5123)
+        } else {
+            (triangles.iter().flatten().flat_map(|&i| (i as u32).to_le_bytes()).collect(), 5125)
+        };
+        let view = self.push_view(bytes, Some(ELEMENT_ARRAY_BUFFER));
+        self.push_accessor(json!({ "bufferView": view, "componentType": ct, "count": triangles.len() * 3, "type": "SCALAR" }))
+    }
+
+    /// Drop accessors and buffer views that nothing references, renumbering the rest.
+    pub fn prune(&mut self) {
+        let j = &mut self.json;
+        // Accessors referenced by meshes, skins and animations.
+        let na = j["accessors"].as_array().map_or(0, |a| a.len());
+        let mut used_acc = vec![false; na];
+        let mark = |v: &Value, used: &mut Vec<bool>| {
+            if let Some(i) = v.as_u64() {
+                if let Some(u) = used.get_mut(i as usize) {
+                    *u = true;
+                }
+            }
+        };
+        for m in j["meshes"].as_array().into_iter().flatten() {
+            for p in m["primitives"].as_array().into_iter().flatten() {
+                for a in p["attributes"].as_object().into_iter().flatten() {
+                    mark(a.1, &mut used_acc);
+                }
+                mark(&p["indices"], &mut used_acc);
+                for t in p["targets"].as_array().into_iter().flatten() {
+                    for a in t.as_object().into_iter().flatten() {
+                        mark(a.1, &mut used_acc);
+                    }
+                }
+            }
+        }
+        for s in j["skins"].as_array().into_iter().flatten() {
+            mark(&s["inverseBindMatrices"], &mut used_acc);
+        }
+        for a in j["animations"].as_array().into_iter().flatten() {
+            for s in a["samplers"].as_array().into_iter().flatten() {
+                mark(&s["input"], &mut used_acc);
+                mark(&s["output"], &mut used_acc);
+            }
+        }
+        let acc_map = renumber(&used_acc);
+        let remap = |v: &mut Value, map: &[Option<usize>]| {
+            if let Some(i) = v.as_u64() {
+                *v = json!(map[i as usize].expect("referenced object is kept"));
+            }
+        };
+        for m in j.get_mut("meshes").and_then(|v| v.as_array_mut()).into_iter().flatten() {
+            for p in m.get_mut("primitives").and_then(|v| v.as_array_mut()).into_iter().flatten() {
+                for a in p.get_mut("attributes").and_then(|v| v.as_object_mut()).into_iter().flatten() {
+                    remap(a.1, &acc_map);
+                }
+                if p.get("indices").is_some() {
+                    remap(&mut p["indices"], &acc_map);
+                }
+                for t in p.get_mut("targets").and_then(|v| v.as_array_mut()).into_iter().flatten() {
+                    for a in t.as_object_mut().into_iter().flatten() {
+                        remap(a.1, &acc_map);
+                    }
+                }
+            }
+        }
+        for s in j.get_mut("skins").and_then(|v| v.as_array_mut()).into_iter().flatten() {
+            if s.get("inverseBindMatrices").is_some() {
+                remap(&mut s["inverseBindMatrices"], &acc_map);
+            }
+        }
+        for a in j.get_mut("animations").and_then(|v| v.as_array_mut()).into_iter().flatten() {
+            for s in a.get_mut("samplers").and_then(|v| v.as_array_mut()).into_iter().flatten() {
+                remap(&mut s["input"], &acc_map);
+                remap(&mut s["output"], &acc_map);
+            }
+        }
+        if let Some(accs) = j.get_mut("accessors").and_then(|v| v.as_array_mut()) {
+            let kept: Vec<Value> = accs.drain(..).enumerate().filter(|(i, _)| used_acc[*i]).map(|(_, a)| a).collect();
+            *accs = kept;
+        }
+        // Buffer views referenced by kept accessors and images.
+        let nv = self.view_bytes.len();
+        let mut used_view = vec![false; nv];
+        for a in j["accessors"].as_array().into_iter().flatten() {
+            mark(&a["bufferView"], &mut used_view);
+            mark(&a["sparse"]["indices"]["bufferView"], &mut used_view);
+            mark(&a["sparse"]["values"]["bufferView"], &mut used_view);
+        }
+        for im in j["images"].as_array().into_iter().flatten() {
+            mark(&im["bufferView"], &mut used_view);
+        }
+        let view_map = renumber(&used_view);
+        for a in j.get_mut("accessors").and_then(|v| v.as_array_mut()).into_iter().flatten() {
+            if a.get("bufferView").is_some() {
+                remap(&mut a["bufferView"], &view_map);
+            }
+            if a["sparse"].is_object() {
+                remap(&mut a["sparse"]["indices"]["bufferView"], &view_map);
+                remap(&mut a["sparse"]["values"]["bufferView"], &view_map);
+            }
+        }
+        for im in j.get_mut("images").and_then(|v| v.as_array_mut()).into_iter().flatten() {
+            if im.get("bufferView").is_some() {
+                remap(&mut im["bufferView"], &view_map);
+            }
+        }
+        if let Some(views) = j.get_mut("bufferViews").and_then(|v| v.as_array_mut()) {
+            let kept: Vec<Value> = views.drain(..).enumerate().filter(|(i, _)| used_view[*i]).map(|(_, v)| v).collect();
+            *views = kept;
+        }
+        let bytes = std::mem::take(&mut self.view_bytes);
+        self.view_bytes = bytes.into_iter().enumerate().filter(|(i, _)| used_view[*i]).map(|(_, b)| b).collect();
+    }
+
+    /// Lay out the binary buffer (views 4-byte aligned), fill offsets, and write a GLB.
+    pub fn to_glb(&mut self) -> Vec<u8> {
+        let mut bin = Vec::new();
+        if let Some(views) = self.json.get_mut("bufferViews").and_then(|v| v.as_array_mut()) {
+            for (v, bytes) in views.iter_mut().zip(&self.view_bytes) {
+                while bin.len() % 4 != 0 {
+                    bin.push(0);
+                }
+                v["buffer"] = json!(0);
+                v["byteOffset"] = json!(bin.len());
+                v["byteLength"] = json!(bytes.len());
+                bin.extend_from_slice(bytes);
+            }
+        }
+        while bin.len() % 4 != 0 {
+            bin.push(0);
+        }
+        let obj = self.json.as_object_mut().expect("document is an object");
+        obj.retain(|_, v| !v.is_null());
+        if bin.is_empty() {
+            obj.remove("buffers");
+            obj.remove("bufferViews");
+        } else {
+            obj.insert("buffers".into(), json!([{ "byteLength": bin.len() }]));
+        }
+        for k in ["accessors", "bufferViews", "animations", "meshes", "nodes", "images", "samplers", "textures", "materials", "skins", "cameras", "scenes", "extensionsUsed", "extensionsRequired"] {
+            if obj.get(k).and_then(|v| v.as_array()).is_some_and(|a| a.is_empty()) {
+                obj.remove(k);
+            }
+        }
+        let mut js = serde_json::to_vec(&self.json).expect("JSON serialises");
+        while js.len() % 4 != 0 {
+            js.push(b' ');
+        }
+        let total = 12 + 8 + js.len() + if bin.is_empty() { 0 } else { 8 + bin.len() };
+        let mut out = Vec::with_capacity(total);
+        out.extend_from_slice(b"glTF");
+        out.extend_from_slice(&2u32.to_le_bytes());
+        out.extend_from_slice(&(total as u32).to_le_bytes());
+        out.extend_from_slice(&(js.len() as u32).to_le_bytes());
+        out.extend_from_slice(b"JSON");
+        out.extend_from_slice(&js);
+        if !bin.is_empty() {
+            out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+            out.extend_from_slice(b"BIN\0");
+            out.extend_from_slice(&bin);
+        }
+        out
+    }
+}
+
+impl Default for Document {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// The `asset.generator` string furrow writes.
+pub fn generator() -> String {
+    format!("furrow {}", env!("CARGO_PKG_VERSION"))
+}
+
+/// New index of each kept object (`None` for dropped ones).
+fn renumber(used: &[bool]) -> Vec<Option<usize>> {
+    let mut next = 0;
+    used.iter()
+        .map(|&u| {
+            if u {
+                next += 1;
+                Some(next - 1)
+            } else {
+                None
+            }
+        })
+        .collect()
+}

@@ -1,0 +1,141 @@
+//! Helpers shared by the integration tests.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// `../shared/data/NAME` (outside test data; never copied into the project).
+pub fn shared_data(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data").join(name)
+}
+
+/// All `.glb` files in `../shared/data/`.
+pub fn shared_glbs() -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(shared_data(""))
+        .expect("../shared/data exists")
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "glb"))
+        .collect();
+    v.sort();
+    v
+}
+
+/// The Node tools folder (`.ci/node_modules`), if installed.
+pub fn node_modules() -> Option<PathBuf> {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join(".ci/node_modules");
+    p.join("gltf-validator").exists().then_some(p)
+}
+
+/// Whether a missing tool must fail the test (in CI) rather than skip it (on a dev machine).
+pub fn tools_required() -> bool {
+    std::env::var("CI").is_ok_and(|v| v == "true" || v == "1")
+}
+
+/// Run the Khronos glTF Validator on `files`; returns each file's JSON report line.
+/// Returns None (test skipped, with a note) when the validator is not installed outside CI.
+pub fn validate(files: &[PathBuf]) -> Option<Vec<serde_json::Value>> {
+    if node_modules().is_none() {
+        assert!(!tools_required(), "gltf-validator is not installed: run `npm ci --prefix .ci`");
+        eprintln!("note: gltf-validator not installed (npm ci --prefix .ci); validation skipped");
+        return None;
+    }
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join(".ci/validate.mjs");
+    let out = Command::new("node").arg(script).args(files).output().expect("node runs");
+    let text = String::from_utf8_lossy(&out.stdout);
+    Some(text.lines().map(|l| serde_json::from_str(l).expect("validator prints JSON")).collect())
+}
+
+/// Assert that every report has no errors and no warnings.
+pub fn assert_valid(reports: &[serde_json::Value]) {
+    for r in reports {
+        assert_eq!(r["errors"], 0, "validator errors: {r}");
+        assert_eq!(r["warnings"], 0, "validator warnings: {r}");
+    }
+}
+
+/// A small valid rig for tests: one quad (4 vertices, 2 triangles, u16 indices) with one
+/// morph target (+0.1 m in z on vertex 2) and a LINEAR weights animation 0 → 1 over 1 s.
+/// Returns the JSON and the binary buffer, to be mutated by bad-input tests.
+pub fn tiny_rig() -> (serde_json::Value, Vec<u8>) {
+    let pos: [f32; 12] = [0., 0., 0., 1., 0., 0., 1., 1., 0., 0., 1., 0.];
+    let idx: [u16; 6] = [0, 1, 2, 0, 2, 3];
+    let dpos: [f32; 12] = [0., 0., 0., 0., 0., 0., 0., 0., 0.1, 0., 0., 0.];
+    let times: [f32; 2] = [0.0, 1.0];
+    let weights: [f32; 2] = [0.0, 1.0];
+    let mut bin = Vec::new();
+    bin.extend(pos.iter().flat_map(|v| v.to_le_bytes())); // 0..48
+    bin.extend(idx.iter().flat_map(|v| v.to_le_bytes())); // 48..60
+    bin.extend(dpos.iter().flat_map(|v| v.to_le_bytes())); // 60..108
+    bin.extend(times.iter().flat_map(|v| v.to_le_bytes())); // 108..116
+    bin.extend(weights.iter().flat_map(|v| v.to_le_bytes())); // 116..124
+    let json = serde_json::json!({
+        "asset": { "version": "2.0" },
+        "scene": 0,
+        "scenes": [{ "nodes": [0] }],
+        "nodes": [{ "mesh": 0, "name": "face" }],
+        "meshes": [{ "name": "face", "primitives": [{ "attributes": { "POSITION": 0 }, "indices": 1, "targets": [{ "POSITION": 2 }] }],
+                     "extras": { "targetNames": ["lift"] } }],
+        "buffers": [{ "byteLength": bin.len() }],
+        "bufferViews": [
+            { "buffer": 0, "byteOffset": 0, "byteLength": 48 },
+            { "buffer": 0, "byteOffset": 48, "byteLength": 12 },
+            { "buffer": 0, "byteOffset": 60, "byteLength": 48 },
+            { "buffer": 0, "byteOffset": 108, "byteLength": 8 },
+            { "buffer": 0, "byteOffset": 116, "byteLength": 8 }
+        ],
+        "accessors": [
+            { "bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [0,0,0], "max": [1,1,0] },
+            { "bufferView": 1, "componentType": 5123, "count": 6, "type": "SCALAR" },
+            { "bufferView": 2, "componentType": 5126, "count": 4, "type": "VEC3", "min": [0,0,0], "max": [0,0,0.1] },
+            { "bufferView": 3, "componentType": 5126, "count": 2, "type": "SCALAR", "min": [0], "max": [1] },
+            { "bufferView": 4, "componentType": 5126, "count": 2, "type": "SCALAR" }
+        ],
+        "animations": [{ "name": "lift", "samplers": [{ "input": 3, "output": 4 }],
+                         "channels": [{ "sampler": 0, "target": { "node": 0, "path": "weights" } }] }]
+    });
+    (json, bin)
+}
+
+/// Pack JSON and a binary chunk into GLB bytes.
+pub fn glb_bytes(json: &serde_json::Value, bin: &[u8]) -> Vec<u8> {
+    let mut js = serde_json::to_vec(json).unwrap();
+    while js.len() % 4 != 0 {
+        js.push(b' ');
+    }
+    let mut b = bin.to_vec();
+    while b.len() % 4 != 0 {
+        b.push(0);
+    }
+    let total = 12 + 8 + js.len() + 8 + b.len();
+    let mut out = Vec::new();
+    out.extend(b"glTF");
+    out.extend(2u32.to_le_bytes());
+    out.extend((total as u32).to_le_bytes());
+    out.extend((js.len() as u32).to_le_bytes());
+    out.extend(b"JSON");
+    out.extend(js);
+    out.extend((b.len() as u32).to_le_bytes());
+    out.extend(b"BIN\0");
+    out.extend(b);
+    out
+}
+
+/// Compress `src` with gltfpack (quantization + meshopt, as capture tools ship rigs) into `out`.
+/// Returns false (skip, with a note) when gltfpack is not installed outside CI.
+pub fn gltfpack(src: &Path, out: &Path) -> bool {
+    let Some(nm) = node_modules() else {
+        assert!(!tools_required(), "gltfpack is not installed: npm ci --prefix .ci");
+        eprintln!("note: gltfpack not installed; skipped");
+        return false;
+    };
+    let st = Command::new("node")
+        .arg(nm.join("gltfpack/cli.js"))
+        .args(["-cc", "-kn", "-km", "-ke", "-i"])
+        .arg(src)
+        .arg("-o")
+        .arg(out)
+        .output()
+        .expect("node runs");
+    assert!(st.status.success(), "gltfpack failed on {}: {}", src.display(), String::from_utf8_lossy(&st.stderr));
+    true
+}
