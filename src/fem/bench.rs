@@ -44,39 +44,6 @@ fn cube_mesh(a: f64, m: usize) -> TriMesh {
     TriMesh::new(pos, tris)
 }
 
-/// A face-sized open mask: the front half of an ellipsoid (0.15 m wide, 0.2 m tall, 0.2 m
-/// deep, facing +z) on an n × n grid (n² vertices), cut along a mouth slit.
-pub fn mask_mesh(n: usize) -> TriMesh {
-    let (rx, ry, rz) = (0.075, 0.1, 0.1);
-    let mut pos = Vec::new();
-    let mut id = vec![vec![0usize; n]; n];
-    for (i, row) in id.iter_mut().enumerate() {
-        for (j, v) in row.iter_mut().enumerate() {
-            let th = -1.3 + 2.6 * i as f64 / (n - 1) as f64; // azimuth
-            let ph = -1.2 + 2.4 * j as f64 / (n - 1) as f64; // elevation
-            *v = pos.len();
-            pos.push(Vector3::new(rx * th.sin() * ph.cos(), ry * ph.sin(), rz * th.cos() * ph.cos()));
-        }
-    }
-    // Mouth slit: row j0 for the middle fifth of the columns gets duplicated lower vertices.
-    let j0 = (0.35 * n as f64) as usize;
-    let mut lower = id.clone();
-    for i in (2 * n / 5 + 1)..(3 * n / 5) {
-        lower[i][j0] = pos.len();
-        pos.push(pos[id[i][j0]]);
-    }
-    let mut tris = Vec::new();
-    for i in 0..n - 1 {
-        for j in 0..n - 1 {
-            let g = if j < j0 { &lower } else { &id };
-            let (a, b, c, d) = (g[i][j], g[i + 1][j], g[i + 1][j + 1], g[i][j + 1]);
-            tris.push([a, b, c]);
-            tris.push([a, c, d]);
-        }
-    }
-    TriMesh::new(pos, tris)
-}
-
 /// Run the lattice benchmark on about `elements` quadratic elements and return its
 /// measurements as a flat JSON object (elements, nodes, times in seconds).
 ///
@@ -86,12 +53,12 @@ pub fn mask_mesh(n: usize) -> TriMesh {
 /// rotations and matrix assembly), `solve_s` (numeric factorisation and solve), `step_s`
 /// (the whole step including energy and gradient evaluations and the line search), per
 /// `newton_iterations`. `face_lattice_build_s` times [`Lattice::build`] with default
-/// settings on a 10k-vertex open mask ([`mask_mesh`]).
+/// settings on the procedural face rig (`rig::face::generate()`, ~10k vertices).
 pub fn bench_lattice(elements: usize) -> anyhow::Result<serde_json::Value> {
     let chol = bench_step(elements, LinearSolver::Cholesky, 20)?;
     let cg = bench_step(elements, LinearSolver::ConjugateGradient { rel_tol: 1e-4, max_iter: 500 }, 20)?;
     let one = bench_step(elements, LinearSolver::ConjugateGradient { rel_tol: 1e-4, max_iter: 500 }, 1)?;
-    let face = mask_mesh(100);
+    let face = crate::rig::face::generate().mesh;
     let t = Instant::now();
     let face_lat = Lattice::build(&face, &LatticeSettings::default())?;
     let face_s = t.elapsed().as_secs_f64();

@@ -634,35 +634,37 @@ impl BackwardEuler {
             let slope: f64 = dir.iter().zip(&g).map(|(d, gi)| d * gi).sum();
             let step_max = dir.iter().fold(0.0f64, |m, d| m.max(d.abs()));
             // Backtracking line search on Φ (Armijo).
+            // The full step is evaluated with its gradient (it is usually accepted); shorter
+            // steps first by value only.
             let mut alpha = 1.0;
-            let mut accepted = false;
+            let mut accepted: Option<(f64, Vec<f64>)> = None;
             let mut trial = y.to_vec();
             for _ in 0..30 {
                 for i in 0..y.len() {
                     trial[i] = y[i] + alpha * dir[i];
                 }
-                let (p, _) = self.potential(&trial, x0, inertia, &force, extra, false);
+                let (p, gt) = self.potential(&trial, x0, inertia, &force, extra, alpha == 1.0);
                 if p.is_finite() && p <= phi + 1e-4 * alpha * slope.min(0.0) {
-                    accepted = true;
+                    let gt = if gt.is_empty() { self.potential(&trial, x0, inertia, &force, extra, true).1 } else { gt };
+                    accepted = Some((p, gt));
                     break;
                 }
                 // Near the solution Φ changes by less than its round-off: accept the step when
                 // it does not raise Φ beyond round-off and it lowers the residual.
                 if p.is_finite() && p - phi <= 1e-12 * phi.abs().max(1e-300) {
-                    let (_, gt) = self.potential(&trial, x0, inertia, &force, extra, true);
+                    let gt = if gt.is_empty() { self.potential(&trial, x0, inertia, &force, extra, true).1 } else { gt };
                     if self.free_norm(&gt) < res {
-                        accepted = true;
+                        accepted = Some((p, gt));
                         break;
                     }
                 }
                 alpha *= 0.5;
             }
-            if !accepted {
+            let Some((p2, g2)) = accepted else {
                 report.status = SolveStatus::Stalled;
                 break;
-            }
+            };
             y.copy_from_slice(&trial);
-            let (p2, g2) = self.potential(y, x0, inertia, &force, extra, true);
             phi = p2;
             g = g2;
             res = self.free_norm(&g);

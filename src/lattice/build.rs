@@ -417,19 +417,25 @@ pub(crate) fn build(mesh: &TriMesh, s: &LatticeSettings) -> Result<Lattice, Latt
     let mut vertex_points = Vec::with_capacity(pos.len());
     for (v, p) in pos.iter().enumerate() {
         let t = vert_tri[v];
-        if t == usize::MAX {
-            return Err(LatticeError::Mesh(format!(
-                "vertex {v} belongs to no triangle; remove unreferenced vertices before building a lattice"
-            )));
-        }
         let c = clamp_cell(p);
         let ci = cidx(c);
-        let Some(l) = cell_tris[ci].iter().position(|&u| u == t) else {
-            return Err(LatticeError::Mesh(format!(
-                "vertex {v} at {p:?} could not be placed in a lattice cell (degenerate triangle {t}?)"
-            )));
+        let e = if t == usize::MAX {
+            // A vertex on no triangle: any element of its cell (the first) carries it.
+            let first = cell_first[ci];
+            if first == usize::MAX || renumber[first] == usize::MAX {
+                return Err(LatticeError::Mesh(format!(
+                    "vertex {v} belongs to no triangle and lies in no lattice element; remove unreferenced vertices"
+                )));
+            }
+            renumber[first]
+        } else {
+            let Some(l) = cell_tris[ci].iter().position(|&u| u == t) else {
+                return Err(LatticeError::Mesh(format!(
+                    "vertex {v} at {p:?} could not be placed in a lattice cell (degenerate triangle {t}?)"
+                )));
+            };
+            renumber[elem_of(ci, l)]
         };
-        let e = renumber[elem_of(ci, l)];
         let r = (p - (lo + V::new(c[0] as f64, c[1] as f64, c[2] as f64) * h)) / h;
         vertex_points.push(MaterialPoint { element: e, xi: [0, 1, 2].map(|d| r[d].clamp(0.0, 1.0)) });
     }
