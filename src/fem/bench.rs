@@ -123,6 +123,8 @@ fn bench_step(elements: usize, solver: LinearSolver, max_newton: usize) -> anyho
         "step_s": step_s,
         "step_per_iteration_s": step_s / iters,
         "cg_iterations": rep.cg_iterations,
+        "energy_s": rep.energy_s,
+        "evaluations": rep.evaluations,
         "relative_residual": rep.relative_residual,
     }))
 }

@@ -29,7 +29,7 @@ fn polar_newton(f: &M3) -> Option<M3> {
     let mut x = *f;
     for _ in 0..30 {
         let inv = x.try_inverse()?;
-        let g = x.determinant().abs().powf(-1.0 / 3.0);
+        let g = 1.0 / x.determinant().abs().cbrt();
         let next = (x * g + inv.transpose() / g) * 0.5;
         let d = (next - x).norm();
         x = next;

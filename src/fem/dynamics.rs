@@ -139,6 +139,10 @@ pub struct SolveReport {
     pub solve_s: f64,
     /// Conjugate-gradient iterations summed over the Newton iterations (0 for Cholesky).
     pub cg_iterations: usize,
+    /// Time spent evaluating the potential and its gradient (s).
+    pub energy_s: f64,
+    /// Potential evaluations (with or without gradient).
+    pub evaluations: usize,
 }
 
 /// Compressed lower-triangle pattern over free DOFs with 3 × 3 node blocks.
@@ -347,6 +351,7 @@ pub struct BackwardEuler {
     lumped: Vec<f64>,
     system: Option<System>,
     solver: SpdSolver,
+    eval_clock: std::cell::Cell<(f64, usize)>,
 }
 
 impl BackwardEuler {
@@ -383,6 +388,7 @@ impl BackwardEuler {
             lumped,
             system: None,
             solver: SpdSolver::new(),
+            eval_clock: std::cell::Cell::new((0.0, 0)),
         })
     }
 
@@ -484,8 +490,24 @@ impl BackwardEuler {
         Ok(report)
     }
 
-    /// Φ and ∇Φ at y.
+    /// Φ and ∇Φ at y (timed into `self.eval_clock`).
     fn potential(
+        &self,
+        y: &[f64],
+        x0: &[f64],
+        inertia: Option<(&[f64], f64)>,
+        force: &[f64],
+        extra: Option<&ExtraTerms>,
+        want_grad: bool,
+    ) -> (f64, Vec<f64>) {
+        let t = Instant::now();
+        let out = self.potential_raw(y, x0, inertia, force, extra, want_grad);
+        let (s, n) = self.eval_clock.get();
+        self.eval_clock.set((s + t.elapsed().as_secs_f64(), n + 1));
+        out
+    }
+
+    fn potential_raw(
         &self,
         y: &[f64],
         x0: &[f64],
@@ -550,6 +572,7 @@ impl BackwardEuler {
         f_ext: &[f64],
         extra: Option<&ExtraTerms>,
     ) -> Result<SolveReport, FemError> {
+        self.eval_clock.set((0.0, 0));
         let gvec = Vector3::from(self.settings.gravity);
         let fg = self.interior.gravity_force(gvec);
         let force: Vec<f64> = fg.iter().zip(f_ext).map(|(a, b)| a + b).collect();
@@ -576,6 +599,8 @@ impl BackwardEuler {
             assembly_s: 0.0,
             solve_s: 0.0,
             cg_iterations: 0,
+            energy_s: 0.0,
+            evaluations: 0,
         };
         let cell = self.interior.cell_size;
         for _ in 0..self.settings.max_newton {
@@ -682,6 +707,9 @@ impl BackwardEuler {
         if report.status == SolveStatus::IterationLimit && res <= self.settings.tolerance * reference {
             report.status = SolveStatus::Converged;
         }
+        let (es, en) = self.eval_clock.get();
+        report.energy_s = es;
+        report.evaluations = en;
         Ok(report)
     }
 }
