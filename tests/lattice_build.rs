@@ -1,5 +1,6 @@
 //! Lattice construction: element counts, node sharing, superimposed elements, embedding,
 //! bone nodes, settings validation.
+#![allow(clippy::needless_range_loop)]
 
 mod lattice_support;
 
@@ -11,7 +12,11 @@ use std::collections::HashSet;
 type V = Vector3<f64>;
 
 fn settings(h: f64, order: ElementOrder) -> LatticeSettings {
-    LatticeSettings { cell_size: Some(h), order, ..Default::default() }
+    LatticeSettings {
+        cell_size: Some(h),
+        order,
+        ..Default::default()
+    }
 }
 
 /// A closed box of 4 × 3 × 2 cells gets exactly one element per cell, and all of them share
@@ -19,7 +24,10 @@ fn settings(h: f64, order: ElementOrder) -> LatticeSettings {
 #[test]
 fn one_body_fills_its_cells_and_shares_all_nodes() {
     let mesh = box_mesh(V::zeros(), V::new(0.4, 0.3, 0.2), 8);
-    for (order, nodes) in [(ElementOrder::Quadratic, 6 * 5 * 4), (ElementOrder::Trilinear, 5 * 4 * 3)] {
+    for (order, nodes) in [
+        (ElementOrder::Quadratic, 6 * 5 * 4),
+        (ElementOrder::Trilinear, 5 * 4 * 3),
+    ] {
         let lat = Lattice::build(&mesh, &settings(0.1, order)).unwrap();
         assert!(lat.closed);
         assert_eq!(lat.dims, [4, 3, 2]);
@@ -38,7 +46,10 @@ fn one_body_fills_its_cells_and_shares_all_nodes() {
         }
         assert!(rows.iter().all(|s| (s - 1.0).abs() < 1e-13));
         let b = lat.embedding().unwrap();
-        assert_eq!((b.nrows(), b.ncols()), (mesh.positions.len(), lat.node_count()));
+        assert_eq!(
+            (b.nrows(), b.ncols()),
+            (mesh.positions.len(), lat.node_count())
+        );
     }
 }
 
@@ -49,7 +60,11 @@ fn interior_cells_become_volume_elements() {
     let mesh = box_mesh(V::zeros(), V::repeat(0.4), 4);
     let lat = Lattice::build(&mesh, &settings(0.1, ElementOrder::Quadratic)).unwrap();
     assert_eq!(lat.elements.len(), 64);
-    let vol = lat.elements.iter().filter(|e| e.kind == ElementKind::Volume).count();
+    let vol = lat
+        .elements
+        .iter()
+        .filter(|e| e.kind == ElementKind::Volume)
+        .count();
     assert_eq!(vol, 8);
     assert_eq!(lat.node_count(), 6 * 6 * 6);
 }
@@ -64,14 +79,27 @@ fn separate_bodies_in_shared_cells_get_superimposed_elements() {
     let lat = Lattice::build(&mesh, &settings(0.1, ElementOrder::Quadratic)).unwrap();
     // Cells along x: [0,.1] [.1,.2] [.2,.3] [.3,.4] [.4,.5]; the gap lies in the third.
     let shared: Vec<_> = lat.elements.iter().filter(|e| e.cell[0] == 2).collect();
-    assert_eq!(shared.len(), 2 * 2 * 2, "two superimposed elements per shared cell");
+    assert_eq!(
+        shared.len(),
+        2 * 2 * 2,
+        "two superimposed elements per shared cell"
+    );
     let nodes_of = |vs: std::ops::Range<usize>| -> HashSet<usize> {
-        vs.flat_map(|v| lat.weights(&lat.vertex_points[v]).into_iter().map(|(n, _)| n)).collect()
+        vs.flat_map(|v| {
+            lat.weights(&lat.vertex_points[v])
+                .into_iter()
+                .map(|(n, _)| n)
+        })
+        .collect()
     };
     let na = a.positions.len();
     let sa = nodes_of(0..na);
     let sb = nodes_of(na..mesh.positions.len());
-    assert!(sa.is_disjoint(&sb), "bodies share {} nodes", sa.intersection(&sb).count());
+    assert!(
+        sa.is_disjoint(&sb),
+        "bodies share {} nodes",
+        sa.intersection(&sb).count()
+    );
     // Every element belongs to exactly one body: its node set meets only one side.
     let x = lat.embed(&lat.rest_flat());
     for (p, e) in mesh.positions.iter().zip(&x) {
@@ -98,7 +126,11 @@ fn face_neighbours_share_18_quadratic_or_4_trilinear_nodes() {
 #[test]
 fn slit_sheet_lips_get_separate_elements_and_bone_behind() {
     let (mesh, upper, lower) = slit_sheet(0.05, 0.005, 0.025);
-    let s = LatticeSettings { cell_size: Some(0.0125), depth: Some(0.02), ..Default::default() };
+    let s = LatticeSettings {
+        cell_size: Some(0.0125),
+        depth: Some(0.02),
+        ..Default::default()
+    };
     let lat = Lattice::build(&mesh, &s).unwrap();
     assert!(!lat.closed);
     // Same cell, different elements, on every slit vertex pair away from the corners.
@@ -110,7 +142,11 @@ fn slit_sheet_lips_get_separate_elements_and_bone_behind() {
             distinct += 1;
         }
     }
-    assert!(distinct >= upper.len() - 2, "{distinct} of {} slit pairs separated", upper.len());
+    assert!(
+        distinct >= upper.len() - 2,
+        "{distinct} of {} slit pairs separated",
+        upper.len()
+    );
     // Bone: every pinned node is behind the sheet deeper than the depth; no node in front or
     // within the flesh is pinned.
     assert!(lat.pinned_count() > 0);
@@ -123,7 +159,11 @@ fn slit_sheet_lips_get_separate_elements_and_bone_behind() {
     // No element lies entirely in front of the sheet or deeper than depth + a cell.
     for e in 0..lat.elements.len() {
         let o = lat.cell_origin(e);
-        assert!(o.z < 0.0 + 1e-12 && o.z + lat.cell_size > -0.02 - 1e-12, "cell at z {}", o.z);
+        assert!(
+            o.z < 0.0 + 1e-12 && o.z + lat.cell_size > -0.02 - 1e-12,
+            "cell at z {}",
+            o.z
+        );
     }
     let x = lat.embed(&lat.rest_flat());
     for (p, e) in mesh.positions.iter().zip(&x) {
@@ -135,10 +175,35 @@ fn slit_sheet_lips_get_separate_elements_and_bone_behind() {
 fn settings_errors_name_the_field() {
     let mesh = box_mesh(V::zeros(), V::repeat(0.1), 1);
     let cases = [
-        (LatticeSettings { cell_size: Some(-1.0), ..Default::default() }, "cell_size"),
-        (LatticeSettings { target_cells: Some(0), ..Default::default() }, "target_cells"),
-        (LatticeSettings { depth: Some(f64::NAN), ..Default::default() }, "depth"),
-        (LatticeSettings { cell_size: Some(0.1), target_cells: Some(8), ..Default::default() }, "target_cells"),
+        (
+            LatticeSettings {
+                cell_size: Some(-1.0),
+                ..Default::default()
+            },
+            "cell_size",
+        ),
+        (
+            LatticeSettings {
+                target_cells: Some(0),
+                ..Default::default()
+            },
+            "target_cells",
+        ),
+        (
+            LatticeSettings {
+                depth: Some(f64::NAN),
+                ..Default::default()
+            },
+            "depth",
+        ),
+        (
+            LatticeSettings {
+                cell_size: Some(0.1),
+                target_cells: Some(8),
+                ..Default::default()
+            },
+            "target_cells",
+        ),
     ];
     for (s, field) in cases {
         match Lattice::build(&mesh, &s) {
@@ -146,8 +211,21 @@ fn settings_errors_name_the_field() {
             other => panic!("expected a settings error for {field}, got {other:?}"),
         }
     }
-    let tiny = LatticeSettings { cell_size: Some(1e-6), ..Default::default() };
-    assert!(matches!(Lattice::build(&mesh, &tiny), Err(LatticeError::TooManyCells { .. })));
-    let lat = Lattice::build(&mesh, &LatticeSettings { target_cells: Some(27), ..Default::default() }).unwrap();
+    let tiny = LatticeSettings {
+        cell_size: Some(1e-6),
+        ..Default::default()
+    };
+    assert!(matches!(
+        Lattice::build(&mesh, &tiny),
+        Err(LatticeError::TooManyCells { .. })
+    ));
+    let lat = Lattice::build(
+        &mesh,
+        &LatticeSettings {
+            target_cells: Some(27),
+            ..Default::default()
+        },
+    )
+    .unwrap();
     assert_eq!(lat.dims, [3, 3, 3]);
 }

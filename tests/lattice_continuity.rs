@@ -1,6 +1,7 @@
 //! Continuity of the lattice map across a shared cell face, measured numerically: quadratic
 //! B-spline elements are C¹ (one-sided slopes agree as the step shrinks), trilinear elements
 //! are only C⁰ (a kink: the slopes differ by O(1)).
+#![allow(clippy::needless_range_loop)]
 
 mod lattice_support;
 
@@ -20,15 +21,43 @@ fn noise(i: usize) -> f64 {
 /// a random control-point perturbation of 20 % of a cell, at one-sided step `d` (local units).
 fn jumps(order: ElementOrder, d: f64) -> (f64, f64) {
     let mesh = box_mesh(V::zeros(), V::new(0.2, 0.1, 0.1), 2);
-    let lat = Lattice::build(&mesh, &LatticeSettings { cell_size: Some(0.1), order, ..Default::default() }).unwrap();
+    let lat = Lattice::build(
+        &mesh,
+        &LatticeSettings {
+            cell_size: Some(0.1),
+            order,
+            ..Default::default()
+        },
+    )
+    .unwrap();
     assert_eq!(lat.elements.len(), 2);
-    let (left, right) = if lat.elements[0].cell[0] == 0 { (0, 1) } else { (1, 0) };
-    let q: Vec<f64> = lat.rest_flat().iter().enumerate().map(|(i, x)| x + 0.02 * noise(i)).collect();
+    let (left, right) = if lat.elements[0].cell[0] == 0 {
+        (0, 1)
+    } else {
+        (1, 0)
+    };
+    let q: Vec<f64> = lat
+        .rest_flat()
+        .iter()
+        .enumerate()
+        .map(|(i, x)| x + 0.02 * noise(i))
+        .collect();
     let mut value_jump: f64 = 0.0;
     let mut slope_jump: f64 = 0.0;
     for s in 0..25 {
-        let (eta, zeta) = (0.1 + 0.8 * (s % 5) as f64 / 4.0, 0.1 + 0.8 * (s / 5) as f64 / 4.0);
-        let at = |e: usize, xi: f64| lat.position(&q, &MaterialPoint { element: e, xi: [xi, eta, zeta] });
+        let (eta, zeta) = (
+            0.1 + 0.8 * (s % 5) as f64 / 4.0,
+            0.1 + 0.8 * (s / 5) as f64 / 4.0,
+        );
+        let at = |e: usize, xi: f64| {
+            lat.position(
+                &q,
+                &MaterialPoint {
+                    element: e,
+                    xi: [xi, eta, zeta],
+                },
+            )
+        };
         let (l0, r0) = (at(left, 1.0), at(right, 0.0));
         value_jump = value_jump.max((l0 - r0).norm());
         let sl = (l0 - at(left, 1.0 - d)) / d;

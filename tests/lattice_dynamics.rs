@@ -1,5 +1,6 @@
 //! Backward Euler dynamics: free fall, recovery from inversion, superimposed-element
 //! independence, one body moving as one, and the lips of a slit sheet.
+#![allow(clippy::needless_range_loop)]
 
 mod lattice_support;
 
@@ -11,11 +12,18 @@ use nalgebra::Vector3;
 type V = Vector3<f64>;
 
 fn soft() -> Material {
-    Material { young: 1.0e4, poisson: 0.3, density: 1000.0 }
+    Material {
+        young: 1.0e4,
+        poisson: 0.3,
+        density: 1000.0,
+    }
 }
 
 fn no_gravity() -> StepSettings {
-    StepSettings { gravity: [0.0; 3], ..Default::default() }
+    StepSettings {
+        gravity: [0.0; 3],
+        ..Default::default()
+    }
 }
 
 /// Surface force f on vertex v enters the nodes as Bᵀ f.
@@ -34,11 +42,27 @@ fn vertex_force(lat: &Lattice, v: usize, f: V) -> Vec<f64> {
 #[test]
 fn free_fall_is_exact_backward_euler() {
     let mesh = box_mesh(V::zeros(), V::repeat(0.2), 4);
-    let lat = Lattice::build(&mesh, &LatticeSettings { cell_size: Some(0.1), ..Default::default() }).unwrap();
+    let lat = Lattice::build(
+        &mesh,
+        &LatticeSettings {
+            cell_size: Some(0.1),
+            ..Default::default()
+        },
+    )
+    .unwrap();
     for lumped in [false, true] {
         let int = Interior::new(&lat, &soft()).unwrap();
-        let settings = StepSettings { lumped_mass: lumped, ..Default::default() };
-        let mut be = BackwardEuler::new(int, lat.rest_flat(), vec![false; lat.node_count()], settings).unwrap();
+        let settings = StepSettings {
+            lumped_mass: lumped,
+            ..Default::default()
+        };
+        let mut be = BackwardEuler::new(
+            int,
+            lat.rest_flat(),
+            vec![false; lat.node_count()],
+            settings,
+        )
+        .unwrap();
         let zero = vec![0.0; be.q.len()];
         let (g, h) = (9.81, settings.dt);
         for k in 1..=25 {
@@ -49,7 +73,10 @@ fn free_fall_is_exact_backward_euler() {
             for (i, (y, y0)) in be.q.iter().zip(lat.rest_flat()).enumerate() {
                 let d = y - y0;
                 if i % 3 == 1 {
-                    assert!((d - discrete).abs() < 1e-10 * discrete.abs(), "k {k}: {d} vs {discrete}");
+                    assert!(
+                        (d - discrete).abs() < 1e-10 * discrete.abs(),
+                        "k {k}: {d} vs {discrete}"
+                    );
                     // Against g t²/2 the error is g h t / 2 (first order in h).
                     assert!((d + 0.5 * g * t * t).abs() <= 0.5 * g * h * t * (1.0 + 1e-9));
                 } else {
@@ -65,7 +92,14 @@ fn free_fall_is_exact_backward_euler() {
 #[test]
 fn inverted_block_recovers() {
     let mesh = box_mesh(V::zeros(), V::repeat(0.2), 4);
-    let lat = Lattice::build(&mesh, &LatticeSettings { cell_size: Some(0.1), ..Default::default() }).unwrap();
+    let lat = Lattice::build(
+        &mesh,
+        &LatticeSettings {
+            cell_size: Some(0.1),
+            ..Default::default()
+        },
+    )
+    .unwrap();
     let int = Interior::new(&lat, &soft()).unwrap();
     let q0: Vec<f64> = lat
         .rest
@@ -107,13 +141,30 @@ fn superimposed_bodies_are_independent_and_one_body_moves_as_one() {
     let a = box_mesh(V::new(0.0, 0.0, 0.0), V::new(0.25, 0.2, 0.2), 5);
     let b = box_mesh(V::new(0.26, 0.0, 0.0), V::new(0.5, 0.2, 0.2), 5);
     let mesh = merge(&a, &b);
-    let lat = Lattice::build(&mesh, &LatticeSettings { cell_size: Some(0.1), ..Default::default() }).unwrap();
+    let lat = Lattice::build(
+        &mesh,
+        &LatticeSettings {
+            cell_size: Some(0.1),
+            ..Default::default()
+        },
+    )
+    .unwrap();
     let int = Interior::new(&lat, &soft()).unwrap();
     let masses = int.node_masses();
-    let mut be = BackwardEuler::new(int, lat.rest_flat(), vec![false; lat.node_count()], no_gravity()).unwrap();
+    let mut be = BackwardEuler::new(
+        int,
+        lat.rest_flat(),
+        vec![false; lat.node_count()],
+        no_gravity(),
+    )
+    .unwrap();
     // Push the corner vertex of body b nearest to body a, along −x (toward a).
     let vb = (a.positions.len()..mesh.positions.len())
-        .min_by(|&i, &j| mesh.positions[i].norm().total_cmp(&mesh.positions[j].norm()))
+        .min_by(|&i, &j| {
+            mesh.positions[i]
+                .norm()
+                .total_cmp(&mesh.positions[j].norm())
+        })
         .unwrap();
     let force = V::new(-0.5, 0.2, 0.0);
     let f = vertex_force(&lat, vb, force);
@@ -126,7 +177,9 @@ fn superimposed_bodies_are_independent_and_one_body_moves_as_one() {
     let moved = lat.embed(&be.q);
     let disp = |v: usize| (moved[v] - mesh.positions[v]).norm();
     let max_a = (0..a.positions.len()).map(disp).fold(0.0, f64::max);
-    let min_b = (a.positions.len()..mesh.positions.len()).map(disp).fold(f64::INFINITY, f64::min);
+    let min_b = (a.positions.len()..mesh.positions.len())
+        .map(disp)
+        .fold(f64::INFINITY, f64::min);
     println!("body a max displacement {max_a:e} m, body b min displacement {min_b:e} m");
     // Round-off only (the bodies share no node; F at rest is I to ~1e-16).
     assert!(max_a < 1e-12 * min_b, "the untouched body moved {max_a}");
@@ -137,7 +190,10 @@ fn superimposed_bodies_are_independent_and_one_body_moves_as_one() {
         p += V::new(be.v[3 * n], be.v[3 * n + 1], be.v[3 * n + 2]) * *m;
     }
     let want = force * (steps as f64 * be.settings.dt);
-    assert!((p - want).norm() < 1e-8 * want.norm(), "momentum {p} vs {want}");
+    assert!(
+        (p - want).norm() < 1e-8 * want.norm(),
+        "momentum {p} vs {want}"
+    );
     assert!(be.q.iter().zip(&rest).all(|(x, r)| (x - r).is_finite()));
 }
 
@@ -145,12 +201,22 @@ fn superimposed_bodies_are_independent_and_one_body_moves_as_one() {
 /// (pushed vertex displacement, displacement of the vertex 5 mm above it), m.
 fn push_lower_lip(half_slit: f64) -> (f64, f64) {
     let (mesh, _upper, _lower) = slit_sheet(0.07, 0.005, half_slit);
-    let s = LatticeSettings { cell_size: Some(0.0125), depth: Some(0.02), ..Default::default() };
+    let s = LatticeSettings {
+        cell_size: Some(0.0125),
+        depth: Some(0.02),
+        ..Default::default()
+    };
     let lat = Lattice::build(&mesh, &s).unwrap();
     let int = Interior::new(&lat, &soft()).unwrap();
-    let mut be = BackwardEuler::new(int, lat.rest_flat(), lat.pinned.clone(), no_gravity()).unwrap();
+    let mut be =
+        BackwardEuler::new(int, lat.rest_flat(), lat.pinned.clone(), no_gravity()).unwrap();
     // The pushed vertex: on y = 0 at x = 0, on the lower side (the last duplicate when slit).
-    let at = |p: V| (0..mesh.positions.len()).filter(|&v| (mesh.positions[v] - p).norm() < 1e-9).max().unwrap();
+    let at = |p: V| {
+        (0..mesh.positions.len())
+            .filter(|&v| (mesh.positions[v] - p).norm() < 1e-9)
+            .max()
+            .unwrap()
+    };
     let pushed = at(V::zeros());
     let above = at(V::new(0.0, 0.005, 0.0));
     let f = vertex_force(&lat, pushed, V::new(0.0, 0.0, -0.05));
@@ -183,7 +249,14 @@ fn pushing_the_lower_lip_leaves_the_upper_lip_still() {
 #[test]
 fn extra_stiffness_hook_matches_sherman_morrison() {
     let mesh = box_mesh(V::zeros(), V::new(0.2, 0.2, 0.1), 4);
-    let lat = Lattice::build(&mesh, &LatticeSettings { cell_size: Some(0.05), ..Default::default() }).unwrap();
+    let lat = Lattice::build(
+        &mesh,
+        &LatticeSettings {
+            cell_size: Some(0.05),
+            ..Default::default()
+        },
+    )
+    .unwrap();
     let int = Interior::new(&lat, &soft()).unwrap();
     // Bottom two node layers pinned (a block glued to the ground), push the top centre down.
     let pinned: Vec<bool> = lat.rest.iter().map(|p| p.z < 0.05).collect();
@@ -195,22 +268,38 @@ fn extra_stiffness_hook_matches_sherman_morrison() {
         .unwrap();
     let fz = -1e-3;
     let f = vertex_force(&lat, v, V::new(0.0, 0.0, fz));
-    let mut be = BackwardEuler::new(int.clone(), lat.rest_flat(), pinned.clone(), no_gravity()).unwrap();
+    let mut be =
+        BackwardEuler::new(int.clone(), lat.rest_flat(), pinned.clone(), no_gravity()).unwrap();
     let rep = be.quasi_static(&f, None).unwrap();
     assert_eq!(rep.status, SolveStatus::Converged);
     let u0 = lat.embed(&be.q)[v].z - mesh.positions[v].z;
     let c = u0 / fz;
     let k = 2.0 / c; // a spring twice as stiff as the block there: u drops to a third
     let w = lat.weights(&lat.vertex_points[v]);
-    let trip: Vec<(usize, usize, f64)> =
-        w.iter().flat_map(|&(a, wa)| w.iter().map(move |&(b, wb)| (3 * a + 2, 3 * b + 2, k * wa * wb))).collect();
+    let trip: Vec<(usize, usize, f64)> = w
+        .iter()
+        .flat_map(|&(a, wa)| {
+            w.iter()
+                .map(move |&(b, wb)| (3 * a + 2, 3 * b + 2, k * wa * wb))
+        })
+        .collect();
     let zero = vec![0.0; be.q.len()];
     let mut be2 = BackwardEuler::new(int, lat.rest_flat(), pinned, no_gravity()).unwrap();
-    let rep = be2.quasi_static(&f, Some(&ExtraTerms { stiffness: &trip, force: &zero })).unwrap();
+    let rep = be2
+        .quasi_static(
+            &f,
+            Some(&ExtraTerms {
+                stiffness: &trip,
+                force: &zero,
+            }),
+        )
+        .unwrap();
     assert_eq!(rep.status, SolveStatus::Converged);
     let uk = lat.embed(&be2.q)[v].z - mesh.positions[v].z;
     let want = c * fz / (1.0 + k * c);
-    println!("u0 {u0:.4e} m, with spring {uk:.4e} m, Sherman–Morrison {want:.4e} m, rel. diff {:.2e}", (uk - want).abs() / want.abs());
+    println!(
+        "u0 {u0:.4e} m, with spring {uk:.4e} m, Sherman–Morrison {want:.4e} m, rel. diff {:.2e}",
+        (uk - want).abs() / want.abs()
+    );
     assert!((uk - want).abs() < 1e-3 * want.abs());
 }
-

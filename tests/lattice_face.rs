@@ -1,6 +1,7 @@
 //! The lattice over the procedural face rig (`rig::face::generate()`): the two lips touch
 //! along the mouth slit but get superimposed elements, and pushing the lower lip leaves the
 //! upper lip (nearly) still.
+#![allow(clippy::needless_range_loop)]
 
 use furrow::fem::{BackwardEuler, Interior, LinearSolver, Material, StepSettings};
 use furrow::lattice::{Lattice, LatticeSettings};
@@ -10,10 +11,19 @@ use nalgebra::Vector3;
 fn face_lips_get_superimposed_elements_and_move_independently() {
     let rig = furrow::rig::face::generate();
     let mesh = &rig.mesh;
-    let region = |n: &str| rig.regions.iter().find(|(k, _)| k == n).map(|(_, v)| v.clone()).unwrap();
+    let region = |n: &str| {
+        rig.regions
+            .iter()
+            .find(|(k, _)| k == n)
+            .map(|(_, v)| v.clone())
+            .unwrap()
+    };
     let (up, lo) = (region("mouth_slit_upper"), region("mouth_slit_lower"));
     assert_eq!(up.len(), lo.len());
-    let s = LatticeSettings { cell_size: Some(0.01), ..Default::default() };
+    let s = LatticeSettings {
+        cell_size: Some(0.01),
+        ..Default::default()
+    };
     let lat = Lattice::build(mesh, &s).unwrap();
     assert!(!lat.closed);
     let mut separate = 0;
@@ -32,10 +42,18 @@ fn face_lips_get_superimposed_elements_and_move_independently() {
         lat.depth,
         up.len()
     );
-    assert!(separate * 10 >= up.len() * 8, "most slit pairs must be in separate elements");
+    assert!(
+        separate * 10 >= up.len() * 8,
+        "most slit pairs must be in separate elements"
+    );
     // B reproduces the neutral face.
     let x = lat.embed(&lat.rest_flat());
-    let err = mesh.positions.iter().zip(&x).map(|(p, e)| (p - e).norm()).fold(0.0, f64::max);
+    let err = mesh
+        .positions
+        .iter()
+        .zip(&x)
+        .map(|(p, e)| (p - e).norm())
+        .fold(0.0, f64::max);
     assert!(err < 1e-12, "{err}");
 
     // Push the middle of the lower lip into the face and watch the upper lip 4 mm above the
@@ -46,7 +64,9 @@ fn face_lips_get_superimposed_elements_and_move_independently() {
         .filter(|&v| up.contains(&v) || mesh.positions[v].y > p_up.y + 1e-4)
         .min_by(|&a, &b| {
             let t = p_up + Vector3::new(0.0, 0.004, 0.0);
-            (mesh.positions[a] - t).norm().total_cmp(&(mesh.positions[b] - t).norm())
+            (mesh.positions[a] - t)
+                .norm()
+                .total_cmp(&(mesh.positions[b] - t).norm())
         })
         .unwrap();
     let (dl, da) = push(mesh, &lat, lo[mid], above);
@@ -66,7 +86,10 @@ fn face_lips_get_superimposed_elements_and_move_independently() {
         da0 / dl0
     );
     assert!(dl > 1e-4 && dl0 > 1e-4);
-    assert!(da / dl < 0.1 && da0 / dl0 > 0.3, "the slit must decouple the lips");
+    assert!(
+        da / dl < 0.1 && da0 / dl0 > 0.3,
+        "the slit must decouple the lips"
+    );
     assert!(da / dl < 0.2 * (da0 / dl0));
 }
 
@@ -74,11 +97,18 @@ fn face_lips_get_superimposed_elements_and_move_independently() {
 /// Newton iterations each, enough for a displacement ratio) with a 0.05 N
 /// push into the face (−z) on `pushed`, bone pinned, no gravity.
 fn push(mesh: &furrow::mesh::TriMesh, lat: &Lattice, pushed: usize, watched: usize) -> (f64, f64) {
-    let mat = Material { young: 1.0e4, poisson: 0.3, density: 1000.0 };
+    let mat = Material {
+        young: 1.0e4,
+        poisson: 0.3,
+        density: 1000.0,
+    };
     let int = Interior::new(lat, &mat).unwrap();
     let settings = StepSettings {
         gravity: [0.0; 3],
-        linear_solver: LinearSolver::ConjugateGradient { rel_tol: 1e-6, max_iter: 2000 },
+        linear_solver: LinearSolver::ConjugateGradient {
+            rel_tol: 1e-6,
+            max_iter: 2000,
+        },
         max_newton: 3,
         ..Default::default()
     };

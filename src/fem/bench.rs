@@ -56,8 +56,22 @@ fn cube_mesh(a: f64, m: usize) -> TriMesh {
 /// settings on the procedural face rig (`rig::face::generate()`, ~10k vertices).
 pub fn bench_lattice(elements: usize) -> anyhow::Result<serde_json::Value> {
     let chol = bench_step(elements, LinearSolver::Cholesky, 20)?;
-    let cg = bench_step(elements, LinearSolver::ConjugateGradient { rel_tol: 1e-4, max_iter: 500 }, 20)?;
-    let one = bench_step(elements, LinearSolver::ConjugateGradient { rel_tol: 1e-4, max_iter: 500 }, 1)?;
+    let cg = bench_step(
+        elements,
+        LinearSolver::ConjugateGradient {
+            rel_tol: 1e-4,
+            max_iter: 500,
+        },
+        20,
+    )?;
+    let one = bench_step(
+        elements,
+        LinearSolver::ConjugateGradient {
+            rel_tol: 1e-4,
+            max_iter: 500,
+        },
+        1,
+    )?;
     let face = crate::rig::face::generate().mesh;
     let t = Instant::now();
     let face_lat = Lattice::build(&face, &LatticeSettings::default())?;
@@ -65,7 +79,12 @@ pub fn bench_lattice(elements: usize) -> anyhow::Result<serde_json::Value> {
     let mut out = serde_json::Map::new();
     for (prefix, v) in [("", &chol), ("cg_", &cg), ("cg_single_newton_", &one)] {
         for (k, x) in v.as_object().expect("object") {
-            if prefix.is_empty() || !matches!(k.as_str(), "elements" | "nodes" | "free_dofs" | "lattice_build_s") {
+            if prefix.is_empty()
+                || !matches!(
+                    k.as_str(),
+                    "elements" | "nodes" | "free_dofs" | "lattice_build_s"
+                )
+            {
                 out.insert(format!("{prefix}{k}"), x.clone());
             }
         }
@@ -80,7 +99,11 @@ pub fn bench_lattice(elements: usize) -> anyhow::Result<serde_json::Value> {
 
 /// One measured backward Euler step (after a warm-up step) with the given linear solver and
 /// Newton iteration cap.
-fn bench_step(elements: usize, solver: LinearSolver, max_newton: usize) -> anyhow::Result<serde_json::Value> {
+fn bench_step(
+    elements: usize,
+    solver: LinearSolver,
+    max_newton: usize,
+) -> anyhow::Result<serde_json::Value> {
     anyhow::ensure!(elements >= 1, "need at least one element");
     let n = ((elements as f64).cbrt().round() as usize).max(1);
     let h = 0.02;
@@ -88,7 +111,11 @@ fn bench_step(elements: usize, solver: LinearSolver, max_newton: usize) -> anyho
     let t = Instant::now();
     let lat = Lattice::build(
         &mesh,
-        &LatticeSettings { cell_size: Some(h), order: ElementOrder::Quadratic, ..Default::default() },
+        &LatticeSettings {
+            cell_size: Some(h),
+            order: ElementOrder::Quadratic,
+            ..Default::default()
+        },
     )?;
     let build_s = t.elapsed().as_secs_f64();
     let int = Interior::new(&lat, &Material::default())?;

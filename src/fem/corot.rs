@@ -24,16 +24,27 @@ pub fn rotation(f: &M3) -> M3 {
     rotation_svd(f)
 }
 
-/// Scaled Newton iteration for the orthogonal polar factor (det > 0 assumed).
+/// Scaled Newton iteration for the orthogonal polar factor (det > 0 assumed):
+/// X ← ½ (γ X + X⁻ᵀ / γ), γ = |det X|^(−1/3), with X⁻ᵀ from the cofactors. Convergence is
+/// quadratic, so stopping when a step is below 1e-12 leaves an error at round-off level.
 fn polar_newton(f: &M3) -> Option<M3> {
     let mut x = *f;
     for _ in 0..30 {
-        let inv = x.try_inverse()?;
-        let g = 1.0 / x.determinant().abs().cbrt();
-        let next = (x * g + inv.transpose() / g) * 0.5;
+        let (a, b, c) = (
+            x.column(0).into_owned(),
+            x.column(1).into_owned(),
+            x.column(2).into_owned(),
+        );
+        let cof = M3::from_columns(&[b.cross(&c), c.cross(&a), a.cross(&b)]);
+        let det = a.dot(&cof.column(0));
+        if !(det > 0.0 && det.is_finite()) {
+            return None;
+        }
+        let g = 1.0 / det.cbrt();
+        let next = (x * g + cof * (1.0 / (det * g))) * 0.5;
         let d = (next - x).norm();
         x = next;
-        if d < 1e-14 {
+        if d < 1e-12 {
             return Some(x);
         }
     }

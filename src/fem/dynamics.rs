@@ -80,20 +80,32 @@ impl StepSettings {
     pub fn validate(&self) -> Result<(), FemError> {
         let bad = |field: &'static str, msg: String| Err(FemError::Settings { field, msg });
         if !(self.dt.is_finite() && self.dt > 0.0) {
-            return bad("dt", format!("time step must be positive (s), got {}", self.dt));
+            return bad(
+                "dt",
+                format!("time step must be positive (s), got {}", self.dt),
+            );
         }
         if self.max_newton == 0 {
-            return bad("max_newton", "at least one Newton iteration is needed".into());
+            return bad(
+                "max_newton",
+                "at least one Newton iteration is needed".into(),
+            );
         }
         if !(self.tolerance.is_finite() && self.tolerance > 0.0) {
-            return bad("tolerance", format!("must be positive, got {}", self.tolerance));
+            return bad(
+                "tolerance",
+                format!("must be positive, got {}", self.tolerance),
+            );
         }
         if !self.gravity.iter().all(|g| g.is_finite()) {
             return bad("gravity", "must be finite (m/s²)".into());
         }
         if let LinearSolver::ConjugateGradient { rel_tol, max_iter } = self.linear_solver {
             if !(rel_tol.is_finite() && rel_tol > 0.0 && rel_tol < 1.0) || max_iter == 0 {
-                return bad("linear_solver", "CG needs 0 < rel_tol < 1 and max_iter ≥ 1".into());
+                return bad(
+                    "linear_solver",
+                    "CG needs 0 < rel_tol < 1 and max_iter ≥ 1".into(),
+                );
             }
         }
         Ok(())
@@ -162,7 +174,11 @@ struct System {
 const NONE: usize = usize::MAX;
 
 impl System {
-    fn new(interior: &Interior, pinned: &[bool], extra: &[(usize, usize)]) -> Result<Self, FemError> {
+    fn new(
+        interior: &Interior,
+        pinned: &[bool],
+        extra: &[(usize, usize)],
+    ) -> Result<Self, FemError> {
         let mut free = vec![NONE; interior.nodes];
         let mut nfree = 0;
         for (n, f) in free.iter_mut().enumerate() {
@@ -216,7 +232,15 @@ impl System {
         let nnz = rows.len();
         let sym = SymbolicSparseColMat::new_checked(n, n, colptr.clone(), None, rows);
         let mat = SparseColMat::new(sym, vec![0.0; nnz]);
-        Ok(Self { free, nfree, nbrs, colptr, node_elems, extra_sig: extra.to_vec(), mat })
+        Ok(Self {
+            free,
+            nfree,
+            nbrs,
+            colptr,
+            node_elems,
+            extra_sig: extra.to_vec(),
+            mat,
+        })
     }
 
     /// Value index of entry (3·fa + i, 3·fb + j), fa ≥ fb, (i ≥ j when fa = fb).
@@ -225,7 +249,9 @@ impl System {
         if fa == fb {
             base + i - j
         } else {
-            let r = self.nbrs[fb][1..].binary_search(&fa).expect("pair in pattern");
+            let r = self.nbrs[fb][1..]
+                .binary_search(&fa)
+                .expect("pair in pattern");
             base + (3 - j) + 3 * r + i
         }
     }
@@ -325,7 +351,11 @@ impl System {
 
 fn extra_signature(extra: Option<&ExtraTerms>) -> Vec<(usize, usize)> {
     let mut s: Vec<(usize, usize)> = match extra {
-        Some(x) => x.stiffness.iter().map(|&(r, c, _)| ((r / 3).max(c / 3), (r / 3).min(c / 3))).collect(),
+        Some(x) => x
+            .stiffness
+            .iter()
+            .map(|&(r, c, _)| ((r / 3).max(c / 3), (r / 3).min(c / 3)))
+            .collect(),
         None => Vec::new(),
     };
     s.sort_unstable();
@@ -373,7 +403,9 @@ impl BackwardEuler {
             )));
         }
         if q0.iter().any(|x| !x.is_finite()) {
-            return Err(FemError::Input("initial positions contain a non-finite value".into()));
+            return Err(FemError::Input(
+                "initial positions contain a non-finite value".into(),
+            ));
         }
         let node_mass = interior.node_mass(false);
         let lumped = interior.node_masses();
@@ -427,18 +459,31 @@ impl BackwardEuler {
     fn check_inputs(&self, f_ext: &[f64], extra: Option<&ExtraTerms>) -> Result<(), FemError> {
         let n = self.q.len();
         if f_ext.len() != n {
-            return Err(FemError::Input(format!("external force has {} entries, expected {n}", f_ext.len())));
+            return Err(FemError::Input(format!(
+                "external force has {} entries, expected {n}",
+                f_ext.len()
+            )));
         }
         if let Some(x) = extra {
             if x.force.len() != n {
-                return Err(FemError::Input(format!("extra force has {} entries, expected {n}", x.force.len())));
+                return Err(FemError::Input(format!(
+                    "extra force has {} entries, expected {n}",
+                    x.force.len()
+                )));
             }
-            if x.stiffness.iter().any(|&(r, c, v)| r >= n || c >= n || !v.is_finite()) {
-                return Err(FemError::Input("extra stiffness has an index out of range or a non-finite value".into()));
+            if x.stiffness
+                .iter()
+                .any(|&(r, c, v)| r >= n || c >= n || !v.is_finite())
+            {
+                return Err(FemError::Input(
+                    "extra stiffness has an index out of range or a non-finite value".into(),
+                ));
             }
         }
         if f_ext.iter().any(|f| !f.is_finite()) {
-            return Err(FemError::Input("external force contains a non-finite value".into()));
+            return Err(FemError::Input(
+                "external force contains a non-finite value".into(),
+            ));
         }
         Ok(())
     }
@@ -446,7 +491,11 @@ impl BackwardEuler {
     /// One backward Euler step with external node forces `f_ext` (flat, N; surface forces
     /// enter as Bᵀ f) and optional coupling terms. Advances q, v and time even when the
     /// Newton solve did not converge (the report says so).
-    pub fn step(&mut self, f_ext: &[f64], extra: Option<&ExtraTerms>) -> Result<SolveReport, FemError> {
+    pub fn step(
+        &mut self,
+        f_ext: &[f64],
+        extra: Option<&ExtraTerms>,
+    ) -> Result<SolveReport, FemError> {
         self.check_inputs(f_ext, extra)?;
         self.ensure_system(extra)?;
         let h = self.settings.dt;
@@ -479,7 +528,11 @@ impl BackwardEuler {
     /// Quasi-static equilibrium from the current q: minimise E(y) − (f_ext + f_g)ᵀ y (+ E_x)
     /// over the free nodes; sets q to the result and v to zero. Needs pinned nodes (or a
     /// positive definite K_x) to remove rigid motions.
-    pub fn quasi_static(&mut self, f_ext: &[f64], extra: Option<&ExtraTerms>) -> Result<SolveReport, FemError> {
+    pub fn quasi_static(
+        &mut self,
+        f_ext: &[f64],
+        extra: Option<&ExtraTerms>,
+    ) -> Result<SolveReport, FemError> {
         self.check_inputs(f_ext, extra)?;
         self.ensure_system(extra)?;
         let x0 = self.q.clone();
@@ -518,7 +571,9 @@ impl BackwardEuler {
     ) -> (f64, Vec<f64>) {
         let n = y.len();
         let mut g = if want_grad { vec![0.0; n] } else { Vec::new() };
-        let mut phi = self.interior.eval(y, if want_grad { Some(&mut g) } else { None }, None, false);
+        let mut phi =
+            self.interior
+                .eval(y, if want_grad { Some(&mut g) } else { None }, None, false);
         if let Some((target, h)) = inertia {
             let d: Vec<f64> = y.iter().zip(target).map(|(a, b)| a - b).collect();
             let md = self.mass_times(&d);
@@ -614,9 +669,20 @@ impl BackwardEuler {
                 .map(|e| self.interior.element_rotation(y, e))
                 .collect();
             let ex_trip = extra.map(|x| x.stiffness);
-            let lumped = if self.settings.lumped_mass { Some(self.lumped.as_slice()) } else { None };
+            let lumped = if self.settings.lumped_mass {
+                Some(self.lumped.as_slice())
+            } else {
+                None
+            };
             let sys = self.system.as_mut().expect("system built");
-            sys.assemble(&self.interior, &rotations, mass_coef, lumped, stiff_coef, ex_trip);
+            sys.assemble(
+                &self.interior,
+                &rotations,
+                mass_coef,
+                lumped,
+                stiff_coef,
+                ex_trip,
+            );
             report.assembly_s += t0.elapsed().as_secs_f64();
             let t1 = Instant::now();
             let mut rhs = vec![0.0; 3 * sys.nfree];
@@ -670,14 +736,22 @@ impl BackwardEuler {
                 }
                 let (p, gt) = self.potential(&trial, x0, inertia, &force, extra, alpha == 1.0);
                 if p.is_finite() && p <= phi + 1e-4 * alpha * slope.min(0.0) {
-                    let gt = if gt.is_empty() { self.potential(&trial, x0, inertia, &force, extra, true).1 } else { gt };
+                    let gt = if gt.is_empty() {
+                        self.potential(&trial, x0, inertia, &force, extra, true).1
+                    } else {
+                        gt
+                    };
                     accepted = Some((p, gt));
                     break;
                 }
                 // Near the solution Φ changes by less than its round-off: accept the step when
                 // it does not raise Φ beyond round-off and it lowers the residual.
                 if p.is_finite() && p - phi <= 1e-12 * phi.abs().max(1e-300) {
-                    let gt = if gt.is_empty() { self.potential(&trial, x0, inertia, &force, extra, true).1 } else { gt };
+                    let gt = if gt.is_empty() {
+                        self.potential(&trial, x0, inertia, &force, extra, true).1
+                    } else {
+                        gt
+                    };
                     if self.free_norm(&gt) < res {
                         accepted = Some((p, gt));
                         break;
@@ -704,7 +778,9 @@ impl BackwardEuler {
                 break;
             }
         }
-        if report.status == SolveStatus::IterationLimit && res <= self.settings.tolerance * reference {
+        if report.status == SolveStatus::IterationLimit
+            && res <= self.settings.tolerance * reference
+        {
             report.status = SolveStatus::Converged;
         }
         let (es, en) = self.eval_clock.get();
@@ -753,7 +829,13 @@ fn sym_lower_mul(a: &SparseColMat<usize, f64>, x: &[f64]) -> Vec<f64> {
 
 /// Preconditioned conjugate gradients with 3 × 3 block-Jacobi on a lower-stored SPD matrix
 /// with node blocks (the layout of `System`). Returns the solution and the iterations.
-fn pcg(a: &SparseColMat<usize, f64>, nodes: usize, b: &[f64], rel_tol: f64, max_iter: usize) -> (Vec<f64>, usize) {
+fn pcg(
+    a: &SparseColMat<usize, f64>,
+    nodes: usize,
+    b: &[f64],
+    rel_tol: f64,
+    max_iter: usize,
+) -> (Vec<f64>, usize) {
     let ar = a.as_ref();
     let cp = ar.symbolic().col_ptr();
     let v = ar.val();
@@ -768,7 +850,9 @@ fn pcg(a: &SparseColMat<usize, f64>, nodes: usize, b: &[f64], rel_tol: f64, max_
                     m[(j, i)] = val;
                 }
             }
-            m.try_inverse().unwrap_or_else(|| M3::from_diagonal(&m.diagonal().map(|d| 1.0 / d.abs().max(1e-300))))
+            m.try_inverse().unwrap_or_else(|| {
+                M3::from_diagonal(&m.diagonal().map(|d| 1.0 / d.abs().max(1e-300)))
+            })
         })
         .collect();
     let precond = |r: &[f64]| -> Vec<f64> {

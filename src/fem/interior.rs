@@ -124,7 +124,10 @@ impl Interior {
     }
 
     fn gather(&self, x: &[f64], e: usize) -> Vec<Vector3<f64>> {
-        self.elements[e].iter().map(|&n| Vector3::new(x[3 * n], x[3 * n + 1], x[3 * n + 2])).collect()
+        self.elements[e]
+            .iter()
+            .map(|&n| Vector3::new(x[3 * n], x[3 * n + 1], x[3 * n + 2]))
+            .collect()
     }
 
     fn def_grad(xe: &[Vector3<f64>], g: &[[f64; 3]]) -> M3 {
@@ -257,8 +260,13 @@ impl Interior {
 
     /// The frozen-rotation (rotated linear) energy at the element rotations of `x`.
     pub fn frozen_at(&self, x: &[f64]) -> FrozenInterior<'_> {
-        let rotations = (0..self.elements.len()).map(|e| self.element_rotation(x, e)).collect();
-        FrozenInterior { interior: self, rotations }
+        let rotations = (0..self.elements.len())
+            .map(|e| self.element_rotation(x, e))
+            .collect();
+        FrozenInterior {
+            interior: self,
+            rotations,
+        }
     }
 
     /// Node-level mass entries (node_a, node_b, kg): consistent (ρ∫N_a N_b) or lumped (row
@@ -299,7 +307,10 @@ impl Interior {
     /// Gravity force on the nodes (flat, N) for acceleration `g` (m/s²): f_a = ρ g ∫ N_a.
     /// Exact for both mass matrices: M 1 g = f, so free fall accelerates uniformly at g.
     pub fn gravity_force(&self, g: Vector3<f64>) -> Vec<f64> {
-        self.node_masses().iter().flat_map(|m| [m * g.x, m * g.y, m * g.z]).collect()
+        self.node_masses()
+            .iter()
+            .flat_map(|m| [m * g.x, m * g.y, m * g.z])
+            .collect()
     }
 }
 
@@ -340,6 +351,7 @@ impl Energy for FrozenInterior<'_> {
         hess: Option<&mut Vec<(usize, usize, f64)>>,
         _project_psd: bool,
     ) -> f64 {
-        self.interior.eval_impl(x, Some(&self.rotations), grad, hess)
+        self.interior
+            .eval_impl(x, Some(&self.rotations), grad, hess)
     }
 }

@@ -74,13 +74,21 @@ pub fn shape(order: ElementOrder, xi: [f64; 3]) -> Shape {
     let (vx, dx) = basis_1d(order, xi[0]);
     let (vy, dy) = basis_1d(order, xi[1]);
     let (vz, dz) = basis_1d(order, xi[2]);
-    let mut s = Shape { n: k * k * k, val: [0.0; 27], grad: [[0.0; 3]; 27] };
+    let mut s = Shape {
+        n: k * k * k,
+        val: [0.0; 27],
+        grad: [[0.0; 3]; 27],
+    };
     for c in 0..k {
         for b in 0..k {
             for a in 0..k {
                 let i = a + k * b + k * k * c;
                 s.val[i] = vx[a] * vy[b] * vz[c];
-                s.grad[i] = [dx[a] * vy[b] * vz[c], vx[a] * dy[b] * vz[c], vx[a] * vy[b] * dz[c]];
+                s.grad[i] = [
+                    dx[a] * vy[b] * vz[c],
+                    vx[a] * dy[b] * vz[c],
+                    vx[a] * vy[b] * dz[c],
+                ];
             }
         }
     }
@@ -98,7 +106,10 @@ pub fn local_offset(order: ElementOrder, i: usize) -> [usize; 3] {
 /// quadratic B-spline gradients and values exactly on an undeformed cell.
 pub fn gauss3() -> ([f64; 3], [f64; 3]) {
     let r = (0.6f64).sqrt() / 2.0;
-    ([0.5 - r, 0.5, 0.5 + r], [5.0 / 18.0, 8.0 / 18.0, 5.0 / 18.0])
+    (
+        [0.5 - r, 0.5, 0.5 + r],
+        [5.0 / 18.0, 8.0 / 18.0, 5.0 / 18.0],
+    )
 }
 
 /// The 27-point tensor Gauss rule on the unit cube: (ξ, weight), weights sum to 1.
@@ -124,7 +135,11 @@ mod tests {
         for i in 0..5 {
             for j in 0..5 {
                 for k in 0..5 {
-                    v.push([i as f64 / 4.0, 0.13 + j as f64 * 0.19, (k as f64 / 4.0).powi(2)]);
+                    v.push([
+                        i as f64 / 4.0,
+                        0.13 + j as f64 * 0.19,
+                        (k as f64 / 4.0).powi(2),
+                    ]);
                 }
             }
         }
@@ -143,7 +158,10 @@ mod tests {
                     let g: f64 = s.grad[..s.n].iter().map(|g| g[d]).sum();
                     assert!(g.abs() < 1e-14, "{order:?} grad sum {g}");
                 }
-                assert!(s.val[..s.n].iter().all(|&v| v >= -1e-15), "B-splines are non-negative");
+                assert!(
+                    s.val[..s.n].iter().all(|&v| v >= -1e-15),
+                    "B-splines are non-negative"
+                );
             }
         }
     }
@@ -203,7 +221,10 @@ mod tests {
         let w: f64 = q.iter().map(|p| p.1).sum();
         assert!((w - 1.0).abs() < 1e-15);
         // ∫₀¹ x⁵ y⁴ z dx dy dz = 1/6 · 1/5 · 1/2.
-        let i: f64 = q.iter().map(|(p, w)| w * p[0].powi(5) * p[1].powi(4) * p[2]).sum();
+        let i: f64 = q
+            .iter()
+            .map(|(p, w)| w * p[0].powi(5) * p[1].powi(4) * p[2])
+            .sum();
         assert!((i - 1.0 / 60.0).abs() < 1e-15);
     }
 }

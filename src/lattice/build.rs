@@ -2,8 +2,7 @@
 //! merging, bone nodes and the embedding of the surface vertices.
 
 use super::geom::{
-    closest_point_on_triangle, segment_box_overlap, segment_crosses_triangle,
-    triangle_box_overlap,
+    closest_point_on_triangle, segment_box_overlap, segment_crosses_triangle, triangle_box_overlap,
 };
 use super::inside::InsideTest;
 use super::{
@@ -50,8 +49,11 @@ fn boundary_edges(mesh: &TriMesh) -> (bool, Vec<(usize, usize)>) {
         }
     }
     let closed = !count.is_empty() && count.values().all(|&c| c == 2);
-    let mut edges: Vec<(usize, usize)> =
-        count.iter().filter(|(_, &c)| c == 1).map(|(&e, _)| e).collect();
+    let mut edges: Vec<(usize, usize)> = count
+        .iter()
+        .filter(|(_, &c)| c == 1)
+        .map(|(&e, _)| e)
+        .collect();
     edges.sort_unstable();
     (closed, edges)
 }
@@ -60,12 +62,24 @@ fn check_mesh(mesh: &TriMesh) -> Result<(), LatticeError> {
     if mesh.triangles.is_empty() {
         return Err(LatticeError::Mesh("the mesh has no triangles".into()));
     }
-    if let Some(i) = mesh.positions.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
-        return Err(LatticeError::Mesh(format!("vertex {i} has a non-finite position")));
+    if let Some(i) = mesh
+        .positions
+        .iter()
+        .position(|p| !p.iter().all(|c| c.is_finite()))
+    {
+        return Err(LatticeError::Mesh(format!(
+            "vertex {i} has a non-finite position"
+        )));
     }
     let n = mesh.positions.len();
-    if let Some(t) = mesh.triangles.iter().position(|t| t.iter().any(|&v| v >= n)) {
-        return Err(LatticeError::Mesh(format!("triangle {t} indexes a vertex ≥ {n}")));
+    if let Some(t) = mesh
+        .triangles
+        .iter()
+        .position(|t| t.iter().any(|&v| v >= n))
+    {
+        return Err(LatticeError::Mesh(format!(
+            "triangle {t} indexes a vertex ≥ {n}"
+        )));
     }
     Ok(())
 }
@@ -95,11 +109,19 @@ pub(crate) fn build(mesh: &TriMesh, s: &LatticeSettings) -> Result<Lattice, Latt
     let dims = [0, 1, 2].map(|d| ((ext[d] / h - 1e-9).ceil() as usize).max(1));
     let ncell = dims[0] as f64 * dims[1] as f64 * dims[2] as f64;
     if ncell > MAX_CELLS as f64 {
-        return Err(LatticeError::TooManyCells { cells: ncell as usize });
+        return Err(LatticeError::TooManyCells {
+            cells: ncell as usize,
+        });
     }
     let ncell = ncell as usize;
     let cidx = |c: [usize; 3]| c[0] + dims[0] * (c[1] + dims[1] * c[2]);
-    let ccoord = |i: usize| [i % dims[0], (i / dims[0]) % dims[1], i / (dims[0] * dims[1])];
+    let ccoord = |i: usize| {
+        [
+            i % dims[0],
+            (i / dims[0]) % dims[1],
+            i / (dims[0] * dims[1]),
+        ]
+    };
     let eps = 1e-9 * h;
     let cell_box = |c: [usize; 3]| {
         let l = lo + V::new(c[0] as f64, c[1] as f64, c[2] as f64) * h;
@@ -118,7 +140,10 @@ pub(crate) fn build(mesh: &TriMesh, s: &LatticeSettings) -> Result<Lattice, Latt
         .map(|&[a, b, c]| {
             let tlo = pos[a].inf(&pos[b]).inf(&pos[c]);
             let thi = pos[a].sup(&pos[b]).sup(&pos[c]);
-            let (c0, c1) = (clamp_cell(&(tlo - V::repeat(eps))), clamp_cell(&(thi + V::repeat(eps))));
+            let (c0, c1) = (
+                clamp_cell(&(tlo - V::repeat(eps))),
+                clamp_cell(&(thi + V::repeat(eps))),
+            );
             let mut out = Vec::new();
             for kz in c0[2]..=c1[2] {
                 for ky in c0[1]..=c1[1] {
@@ -154,7 +179,10 @@ pub(crate) fn build(mesh: &TriMesh, s: &LatticeSettings) -> Result<Lattice, Latt
     let mut cell_cuts: Vec<Vec<usize>> = vec![Vec::new(); ncell];
     for (t, [a, b, c]) in cuts.iter().enumerate() {
         let (tlo, thi) = (a.inf(b).inf(c), a.sup(b).sup(c));
-        let (c0, c1) = (clamp_cell(&(tlo - V::repeat(eps))), clamp_cell(&(thi + V::repeat(eps))));
+        let (c0, c1) = (
+            clamp_cell(&(tlo - V::repeat(eps))),
+            clamp_cell(&(thi + V::repeat(eps))),
+        );
         for kz in c0[2]..=c1[2] {
             for ky in c0[1]..=c1[1] {
                 for kx in c0[0]..=c1[0] {
@@ -229,7 +257,8 @@ pub(crate) fn build(mesh: &TriMesh, s: &LatticeSettings) -> Result<Lattice, Latt
 
     // 3. Elements: one per piece; cells without surface in the flesh get a volume element.
     let inside = InsideTest::new(mesh, lo, h, dims, &cell_tris, closed, depth);
-    let center = |c: [usize; 3]| lo + V::new(c[0] as f64 + 0.5, c[1] as f64 + 0.5, c[2] as f64 + 0.5) * h;
+    let center =
+        |c: [usize; 3]| lo + V::new(c[0] as f64 + 0.5, c[1] as f64 + 0.5, c[2] as f64 + 0.5) * h;
     let empty_flesh: Vec<bool> = (0..ncell)
         .into_par_iter()
         .map(|ci| cell_tris[ci].is_empty() && inside.is_flesh(&center(ccoord(ci))))
@@ -238,25 +267,38 @@ pub(crate) fn build(mesh: &TriMesh, s: &LatticeSettings) -> Result<Lattice, Latt
     let mut cell_first = vec![usize::MAX; ncell]; // first element of each cell
     for ci in 0..ncell {
         let cell = ccoord(ci);
-        let count = if cell_tris[ci].is_empty() { usize::from(empty_flesh[ci]) } else { pieces[ci].0 };
+        let count = if cell_tris[ci].is_empty() {
+            usize::from(empty_flesh[ci])
+        } else {
+            pieces[ci].0
+        };
         if count > 0 {
             cell_first[ci] = elements.len();
         }
-        let kind = if cell_tris[ci].is_empty() { ElementKind::Volume } else { ElementKind::Surface };
+        let kind = if cell_tris[ci].is_empty() {
+            ElementKind::Volume
+        } else {
+            ElementKind::Surface
+        };
         for _ in 0..count {
-            elements.push(Element { cell, nodes: Vec::new(), kind });
+            elements.push(Element {
+                cell,
+                nodes: Vec::new(),
+                kind,
+            });
         }
     }
     let ne = elements.len();
     if ne == 0 {
-        return Err(LatticeError::Mesh("no lattice element could be made".into()));
+        return Err(LatticeError::Mesh(
+            "no lattice element could be made".into(),
+        ));
     }
     let elem_of = |ci: usize, local: usize| cell_first[ci] + pieces[ci].1[local];
 
     // 4. Element graph across cell faces.
-    let face_adjacent = |a: [usize; 3], b: [usize; 3]| {
-        (0..3).map(|d| a[d].abs_diff(b[d])).sum::<usize>() == 1
-    };
+    let face_adjacent =
+        |a: [usize; 3], b: [usize; 3]| (0..3).map(|d| a[d].abs_diff(b[d])).sum::<usize>() == 1;
     let mut graph: Vec<(usize, usize)> = Vec::new();
     // 4a. Pieces sharing a triangle.
     let mut tri_elems: Vec<Vec<(usize, usize)>> = vec![Vec::new(); mesh.triangles.len()];
@@ -394,7 +436,9 @@ pub(crate) fn build(mesh: &TriMesh, s: &LatticeSettings) -> Result<Lattice, Latt
                 *node_of_root.entry(r).or_insert_with(|| {
                     let off = local_offset(order, a);
                     let g = [0, 1, 2].map(|d| el.cell[d] + off[d]);
-                    rest.push(lo + V::new(g[0] as f64 + off0, g[1] as f64 + off0, g[2] as f64 + off0) * h);
+                    rest.push(
+                        lo + V::new(g[0] as f64 + off0, g[1] as f64 + off0, g[2] as f64 + off0) * h,
+                    );
                     grid.push(g);
                     rest.len() - 1
                 })
@@ -437,7 +481,10 @@ pub(crate) fn build(mesh: &TriMesh, s: &LatticeSettings) -> Result<Lattice, Latt
             renumber[elem_of(ci, l)]
         };
         let r = (p - (lo + V::new(c[0] as f64, c[1] as f64, c[2] as f64) * h)) / h;
-        vertex_points.push(MaterialPoint { element: e, xi: [0, 1, 2].map(|d| r[d].clamp(0.0, 1.0)) });
+        vertex_points.push(MaterialPoint {
+            element: e,
+            xi: [0, 1, 2].map(|d| r[d].clamp(0.0, 1.0)),
+        });
     }
 
     Ok(Lattice {

@@ -164,20 +164,73 @@ mod tests {
     fn predicates_on_known_cases() {
         let (lo, hi) = (v(0., 0., 0.), v(1., 1., 1.));
         // Triangle slicing through the box, one far away, one whose plane misses the box.
-        assert!(triangle_box_overlap(&v(-1., 0.5, -1.), &v(3., 0.5, -1.), &v(-1., 0.5, 3.), &lo, &hi));
-        assert!(!triangle_box_overlap(&v(2., 2., 2.), &v(3., 2., 2.), &v(2., 3., 2.), &lo, &hi));
+        assert!(triangle_box_overlap(
+            &v(-1., 0.5, -1.),
+            &v(3., 0.5, -1.),
+            &v(-1., 0.5, 3.),
+            &lo,
+            &hi
+        ));
+        assert!(!triangle_box_overlap(
+            &v(2., 2., 2.),
+            &v(3., 2., 2.),
+            &v(2., 3., 2.),
+            &lo,
+            &hi
+        ));
         // Big triangle near a corner: bounding boxes overlap but the triangle misses.
-        assert!(!triangle_box_overlap(&v(1.2, 2., 0.), &v(2., 1.2, 0.), &v(2., 2., 2.), &lo, &hi));
-        assert!(segment_box_overlap(&v(-1., 0.5, 0.5), &v(2., 0.5, 0.5), &lo, &hi));
-        assert!(!segment_box_overlap(&v(-1., 2., 0.5), &v(2., 2., 0.5), &lo, &hi));
+        assert!(!triangle_box_overlap(
+            &v(1.2, 2., 0.),
+            &v(2., 1.2, 0.),
+            &v(2., 2., 2.),
+            &lo,
+            &hi
+        ));
+        assert!(segment_box_overlap(
+            &v(-1., 0.5, 0.5),
+            &v(2., 0.5, 0.5),
+            &lo,
+            &hi
+        ));
+        assert!(!segment_box_overlap(
+            &v(-1., 2., 0.5),
+            &v(2., 2., 0.5),
+            &lo,
+            &hi
+        ));
         let (a, b, c) = (v(0., 0., 0.), v(1., 0., 0.), v(0., 1., 0.));
-        assert!(segment_crosses_triangle(&v(0.2, 0.2, -1.), &v(0.2, 0.2, 1.), &a, &b, &c, 1e-9));
-        assert!(!segment_crosses_triangle(&v(0.8, 0.8, -1.), &v(0.8, 0.8, 1.), &a, &b, &c, 1e-9));
-        assert!((closest_point_on_triangle(&v(0.2, 0.3, 5.), &a, &b, &c) - v(0.2, 0.3, 0.)).norm() < 1e-15);
-        assert!((closest_point_on_triangle(&v(2., 2., 0.), &a, &b, &c) - v(0.5, 0.5, 0.)).norm() < 1e-15);
+        assert!(segment_crosses_triangle(
+            &v(0.2, 0.2, -1.),
+            &v(0.2, 0.2, 1.),
+            &a,
+            &b,
+            &c,
+            1e-9
+        ));
+        assert!(!segment_crosses_triangle(
+            &v(0.8, 0.8, -1.),
+            &v(0.8, 0.8, 1.),
+            &a,
+            &b,
+            &c,
+            1e-9
+        ));
+        assert!(
+            (closest_point_on_triangle(&v(0.2, 0.3, 5.), &a, &b, &c) - v(0.2, 0.3, 0.)).norm()
+                < 1e-15
+        );
+        assert!(
+            (closest_point_on_triangle(&v(2., 2., 0.), &a, &b, &c) - v(0.5, 0.5, 0.)).norm()
+                < 1e-15
+        );
         // An octant triangle subtends 4π/8 from the origin... seen from the origin the
         // triangle (1,0,0),(0,1,0),(0,0,1) covers one octant of the sphere: π/2.
-        let o = solid_angle(&v(0., 0., 0.), &v(1., 0., 0.), &v(0., 1., 0.), &v(0., 0., 1.));
+        let o = solid_angle(
+            &v(0., 0., 0.),
+            &v(1., 0., 0.),
+            &v(0., 1., 0.),
+            &v(0., 0., 1.),
+        );
         assert!((o - std::f64::consts::FRAC_PI_2).abs() < 1e-12, "{o}");
     }
 }

@@ -57,7 +57,9 @@ impl<'a> InsideTest<'a> {
         let cell_box = cell_tris
             .iter()
             .map(|ts| {
-                let mut it = ts.iter().flat_map(|&t| mesh.triangles[t].iter().map(|&v| p[v]));
+                let mut it = ts
+                    .iter()
+                    .flat_map(|&t| mesh.triangles[t].iter().map(|&v| p[v]));
                 let first = it.next()?;
                 Some(it.fold((first, first), |(a, b), q| (a.inf(&q), b.sup(&q))))
             })
@@ -69,7 +71,12 @@ impl<'a> InsideTest<'a> {
             let cell = Self::cell_of(lo, h, &cen);
             let av = 0.5 * (p[b] - p[a]).cross(&(p[c] - p[a]));
             let k = *map.entry(cell).or_insert_with(|| {
-                clusters.push(Cluster { cell, tris: Vec::new(), centroid: V::zeros(), area_vec: V::zeros() });
+                clusters.push(Cluster {
+                    cell,
+                    tris: Vec::new(),
+                    centroid: V::zeros(),
+                    area_vec: V::zeros(),
+                });
                 clusters.len() - 1
             });
             let cl = &mut clusters[k];
@@ -79,11 +86,7 @@ impl<'a> InsideTest<'a> {
             cl.area_vec += av;
         }
         for cl in &mut clusters {
-            let wsum: f64 = cl
-                .tris
-                .iter()
-                .map(|&t| mesh.triangle_area(t))
-                .sum();
+            let wsum: f64 = cl.tris.iter().map(|&t| mesh.triangle_area(t)).sum();
             if wsum > 0.0 {
                 cl.centroid /= wsum;
             } else {
@@ -91,7 +94,17 @@ impl<'a> InsideTest<'a> {
                 cl.centroid = (p[t[0]] + p[t[1]] + p[t[2]]) / 3.0;
             }
         }
-        Self { mesh, lo, h, dims, cell_tris, cell_box, clusters, closed, depth }
+        Self {
+            mesh,
+            lo,
+            h,
+            dims,
+            cell_tris,
+            cell_box,
+            clusters,
+            closed,
+            depth,
+        }
     }
 
     fn cell_of(lo: V, h: f64, p: &V) -> [i64; 3] {
@@ -140,7 +153,9 @@ impl<'a> InsideTest<'a> {
                             continue;
                         }
                         let cell = (i + nx * (j + ny * k)) as usize;
-                        let Some((blo, bhi)) = &self.cell_box[cell] else { continue };
+                        let Some((blo, bhi)) = &self.cell_box[cell] else {
+                            continue;
+                        };
                         let q = p.sup(blo).inf(bhi);
                         if (q - p).norm() >= best {
                             continue;
@@ -173,8 +188,6 @@ impl<'a> InsideTest<'a> {
     /// Is `p` bone: behind an open surface and deeper than the flesh depth? Never for closed
     /// meshes.
     pub fn is_bone(&self, p: &V) -> bool {
-        !self.closed
-            && self.distance_within(p, self.depth).is_infinite()
-            && self.winding(p) > 0.0
+        !self.closed && self.distance_within(p, self.depth).is_infinite() && self.winding(p) > 0.0
     }
 }

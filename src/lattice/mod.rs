@@ -8,6 +8,9 @@
 //! pieces touch across a cell face share their overlapping nodes (18 for quadratic B-splines,
 //! 4 for trilinear); everything else stays separate. See [`Lattice::build`].
 
+// Numerical kernels index small fixed-size arrays by axis; iterator forms obscure them.
+#![allow(clippy::needless_range_loop)]
+
 pub mod basis;
 mod build;
 pub(crate) mod geom;
@@ -46,7 +49,12 @@ pub struct LatticeSettings {
 
 impl Default for LatticeSettings {
     fn default() -> Self {
-        Self { cell_size: None, target_cells: None, order: ElementOrder::Quadratic, depth: None }
+        Self {
+            cell_size: None,
+            target_cells: None,
+            order: ElementOrder::Quadratic,
+            depth: None,
+        }
     }
 }
 
@@ -56,20 +64,32 @@ impl LatticeSettings {
         let bad = |field: &'static str, msg: String| Err(LatticeError::Settings { field, msg });
         if let Some(h) = self.cell_size {
             if !(h.is_finite() && h > 0.0) {
-                return bad("cell_size", format!("must be a positive length in metres, got {h}"));
+                return bad(
+                    "cell_size",
+                    format!("must be a positive length in metres, got {h}"),
+                );
             }
             if self.target_cells.is_some() {
-                return bad("target_cells", "give either cell_size or target_cells, not both".into());
+                return bad(
+                    "target_cells",
+                    "give either cell_size or target_cells, not both".into(),
+                );
             }
         }
         if let Some(n) = self.target_cells {
             if n == 0 || n > MAX_CELLS {
-                return bad("target_cells", format!("must be between 1 and {MAX_CELLS}, got {n}"));
+                return bad(
+                    "target_cells",
+                    format!("must be between 1 and {MAX_CELLS}, got {n}"),
+                );
             }
         }
         if let Some(d) = self.depth {
             if !(d.is_finite() && d > 0.0) {
-                return bad("depth", format!("must be a positive length in metres, got {d}"));
+                return bad(
+                    "depth",
+                    format!("must be a positive length in metres, got {d}"),
+                );
             }
         }
         Ok(())
@@ -188,7 +208,10 @@ impl Lattice {
     /// `p` is outside the element's cell.
     pub fn locate_in_element(&self, e: usize, p: &Vector3<f64>) -> MaterialPoint {
         let r = (p - self.cell_origin(e)) / self.cell_size;
-        MaterialPoint { element: e, xi: [r.x, r.y, r.z] }
+        MaterialPoint {
+            element: e,
+            xi: [r.x, r.y, r.z],
+        }
     }
 
     /// Elements whose cell contains rest position `p` (several where elements are
@@ -222,7 +245,10 @@ impl Lattice {
 
     /// Positions (m) of all embedded surface vertices for node positions `q` (x = B q).
     pub fn embed(&self, q: &[f64]) -> Vec<Vector3<f64>> {
-        self.vertex_points.iter().map(|mp| self.position(q, mp)).collect()
+        self.vertex_points
+            .iter()
+            .map(|mp| self.position(q, mp))
+            .collect()
     }
 
     /// Triplets (vertex, node, weight) of the embedding matrix B.
@@ -240,7 +266,11 @@ impl Lattice {
 
     /// The embedding B (vertices × nodes, rows sum to one): x_v = Σ_n B_vn q_n per coordinate.
     pub fn embedding(&self) -> Result<SparseColMat<usize, f64>, LatticeError> {
-        Ok(assemble(self.vertex_points.len(), self.node_count(), &self.embedding_triplets())?)
+        Ok(assemble(
+            self.vertex_points.len(),
+            self.node_count(),
+            &self.embedding_triplets(),
+        )?)
     }
 
     /// Number of pinned (bone) nodes.

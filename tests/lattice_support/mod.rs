@@ -1,4 +1,5 @@
 //! Synthetic meshes for the lattice tests.
+#![allow(clippy::needless_range_loop)]
 #![allow(dead_code)]
 
 use furrow::mesh::TriMesh;
