@@ -56,6 +56,7 @@ fn cube_mesh(a: f64, m: usize) -> TriMesh {
 /// settings on the procedural face rig (`rig::face::generate()`, ~10k vertices).
 pub fn bench_lattice(elements: usize) -> anyhow::Result<serde_json::Value> {
     let chol = bench_step(elements, LinearSolver::Cholesky, 20)?;
+    let chol1 = bench_step(elements, LinearSolver::Cholesky, 1)?;
     let cg = bench_step(
         elements,
         LinearSolver::ConjugateGradient {
@@ -77,7 +78,12 @@ pub fn bench_lattice(elements: usize) -> anyhow::Result<serde_json::Value> {
     let face_lat = Lattice::build(&face, &LatticeSettings::default())?;
     let face_s = t.elapsed().as_secs_f64();
     let mut out = serde_json::Map::new();
-    for (prefix, v) in [("", &chol), ("cg_", &cg), ("cg_single_newton_", &one)] {
+    for (prefix, v) in [
+        ("", &chol),
+        ("single_newton_", &chol1),
+        ("cg_", &cg),
+        ("cg_single_newton_", &one),
+    ] {
         for (k, x) in v.as_object().expect("object") {
             if prefix.is_empty()
                 || !matches!(

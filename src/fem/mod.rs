@@ -9,7 +9,7 @@ pub mod dynamics;
 pub mod interior;
 
 pub use dynamics::{
-    BackwardEuler, ExtraTerms, LinearSolver, SolveReport, SolveStatus, StepSettings,
+    BackwardEuler, ExtraTerms, LinearSolver, SolveReport, SolveStatus, StepSettings, AUTO_CG_DOFS,
 };
 pub use interior::{FrozenInterior, Interior};
 
