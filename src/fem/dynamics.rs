@@ -380,7 +380,9 @@ pub struct BackwardEuler {
     pub q: Vec<f64>,
     /// Node velocities (flat, m/s).
     pub v: Vec<f64>,
-    /// Pinned nodes: they keep their position (and zero velocity).
+    /// Pinned nodes: they keep their position in `q` through a step (velocity zero). To drive
+    /// bone (e.g. a jaw), write the pinned nodes' new positions into `q` before `step`.
+    /// Changing which nodes are pinned rebuilds the sparse pattern on the next solve.
     pub pinned: Vec<bool>,
     /// Time step, Newton and mass settings.
     pub settings: StepSettings,
@@ -455,7 +457,14 @@ impl BackwardEuler {
     fn ensure_system(&mut self, extra: Option<&ExtraTerms>) -> Result<(), FemError> {
         let sig = extra_signature(extra);
         let rebuild = match &self.system {
-            Some(s) => s.extra_sig != sig || s.free.len() != self.pinned.len(),
+            Some(s) => {
+                s.extra_sig != sig
+                    || s.free.len() != self.pinned.len()
+                    || s.free
+                        .iter()
+                        .zip(&self.pinned)
+                        .any(|(&f, &p)| (f == NONE) != p)
+            }
             None => true,
         };
         if rebuild {
