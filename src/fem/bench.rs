@@ -53,7 +53,8 @@ fn cube_mesh(a: f64, m: usize) -> TriMesh {
 /// rotations and matrix assembly), `solve_s` (numeric factorisation and solve), `step_s`
 /// (the whole step including energy and gradient evaluations and the line search), per
 /// `newton_iterations`. `face_lattice_build_s` times [`Lattice::build`] with default
-/// settings on the procedural face rig (`rig::face::generate()`, ~10k vertices).
+/// settings on the procedural face rig (`rig::face::generate()`, ~10k vertices), and
+/// `face_1cm_lattice_build_s` with 1 cm cells.
 pub fn bench_lattice(elements: usize) -> anyhow::Result<serde_json::Value> {
     let chol = bench_step(elements, LinearSolver::Cholesky, 20)?;
     let chol1 = bench_step(elements, LinearSolver::Cholesky, 1)?;
@@ -77,6 +78,15 @@ pub fn bench_lattice(elements: usize) -> anyhow::Result<serde_json::Value> {
     let t = Instant::now();
     let face_lat = Lattice::build(&face, &LatticeSettings::default())?;
     let face_s = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let face_fine = Lattice::build(
+        &face,
+        &LatticeSettings {
+            cell_size: Some(0.01),
+            ..Default::default()
+        },
+    )?;
+    let face_fine_s = t.elapsed().as_secs_f64();
     let mut out = serde_json::Map::new();
     for (prefix, v) in [
         ("", &chol),
@@ -100,6 +110,8 @@ pub fn bench_lattice(elements: usize) -> anyhow::Result<serde_json::Value> {
     out.insert("face_elements".into(), face_lat.elements.len().into());
     out.insert("face_nodes".into(), face_lat.node_count().into());
     out.insert("face_lattice_build_s".into(), face_s.into());
+    out.insert("face_1cm_elements".into(), face_fine.elements.len().into());
+    out.insert("face_1cm_lattice_build_s".into(), face_fine_s.into());
     Ok(serde_json::Value::Object(out))
 }
 
