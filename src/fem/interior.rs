@@ -1,0 +1,357 @@
+//! The interior energy: corotated linear elasticity on lattice elements.
+//!
+//! Energy (J) E(q) = Σ_elements Σ_{27 Gauss points} w ψ(F), with F = Σ_a q_a ⊗ ∇N_a the
+//! deformation gradient of the B-spline (or trilinear) map and ψ the corotated density of
+//! [`super::corot::corotated`] with R the polar rotation of F at that Gauss point (Irving et
+//! al.'s reflection handling for inverted F). The gradient is exact.
+//!
+//! Hessian (what Newton uses, and what [`Energy::eval`] emits): standard corotational
+//! stiffness with ONE rotation per element held fixed, H_e = R_e K₀ R_eᵀ, where K₀ is the
+//! linear-elastic stiffness of the undeformed element and R_e the polar rotation of F at the
+//! element centre. It is symmetric positive semi-definite by construction (so `project_psd`
+//! needs no work) and it is the exact Hessian of the frozen-rotation energy
+//! ([`FrozenInterior`]), which is how it is tested. It omits the derivative of the rotation,
+//! so Newton converges linearly rather than quadratically under large rotation.
+
+use super::corot::{corotated, rotation};
+use super::{FemError, Material};
+use crate::lattice::basis::gauss27;
+use crate::lattice::{shape, ElementOrder, Lattice};
+use crate::math::Energy;
+use nalgebra::{Matrix3, Vector3};
+use rayon::prelude::*;
+
+type M3 = Matrix3<f64>;
+
+/// One Gauss point of the reference element.
+#[derive(Debug, Clone)]
+pub(crate) struct QuadPoint {
+    /// Quadrature weight times cell volume (m³).
+    pub w: f64,
+    /// Shape function values.
+    pub n: Vec<f64>,
+    /// ∇_X N_a (1/m).
+    pub g: Vec<[f64; 3]>,
+}
+
+/// Corotated elasticity over the elements of a lattice, as an [`Energy`] over flat node
+/// positions (3 × nodes, m).
+#[derive(Debug, Clone)]
+pub struct Interior {
+    /// Shear modulus μ (Pa).
+    pub mu: f64,
+    /// Lamé's first parameter λ (Pa).
+    pub lambda: f64,
+    /// Mass density (kg/m³).
+    pub density: f64,
+    /// Element order.
+    pub order: ElementOrder,
+    /// Cell edge (m).
+    pub cell_size: f64,
+    /// Node indices of each element (local order of [`crate::lattice::Element::nodes`]).
+    pub elements: Vec<Vec<usize>>,
+    /// Number of nodes.
+    pub nodes: usize,
+    pub(crate) qp: Vec<QuadPoint>,
+    center_g: Vec<[f64; 3]>,
+    /// Linear-elastic stiffness of one undeformed element, (3K × 3K) row-major, N/m.
+    pub(crate) k0: Vec<f64>,
+    /// Consistent mass of one element, (K × K) row-major, kg.
+    pub(crate) m0: Vec<f64>,
+}
+
+impl Interior {
+    /// The interior of `lattice` made of `material`.
+    pub fn new(lattice: &Lattice, material: &Material) -> Result<Self, FemError> {
+        material.validate()?;
+        let (mu, lambda) = material.lame();
+        let order = lattice.order;
+        let h = lattice.cell_size;
+        let k = order.nodes_per_element();
+        let qp: Vec<QuadPoint> = gauss27()
+            .into_iter()
+            .map(|(xi, w)| {
+                let s = shape(order, xi);
+                QuadPoint {
+                    w: w * h * h * h,
+                    n: s.val[..k].to_vec(),
+                    g: s.grad[..k].iter().map(|g| g.map(|c| c / h)).collect(),
+                }
+            })
+            .collect();
+        let sc = shape(order, [0.5; 3]);
+        let center_g = sc.grad[..k].iter().map(|g| g.map(|c| c / h)).collect();
+        // K₀_ab = Σ w [μ (g_a·g_b) I + μ g_b g_aᵀ + λ g_a g_bᵀ]; M₀_ab = ρ Σ w N_a N_b.
+        let n3 = 3 * k;
+        let mut k0 = vec![0.0; n3 * n3];
+        let mut m0 = vec![0.0; k * k];
+        for q in &qp {
+            for a in 0..k {
+                for b in 0..k {
+                    let (ga, gb) = (q.g[a], q.g[b]);
+                    let dot = ga[0] * gb[0] + ga[1] * gb[1] + ga[2] * gb[2];
+                    for i in 0..3 {
+                        for j in 0..3 {
+                            let mut v = mu * gb[i] * ga[j] + lambda * ga[i] * gb[j];
+                            if i == j {
+                                v += mu * dot;
+                            }
+                            k0[(3 * a + i) * n3 + 3 * b + j] += q.w * v;
+                        }
+                    }
+                    m0[a * k + b] += material.density * q.w * q.n[a] * q.n[b];
+                }
+            }
+        }
+        Ok(Self {
+            mu,
+            lambda,
+            density: material.density,
+            order,
+            cell_size: h,
+            elements: lattice.elements.iter().map(|e| e.nodes.clone()).collect(),
+            nodes: lattice.node_count(),
+            qp,
+            center_g,
+            k0,
+            m0,
+        })
+    }
+
+    /// Nodes per element.
+    pub fn nodes_per_element(&self) -> usize {
+        self.order.nodes_per_element()
+    }
+
+    fn gather(&self, x: &[f64], e: usize) -> Vec<Vector3<f64>> {
+        self.elements[e]
+            .iter()
+            .map(|&n| Vector3::new(x[3 * n], x[3 * n + 1], x[3 * n + 2]))
+            .collect()
+    }
+
+    fn def_grad(xe: &[Vector3<f64>], g: &[[f64; 3]]) -> M3 {
+        let mut f = M3::zeros();
+        for (xa, ga) in xe.iter().zip(g) {
+            for j in 0..3 {
+                f.column_mut(j).axpy(ga[j], xa, 1.0);
+            }
+        }
+        f
+    }
+
+    /// Deformation gradients F at the 27 Gauss points of element `e` for positions `x`.
+    pub fn deformation_gradients(&self, x: &[f64], e: usize) -> Vec<M3> {
+        let xe = self.gather(x, e);
+        self.qp.iter().map(|q| Self::def_grad(&xe, &q.g)).collect()
+    }
+
+    /// The element rotation R_e (polar rotation of F at the cell centre, reflection removed).
+    pub fn element_rotation(&self, x: &[f64], e: usize) -> M3 {
+        rotation(&Self::def_grad(&self.gather(x, e), &self.center_g))
+    }
+
+    /// Energy (J) of element `e`, adding its gradient (N) into `grad` (local, 3K) when
+    /// given. `frozen` replaces the per-Gauss-point polar rotation by a fixed rotation.
+    pub(crate) fn element_energy(
+        &self,
+        x: &[f64],
+        e: usize,
+        frozen: Option<&M3>,
+        mut grad: Option<&mut [f64]>,
+    ) -> f64 {
+        let xe = self.gather(x, e);
+        let mut energy = 0.0;
+        for q in &self.qp {
+            let f = Self::def_grad(&xe, &q.g);
+            let r = match frozen {
+                Some(r) => *r,
+                None => rotation(&f),
+            };
+            let (psi, p) = corotated(&f, &r, self.mu, self.lambda);
+            energy += q.w * psi;
+            if let Some(gr) = grad.as_deref_mut() {
+                for (a, ga) in q.g.iter().enumerate() {
+                    let v = p * Vector3::new(ga[0], ga[1], ga[2]) * q.w;
+                    gr[3 * a] += v.x;
+                    gr[3 * a + 1] += v.y;
+                    gr[3 * a + 2] += v.z;
+                }
+            }
+        }
+        energy
+    }
+
+    /// The rotated element stiffness R K₀ Rᵀ (3K × 3K, row-major, N/m).
+    pub(crate) fn rotated_stiffness(&self, r: &M3) -> Vec<f64> {
+        let k = self.nodes_per_element();
+        let n3 = 3 * k;
+        let mut out = vec![0.0; n3 * n3];
+        for a in 0..k {
+            for b in 0..k {
+                let blk = M3::from_fn(|i, j| self.k0[(3 * a + i) * n3 + 3 * b + j]);
+                let rb = r * blk * r.transpose();
+                for i in 0..3 {
+                    for j in 0..3 {
+                        out[(3 * a + i) * n3 + 3 * b + j] = rb[(i, j)];
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    fn eval_impl(
+        &self,
+        x: &[f64],
+        frozen: Option<&[M3]>,
+        grad: Option<&mut [f64]>,
+        hess: Option<&mut Vec<(usize, usize, f64)>>,
+    ) -> f64 {
+        let want_g = grad.is_some();
+        let want_h = hess.is_some();
+        let k = self.nodes_per_element();
+        let per: Vec<(f64, Vec<f64>, Vec<f64>)> = (0..self.elements.len())
+            .into_par_iter()
+            .map(|e| {
+                let mut g = if want_g { vec![0.0; 3 * k] } else { Vec::new() };
+                let fr = frozen.map(|f| &f[e]);
+                let en = self.element_energy(x, e, fr, if want_g { Some(&mut g) } else { None });
+                let hm = if want_h {
+                    let r = match fr {
+                        Some(r) => *r,
+                        None => self.element_rotation(x, e),
+                    };
+                    self.rotated_stiffness(&r)
+                } else {
+                    Vec::new()
+                };
+                (en, g, hm)
+            })
+            .collect();
+        let mut energy = 0.0;
+        let mut grad = grad;
+        let mut hess = hess;
+        for (e, (en, g, hm)) in per.into_iter().enumerate() {
+            energy += en;
+            let nodes = &self.elements[e];
+            if let Some(gr) = grad.as_deref_mut() {
+                for (a, &n) in nodes.iter().enumerate() {
+                    for i in 0..3 {
+                        gr[3 * n + i] += g[3 * a + i];
+                    }
+                }
+            }
+            if let Some(hs) = hess.as_deref_mut() {
+                let n3 = 3 * k;
+                for (a, &na) in nodes.iter().enumerate() {
+                    for (b, &nb) in nodes.iter().enumerate() {
+                        for i in 0..3 {
+                            for j in 0..3 {
+                                hs.push((3 * na + i, 3 * nb + j, hm[(3 * a + i) * n3 + 3 * b + j]));
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        energy
+    }
+
+    /// The frozen-rotation (rotated linear) energy at the element rotations of `x`.
+    pub fn frozen_at(&self, x: &[f64]) -> FrozenInterior<'_> {
+        let rotations = (0..self.elements.len())
+            .map(|e| self.element_rotation(x, e))
+            .collect();
+        FrozenInterior {
+            interior: self,
+            rotations,
+        }
+    }
+
+    /// Node-level mass entries (node_a, node_b, kg): consistent (ρ∫N_a N_b) or lumped (row
+    /// sums on the diagonal). Multiply by the 3×3 identity for the DOF mass matrix.
+    pub fn node_mass(&self, lumped: bool) -> Vec<(usize, usize, f64)> {
+        let k = self.nodes_per_element();
+        let mut t = Vec::new();
+        for nodes in &self.elements {
+            for a in 0..k {
+                if lumped {
+                    let s: f64 = (0..k).map(|b| self.m0[a * k + b]).sum();
+                    t.push((nodes[a], nodes[a], s));
+                } else {
+                    for b in 0..k {
+                        t.push((nodes[a], nodes[b], self.m0[a * k + b]));
+                    }
+                }
+            }
+        }
+        t
+    }
+
+    /// Mass of each node (kg): the lumped (row-sum) mass, ρ ∫ N_a over its elements.
+    pub fn node_masses(&self) -> Vec<f64> {
+        let mut m = vec![0.0; self.nodes];
+        for (a, _, v) in self.node_mass(true) {
+            m[a] += v;
+        }
+        m
+    }
+
+    /// Total mass (kg): density × cell volume × element count (superimposed elements each
+    /// carry a full cell of material).
+    pub fn total_mass(&self) -> f64 {
+        self.node_masses().iter().sum()
+    }
+
+    /// Gravity force on the nodes (flat, N) for acceleration `g` (m/s²): f_a = ρ g ∫ N_a.
+    /// Exact for both mass matrices: M 1 g = f, so free fall accelerates uniformly at g.
+    pub fn gravity_force(&self, g: Vector3<f64>) -> Vec<f64> {
+        self.node_masses()
+            .iter()
+            .flat_map(|m| [m * g.x, m * g.y, m * g.z])
+            .collect()
+    }
+}
+
+impl Energy for Interior {
+    fn dofs(&self) -> usize {
+        3 * self.nodes
+    }
+
+    fn eval(
+        &self,
+        x: &[f64],
+        grad: Option<&mut [f64]>,
+        hess: Option<&mut Vec<(usize, usize, f64)>>,
+        _project_psd: bool,
+    ) -> f64 {
+        self.eval_impl(x, None, grad, hess)
+    }
+}
+
+/// The rotated linear energy Σ w ψ(F) with each element's rotation frozen (Müller–Gross
+/// warped stiffness): E = ½ (Rᵀq − X)ᵀ K₀ (Rᵀq − X) per element. Its Hessian is exactly what
+/// [`Interior`] emits, which lets finite differences check that Hessian.
+pub struct FrozenInterior<'a> {
+    interior: &'a Interior,
+    /// Frozen rotation of each element.
+    pub rotations: Vec<M3>,
+}
+
+impl Energy for FrozenInterior<'_> {
+    fn dofs(&self) -> usize {
+        3 * self.interior.nodes
+    }
+
+    fn eval(
+        &self,
+        x: &[f64],
+        grad: Option<&mut [f64]>,
+        hess: Option<&mut Vec<(usize, usize, f64)>>,
+        _project_psd: bool,
+    ) -> f64 {
+        self.interior
+            .eval_impl(x, Some(&self.rotations), grad, hess)
+    }
+}

@@ -1,0 +1,105 @@
+//! Synthetic meshes for the lattice tests.
+#![allow(clippy::needless_range_loop)]
+#![allow(dead_code)]
+
+use furrow::mesh::TriMesh;
+use nalgebra::Vector3;
+use std::collections::HashMap;
+
+type V = Vector3<f64>;
+
+/// Closed axis-aligned box [lo, hi], each face split into m × m quads (outward normals,
+/// counter-clockwise triangles), vertices welded.
+pub fn box_mesh(lo: V, hi: V, m: usize) -> TriMesh {
+    let faces: [(usize, f64, V, V); 6] = [
+        (0, 1.0, V::y(), V::z()),
+        (0, 0.0, V::z(), V::y()),
+        (1, 1.0, V::z(), V::x()),
+        (1, 0.0, V::x(), V::z()),
+        (2, 1.0, V::x(), V::y()),
+        (2, 0.0, V::y(), V::x()),
+    ];
+    let mut pos: Vec<V> = Vec::new();
+    let mut key: HashMap<[i64; 3], usize> = HashMap::new();
+    let mut tris = Vec::new();
+    let ext = hi - lo;
+    let mut vid = |p: V, pos: &mut Vec<V>| -> usize {
+        let k = [0, 1, 2].map(|d| ((p[d] - lo[d]) / ext[d] * 1e6).round() as i64);
+        *key.entry(k).or_insert_with(|| {
+            pos.push(p);
+            pos.len() - 1
+        })
+    };
+    for (axis, side, t1, t2) in faces {
+        let corner = |u: f64, v: f64| -> V {
+            let mut unit = t1 * u + t2 * v;
+            unit[axis] = side;
+            lo + unit.component_mul(&ext)
+        };
+        let mut idx = vec![vec![0usize; m + 1]; m + 1];
+        for (i, row) in idx.iter_mut().enumerate() {
+            for (j, id) in row.iter_mut().enumerate() {
+                *id = vid(corner(i as f64 / m as f64, j as f64 / m as f64), &mut pos);
+            }
+        }
+        for i in 0..m {
+            for j in 0..m {
+                let (a, b, c, d) = (idx[i][j], idx[i + 1][j], idx[i + 1][j + 1], idx[i][j + 1]);
+                tris.push([a, b, c]);
+                tris.push([a, c, d]);
+            }
+        }
+    }
+    TriMesh::new(pos, tris)
+}
+
+/// Two meshes in one.
+pub fn merge(a: &TriMesh, b: &TriMesh) -> TriMesh {
+    let n = a.positions.len();
+    let mut p = a.positions.clone();
+    p.extend(&b.positions);
+    let mut t = a.triangles.clone();
+    t.extend(b.triangles.iter().map(|t| t.map(|i| i + n)));
+    TriMesh::new(p, t)
+}
+
+/// An open "mask": the square sheet [−w, w]² in the plane z = 0 facing +z (flesh behind it,
+/// at z < 0), grid spacing `s`, cut along a mouth slit on y = 0 for |x| < `half_slit`: the
+/// upper lip (y ≥ 0) and lower lip (y ≤ 0) coincide there but share no vertex; the sheet is
+/// one connected surface around the slit corners. Returns the mesh and the vertex sets of
+/// the upper and lower slit edges.
+pub fn slit_sheet(w: f64, s: f64, half_slit: f64) -> (TriMesh, Vec<usize>, Vec<usize>) {
+    let n = (2.0 * w / s).round() as usize;
+    let mut pos = Vec::new();
+    let mut id = vec![vec![0usize; n + 1]; n + 1];
+    let coord = |i: usize| -w + i as f64 * s;
+    for (i, row) in id.iter_mut().enumerate() {
+        for (j, v) in row.iter_mut().enumerate() {
+            *v = pos.len();
+            pos.push(V::new(coord(i), coord(j), 0.0));
+        }
+    }
+    let j0 = n / 2; // y = 0 row
+    let mut lower_id = id.clone();
+    let mut upper = Vec::new();
+    let mut lower = Vec::new();
+    for i in 0..=n {
+        if coord(i).abs() < half_slit - 1e-12 {
+            let p = pos[id[i][j0]];
+            lower_id[i][j0] = pos.len();
+            pos.push(p);
+            upper.push(id[i][j0]);
+            lower.push(lower_id[i][j0]);
+        }
+    }
+    let mut tris = Vec::new();
+    for i in 0..n {
+        for j in 0..n {
+            let g = if j < j0 { &lower_id } else { &id };
+            let (a, b, c, d) = (g[i][j], g[i + 1][j], g[i + 1][j + 1], g[i][j + 1]);
+            tris.push([a, b, c]);
+            tris.push([a, c, d]);
+        }
+    }
+    (TriMesh::new(pos, tris), upper, lower)
+}
