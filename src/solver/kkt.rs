@@ -1,0 +1,271 @@
+//! Sparse symmetric KKT solve for equality-constrained Newton steps.
+//!
+//! The system (free dofs only, pinned dofs removed) is
+//!
+//! ```text
+//! [ K + τI   γCᵀ ] [Δx]   [a]
+//! [ γC      −δI  ] [μ ] = [b]
+//! ```
+//!
+//! with γ balancing the rows, τ ≥ 0 an optional shift and δ = 1e-8 γ a tiny negative
+//! regularisation of the constraint block.
+//!
+//! Why this method: the KKT matrix is symmetric indefinite. With δ > 0 and K + τI positive
+//! definite it is *quasi-definite*, so an LDLᵀ factorisation without pivoting exists for any
+//! symmetric ordering (Vanderbei 1995). That lets us use faer's supernodal sparse LDLᵀ with
+//! an AMD fill-reducing ordering computed once (the symbolic analysis is cached here and
+//! reused across Newton iterations and frames). It costs the same as a Cholesky of the same
+//! pattern, about half of a sparse LU with partial pivoting, and unlike a null-space method
+//! it keeps the sparsity of the cluster constraints. The error δ introduces is removed by a
+//! few steps of iterative refinement against the unregularised matrix. A bonus: by
+//! Sylvester's law of inertia the signs of D tell whether K is positive definite on the null
+//! space of C (exactly m negative pivots), i.e. whether the equilibrium is stable; Newton
+//! uses that to decide between the exact and a projected Hessian.
+
+use crate::math::sparse::{mul_vec, Pattern, SparseError};
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
+use faer::sparse::linalg::cholesky::{
+    factorize_symbolic_cholesky, CholeskySymbolicParams, LdltRef, SymbolicCholesky,
+    SymbolicCholeskyRaw, SymmetricOrdering,
+};
+use faer::sparse::SparseColMat;
+use faer::{Conj, MatMut, Side};
+
+/// Outcome of one numeric KKT factorisation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct KktFactorInfo {
+    /// Negative pivots found in D.
+    pub negative_pivots: usize,
+    /// True when the inertia is (free dofs positive, constraint rows negative): the
+    /// (shifted) Hessian is positive definite on the null space of the constraints.
+    pub inertia_ok: bool,
+    /// Seconds spent in the symbolic analysis (0 when reused).
+    pub symbolic_s: f64,
+    /// Seconds spent in the numeric factorisation.
+    pub numeric_s: f64,
+}
+
+/// A KKT factorisation with cached pattern and symbolic analysis. Hold one per problem
+/// (per skin) and reuse it: only the numeric factorisation is redone while the triplet
+/// layout is unchanged.
+#[derive(Default)]
+pub struct KktSolver {
+    fingerprint: Option<(usize, usize, u64)>,
+    pattern: Option<Pattern>,
+    symbolic: Option<SymbolicCholesky<usize>>,
+    values: Vec<f64>,
+    mem: Option<MemBuffer>,
+    matrix: Option<SparseColMat<usize, f64>>,
+    n_free: usize,
+    n_cons: usize,
+    shift: f64,
+    delta: f64,
+    factored: bool,
+    /// Number of symbolic analyses performed so far (to check reuse).
+    pub symbolic_count: usize,
+}
+
+fn fingerprint(n: usize, t: &[(usize, usize, f64)]) -> (usize, usize, u64) {
+    let mut h: u64 = 0xcbf29ce484222325;
+    for &(r, c, _) in t {
+        h = (h ^ (r as u64)).wrapping_mul(0x100000001b3);
+        h = (h ^ (c as u64)).wrapping_mul(0x100000001b3);
+    }
+    (n, t.len(), h)
+}
+
+impl KktSolver {
+    /// An empty solver (no cached analysis).
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Assemble and factorise the KKT matrix.
+    ///
+    /// `k` holds the Hessian triplets over free dofs `0..n_free` (both triangles),
+    /// `c` the constraint triplets `(row, free dof, value)` for rows `0..n_cons`, unscaled.
+    /// The triplet order must be the same from call to call for the analysis to be reused.
+    #[allow(clippy::too_many_arguments)]
+    pub fn factorize(
+        &mut self,
+        n_free: usize,
+        n_cons: usize,
+        k: &[(usize, usize, f64)],
+        c: &[(usize, usize, f64)],
+        gamma: f64,
+        shift: f64,
+        delta: f64,
+    ) -> Result<KktFactorInfo, SparseError> {
+        let n = n_free + n_cons;
+        let mut t = Vec::with_capacity(k.len() + 2 * c.len() + n);
+        t.extend_from_slice(k);
+        for i in 0..n_free {
+            t.push((i, i, shift));
+        }
+        for &(r, j, v) in c {
+            t.push((n_free + r, j, gamma * v));
+            t.push((j, n_free + r, gamma * v));
+        }
+        for r in 0..n_cons {
+            t.push((n_free + r, n_free + r, -delta));
+        }
+        let fp = fingerprint(n, &t);
+        let mut symbolic_s = 0.0;
+        if self.fingerprint != Some(fp) || self.pattern.is_none() {
+            let t0 = std::time::Instant::now();
+            let pattern = Pattern::new(n, &t)?;
+            let a = pattern.assemble(&t)?;
+            let sym = factorize_symbolic_cholesky(
+                a.symbolic(),
+                Side::Lower,
+                SymmetricOrdering::Amd,
+                CholeskySymbolicParams::default(),
+            )
+            .map_err(|e| SparseError::Build(format!("{e:?}")))?;
+            let par = faer::get_global_parallelism();
+            let req = sym
+                .factorize_numeric_ldlt_scratch::<f64>(par, Default::default())
+                .or(sym.solve_in_place_scratch::<f64>(1, par));
+            self.mem = Some(MemBuffer::new(req));
+            self.values = vec![0.0; sym.len_val()];
+            self.symbolic = Some(sym);
+            self.pattern = Some(pattern);
+            self.fingerprint = Some(fp);
+            self.symbolic_count += 1;
+            symbolic_s = t0.elapsed().as_secs_f64();
+        }
+        let t1 = std::time::Instant::now();
+        let a = self.pattern.as_ref().expect("pattern set").assemble(&t)?;
+        let sym = self.symbolic.as_ref().expect("symbolic set");
+        let par = faer::get_global_parallelism();
+        let stack = MemStack::new(self.mem.as_mut().expect("memory set"));
+        let reg = LdltRegularization {
+            dynamic_regularization_signs: None,
+            dynamic_regularization_delta: 0.0,
+            dynamic_regularization_epsilon: 0.0,
+        };
+        let res = sym.factorize_numeric_ldlt(
+            &mut self.values,
+            a.as_ref(),
+            Side::Lower,
+            reg,
+            par,
+            stack,
+            Default::default(),
+        );
+        self.n_free = n_free;
+        self.n_cons = n_cons;
+        self.shift = shift;
+        self.delta = delta;
+        self.matrix = Some(a);
+        let numeric_s = t1.elapsed().as_secs_f64();
+        if res.is_err() {
+            self.factored = false;
+            return Ok(KktFactorInfo { negative_pivots: usize::MAX, inertia_ok: false, symbolic_s, numeric_s });
+        }
+        self.factored = true;
+        let neg = negative_pivots(sym, &self.values);
+        Ok(KktFactorInfo { negative_pivots: neg, inertia_ok: neg == n_cons, symbolic_s, numeric_s })
+    }
+
+    /// True when the last factorisation succeeded (no zero pivot).
+    pub fn is_factored(&self) -> bool {
+        self.factored
+    }
+
+    /// Solve the *unregularised* KKT system (τ kept, δ removed) for `rhs` in place, with
+    /// `refine` steps of iterative refinement.
+    pub fn solve(&mut self, rhs: &mut [f64], refine: usize) {
+        assert!(self.factored, "KktSolver::solve before a successful factorize");
+        let b = rhs.to_vec();
+        self.raw_solve(rhs);
+        for _ in 0..refine {
+            // r = b − A x, A = A_reg + δ I on the constraint block.
+            let ax = mul_vec(self.matrix.as_ref().expect("matrix"), rhs);
+            let mut r: Vec<f64> = b.iter().zip(&ax).map(|(bi, ai)| bi - ai).collect();
+            for i in self.n_free..self.n_free + self.n_cons {
+                r[i] -= self.delta * rhs[i];
+            }
+            self.raw_solve(&mut r);
+            for (x, d) in rhs.iter_mut().zip(&r) {
+                *x += d;
+            }
+        }
+    }
+
+    fn raw_solve(&mut self, rhs: &mut [f64]) {
+        let sym = self.symbolic.as_ref().expect("symbolic");
+        let ldlt = LdltRef::<usize, f64>::new(sym, &self.values);
+        let n = rhs.len();
+        let m = MatMut::from_column_major_slice_mut(rhs, n, 1);
+        let par = faer::get_global_parallelism();
+        let stack = MemStack::new(self.mem.as_mut().expect("memory"));
+        ldlt.solve_in_place_with_conj(Conj::No, m, par, stack);
+    }
+
+    /// Forget the cached analysis.
+    pub fn reset(&mut self) {
+        *self = Self { symbolic_count: self.symbolic_count, ..Self::default() };
+    }
+}
+
+/// Count negative entries of D in an LDLᵀ factor (D is stored on the factor's diagonal).
+fn negative_pivots(sym: &SymbolicCholesky<usize>, values: &[f64]) -> usize {
+    match sym.raw() {
+        SymbolicCholeskyRaw::Simplicial(s) => {
+            let cp = s.col_ptr();
+            (0..sym.nrows()).filter(|&k| values[cp[k]] < 0.0).count()
+        }
+        SymbolicCholeskyRaw::Supernodal(s) => {
+            let begin = s.supernode_begin();
+            let end = s.supernode_end();
+            let cpv = s.col_ptr_for_val();
+            let mut neg = 0;
+            for sn in 0..s.n_supernodes() {
+                let ncols = end[sn] - begin[sn];
+                let len = cpv[sn + 1] - cpv[sn];
+                let nrows = len / ncols;
+                for k in 0..ncols {
+                    if values[cpv[sn] + k * nrows + k] < 0.0 {
+                        neg += 1;
+                    }
+                }
+            }
+            neg
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// min ½ xᵀ K x − fᵀx s.t. x0 + x1 + x2 = 1 with K = diag(1, 2, 4), f = 0: the solution is
+    /// x = K⁻¹Cᵀλ' with λ' = 1 / (C K⁻¹ Cᵀ) = 1 / 1.75: x = (4/7, 2/7, 1/7).
+    #[test]
+    fn kkt_solves_constrained_quadratic_and_reports_inertia() {
+        let k = vec![(0, 0, 1.0), (1, 1, 2.0), (2, 2, 4.0)];
+        let c = vec![(0, 0, 1.0), (0, 1, 1.0), (0, 2, 1.0)];
+        let mut s = KktSolver::new();
+        for gamma in [1.0, 10.0] {
+            let info = s.factorize(3, 1, &k, &c, gamma, 0.0, 1e-8 * gamma).unwrap();
+            assert!(info.inertia_ok, "{info:?}");
+            let mut rhs = vec![0.0, 0.0, 0.0, gamma * 1.0];
+            s.solve(&mut rhs, 3);
+            for (xi, ex) in rhs.iter().zip([4.0 / 7.0, 2.0 / 7.0, 1.0 / 7.0]) {
+                assert!((xi - ex).abs() < 1e-12, "{xi} vs {ex}");
+            }
+        }
+        assert_eq!(s.symbolic_count, 1, "same pattern: the analysis is reused");
+        // K = diag(1, 2, −4): indefinite on the null space of C → inertia flagged.
+        let kneg = vec![(0, 0, 1.0), (1, 1, 2.0), (2, 2, -4.0)];
+        let info = s.factorize(3, 1, &kneg, &c, 1.0, 0.0, 1e-8).unwrap();
+        assert!(!info.inertia_ok);
+        // ...but K = diag(1, 2, −0.1) with the constraint x2 = 0 is PD on the null space.
+        let c2 = vec![(0, 2, 1.0)];
+        let kn2 = vec![(0, 0, 1.0), (1, 1, 2.0), (2, 2, -0.1)];
+        let info = s.factorize(3, 1, &kn2, &c2, 1.0, 0.0, 1e-8).unwrap();
+        assert!(info.inertia_ok, "{info:?}");
+    }
+}
