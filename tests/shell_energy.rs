@@ -12,13 +12,20 @@ use nalgebra::{Rotation3, Vector3};
 struct Lcg(u64);
 impl Lcg {
     fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         ((self.0 >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
     }
 }
 
 fn material() -> ShellMaterial {
-    ShellMaterial { young: 2.0e6, poisson: 0.35, thickness: 1.0e-3 }
+    ShellMaterial {
+        young: 2.0e6,
+        poisson: 0.35,
+        thickness: 1.0e-3,
+    }
 }
 
 /// A small sheet with a curved, irregular rest shape, and a random large deformation of it.
@@ -37,7 +44,11 @@ fn random_case(seed: u64) -> (Shell, Vec<f64>, f64) {
         .iter()
         .flat_map(|p| {
             let q = Vector3::new(p.x * 1.1, p.y * 0.93, p.z + 3.0 * (p.x / 0.03).powi(2) * a);
-            [q.x + 0.2 * a * rng.next(), q.y + 0.2 * a * rng.next(), q.z + 0.3 * a * rng.next()]
+            [
+                q.x + 0.2 * a * rng.next(),
+                q.y + 0.2 * a * rng.next(),
+                q.z + 0.3 * a * rng.next(),
+            ]
         })
         .collect();
     (shell, x, a)
@@ -47,8 +58,11 @@ fn random_case(seed: u64) -> (Shell, Vec<f64>, f64) {
 fn fd_gradient_and_hessian_of_every_energy_on_random_deformed_meshes() {
     for seed in [1u64, 7, 42] {
         let (shell, x, a) = random_case(seed);
-        let parts: [(&str, &dyn Energy); 3] =
-            [("membrane", &shell.membrane), ("bending", &shell.bending), ("shell", &shell)];
+        let parts: [(&str, &dyn Energy); 3] = [
+            ("membrane", &shell.membrane),
+            ("bending", &shell.bending),
+            ("shell", &shell),
+        ];
         for (name, e) in parts {
             let g = check_gradient(e, &x, a);
             let h = check_hessian(e, &x, a);
@@ -67,7 +81,11 @@ fn fd_gradient_and_hessian_of_every_energy_on_random_deformed_meshes() {
         let m = nalgebra::DMatrix::from_row_slice(n, n, &d);
         let eig = m.symmetric_eigenvalues();
         let max = eig.max();
-        assert!(eig.min() > -1e-9 * max, "projected Hessian has eigenvalue {}", eig.min());
+        assert!(
+            eig.min() > -1e-9 * max,
+            "projected Hessian has eigenvalue {}",
+            eig.min()
+        );
     }
 }
 
@@ -129,8 +147,12 @@ fn cylinder_density(nx: usize, ny: usize, a: f64, r: f64) -> (f64, f64) {
     let eb = shell.bending.eval(&x, None, None, false);
     // Area carried by the hinges: a third of each of the two triangles (interior region).
     let m: &TriMesh = &shell.rest;
-    let hinge_area: f64 =
-        shell.topology.hinges.iter().map(|h| (m.triangle_area(h.tris[0]) + m.triangle_area(h.tris[1])) / 3.0).sum();
+    let hinge_area: f64 = shell
+        .topology
+        .hinges
+        .iter()
+        .map(|h| (m.triangle_area(h.tris[0]) + m.triangle_area(h.tris[1])) / 3.0)
+        .sum();
     (eb / hinge_area, eb / m.area())
 }
 
@@ -158,7 +180,10 @@ fn cylinder_bending_stores_d_over_2r2_and_converges() {
         prev = err;
         if nx == 80 {
             assert!(err < 0.03, "fine mesh error {err}");
-            assert!(err_total < 0.05, "fine mesh error over total area {err_total}");
+            assert!(
+                err_total < 0.05,
+                "fine mesh error over total area {err_total}"
+            );
         }
     }
 }
@@ -173,8 +198,12 @@ fn cylinder_calibration_does_not_depend_on_bending_direction() {
     let sheet = equilateral_sheet(nx, ny, a);
     let shell = Shell::new(sheet.mesh.clone(), material()).unwrap();
     let m = &shell.rest;
-    let hinge_area: f64 =
-        shell.topology.hinges.iter().map(|h| (m.triangle_area(h.tris[0]) + m.triangle_area(h.tris[1])) / 3.0).sum();
+    let hinge_area: f64 = shell
+        .topology
+        .hinges
+        .iter()
+        .map(|h| (m.triangle_area(h.tris[0]) + m.triangle_area(h.tris[1])) / 3.0)
+        .sum();
     for phi in [0.0f64, 0.3, std::f64::consts::FRAC_PI_2] {
         // Bend about an axis at angle phi from y: s is the arc coordinate across the axis.
         let (c, s) = (phi.cos(), phi.sin());

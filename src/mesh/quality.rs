@@ -76,12 +76,19 @@ pub fn triangle_quality(p: [Vector3<f64>; 3]) -> (f64, f64) {
     let s = 0.5 * (a + b + c);
     // r_in = A / s, r_circ = abc / (4A): q = 8 A² / (s a b c).
     let denom = s * a * b * c;
-    let q = if denom > 0.0 && denom.is_finite() { (8.0 * area * area / denom).min(1.0) } else { 0.0 };
+    let q = if denom > 0.0 && denom.is_finite() {
+        (8.0 * area * area / denom).min(1.0)
+    } else {
+        0.0
+    };
     let ang = |opp: f64, x: f64, y: f64| {
         if x * y <= 0.0 {
             0.0
         } else {
-            ((x * x + y * y - opp * opp) / (2.0 * x * y)).clamp(-1.0, 1.0).acos().to_degrees()
+            ((x * x + y * y - opp * opp) / (2.0 * x * y))
+                .clamp(-1.0, 1.0)
+                .acos()
+                .to_degrees()
         }
     };
     let min_angle = ang(a, b, c).min(ang(b, c, a)).min(ang(c, a, b));
@@ -95,12 +102,23 @@ pub fn check(mesh: &TriMesh, threshold: f64) -> QualityReport {
     let mut worst = 1.0f64;
     let mut sum = 0.0;
     for (t, &tri) in mesh.triangles.iter().enumerate() {
-        let pos = tri.map(|v| mesh.positions.get(v).copied().unwrap_or_else(Vector3::zeros));
+        let pos = tri.map(|v| {
+            mesh.positions
+                .get(v)
+                .copied()
+                .unwrap_or_else(Vector3::zeros)
+        });
         let (q, min_angle_deg) = triangle_quality(pos);
         worst = worst.min(q);
         sum += q;
         if q < threshold {
-            slivers.push(Sliver { triangle: t, vertices: tri, positions: pos, quality: q, min_angle_deg });
+            slivers.push(Sliver {
+                triangle: t,
+                vertices: tri,
+                positions: pos,
+                quality: q,
+                min_angle_deg,
+            });
         }
     }
     slivers.sort_by(|a, b| a.quality.total_cmp(&b.quality));
@@ -128,7 +146,11 @@ mod tests {
         let (q, a) = triangle_quality(eq);
         assert!((q - 1.0).abs() < 1e-12 && (a - 60.0).abs() < 1e-9);
         // Right isoceles legs 1: r_in = (2 − √2)/2, r_circ = √2/2, q = 2√2 − 2 ≈ 0.828.
-        let ri = [Vector3::new(0.0, 0.0, 0.0), Vector3::new(1.0, 0.0, 0.0), Vector3::new(0.0, 1.0, 0.0)];
+        let ri = [
+            Vector3::new(0.0, 0.0, 0.0),
+            Vector3::new(1.0, 0.0, 0.0),
+            Vector3::new(0.0, 1.0, 0.0),
+        ];
         assert!((triangle_quality(ri).0 - (2.0 * 2f64.sqrt() - 2.0)).abs() < 1e-12);
         let m = TriMesh::new(
             vec![
@@ -144,7 +166,10 @@ mod tests {
         assert_eq!(r.slivers[0].triangle, 1);
         assert!(r.slivers[0].min_angle_deg < 0.3);
         let msg = r.message();
-        assert!(msg.contains("triangle 1") && msg.contains("1 of 2"), "{msg}");
+        assert!(
+            msg.contains("triangle 1") && msg.contains("1 of 2"),
+            "{msg}"
+        );
         assert!(check(&m, 0.01).is_ok() || r.slivers[0].quality < 0.01);
     }
 }

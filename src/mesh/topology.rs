@@ -80,11 +80,18 @@ impl Topology {
         for (t, tri) in mesh.triangles.iter().enumerate() {
             for &v in tri {
                 if v >= n {
-                    return Err(TopologyError::BadIndex { tri: t, vertex: v, count: n });
+                    return Err(TopologyError::BadIndex {
+                        tri: t,
+                        vertex: v,
+                        count: n,
+                    });
                 }
             }
             if tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] {
-                return Err(TopologyError::DegenerateTriangle { tri: t, verts: *tri });
+                return Err(TopologyError::DegenerateTriangle {
+                    tri: t,
+                    verts: *tri,
+                });
             }
             for k in 0..3 {
                 let (a, b) = (tri[k], tri[(k + 1) % 3]);
@@ -112,7 +119,10 @@ impl Topology {
                     }
                     let o0 = tri0[(k0 + 2) % 3];
                     let o1 = tri1[(k1 + 2) % 3];
-                    topo.hinges.push(Hinge { v: [s0, e0, o0, o1], tris: [t0, t1] });
+                    topo.hinges.push(Hinge {
+                        v: [s0, e0, o0, o1],
+                        tris: [t0, t1],
+                    });
                     let _ = e1;
                 }
                 c => return Err(TopologyError::NonManifoldEdge { a, b, count: c }),
@@ -159,7 +169,10 @@ mod tests {
     fn bad_meshes_are_refused_with_the_reason() {
         let mut m = square();
         m.triangles[1] = [0, 3, 2];
-        assert!(matches!(Topology::new(&m), Err(TopologyError::InconsistentWinding { .. })));
+        assert!(matches!(
+            Topology::new(&m),
+            Err(TopologyError::InconsistentWinding { .. })
+        ));
         let mut m = square();
         m.triangles.push([2, 0, 1]);
         m.triangles[2] = [0, 2, 1];
@@ -168,6 +181,9 @@ mod tests {
         assert!(Topology::new(&m).is_err());
         let mut m = square();
         m.triangles[0] = [0, 1, 9];
-        assert!(matches!(Topology::new(&m), Err(TopologyError::BadIndex { .. })));
+        assert!(matches!(
+            Topology::new(&m),
+            Err(TopologyError::BadIndex { .. })
+        ));
     }
 }

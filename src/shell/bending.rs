@@ -66,32 +66,47 @@ pub struct Dual {
 impl Add for Dual {
     type Output = Dual;
     fn add(self, o: Dual) -> Dual {
-        Dual { v: self.v + o.v, d: self.d + o.d }
+        Dual {
+            v: self.v + o.v,
+            d: self.d + o.d,
+        }
     }
 }
 impl Sub for Dual {
     type Output = Dual;
     fn sub(self, o: Dual) -> Dual {
-        Dual { v: self.v - o.v, d: self.d - o.d }
+        Dual {
+            v: self.v - o.v,
+            d: self.d - o.d,
+        }
     }
 }
 impl Mul for Dual {
     type Output = Dual;
     fn mul(self, o: Dual) -> Dual {
-        Dual { v: self.v * o.v, d: self.d * o.v + self.v * o.d }
+        Dual {
+            v: self.v * o.v,
+            d: self.d * o.v + self.v * o.d,
+        }
     }
 }
 impl Div for Dual {
     type Output = Dual;
     fn div(self, o: Dual) -> Dual {
         let q = self.v / o.v;
-        Dual { v: q, d: (self.d - q * o.d) / o.v }
+        Dual {
+            v: q,
+            d: (self.d - q * o.d) / o.v,
+        }
     }
 }
 impl Neg for Dual {
     type Output = Dual;
     fn neg(self) -> Dual {
-        Dual { v: -self.v, d: -self.d }
+        Dual {
+            v: -self.v,
+            d: -self.d,
+        }
     }
 }
 impl Scalar for Dual {
@@ -100,11 +115,17 @@ impl Scalar for Dual {
     }
     fn sqrt(self) -> Self {
         let s = self.v.sqrt();
-        Dual { v: s, d: self.d / (2.0 * s) }
+        Dual {
+            v: s,
+            d: self.d / (2.0 * s),
+        }
     }
     fn atan2(self, x: Self) -> Self {
         let r2 = x.v * x.v + self.v * self.v;
-        Dual { v: self.v.atan2(x.v), d: (x.v * self.d - self.v * x.d) / r2 }
+        Dual {
+            v: self.v.atan2(x.v),
+            d: (x.v * self.d - self.v * x.d) / r2,
+        }
     }
 }
 
@@ -117,7 +138,11 @@ fn dot<T: Scalar>(a: V<T>, b: V<T>) -> T {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 fn cross<T: Scalar>(a: V<T>, b: V<T>) -> V<T> {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 fn scale<T: Scalar>(s: T, a: V<T>) -> V<T> {
     [s * a[0], s * a[1], s * a[2]]
@@ -155,7 +180,10 @@ pub fn hinge_angle_hessian(x: [[f64; 3]; 4]) -> [f64; 144] {
     let mut h = [0.0; 144];
     for k in 0..12 {
         let xd: [V<Dual>; 4] = std::array::from_fn(|i| {
-            std::array::from_fn(|c| Dual { v: x[i][c], d: if 3 * i + c == k { 1.0 } else { 0.0 } })
+            std::array::from_fn(|c| Dual {
+                v: x[i][c],
+                d: if 3 * i + c == k { 1.0 } else { 0.0 },
+            })
         });
         let (_, g) = hinge_angle(xd);
         for i in 0..4 {
@@ -235,13 +263,24 @@ impl BendingEnergy {
             let area = rest.triangle_area(h.tris[0]) + rest.triangle_area(h.tris[1]);
             let el2 = (p[h.v[1]] - p[h.v[0]]).norm_squared();
             if !(area > 0.0) {
-                anyhow::bail!("hinge on edge {:?} has zero rest area; remesh it", [h.v[0], h.v[1]]);
+                anyhow::bail!(
+                    "hinge on edge {:?} has zero rest area; remesh it",
+                    [h.v[0], h.v[1]]
+                );
             }
             let xs = h.v.map(|i| [p[i].x, p[i].y, p[i].z]);
             let (theta, _) = hinge_angle(xs);
-            hinges.push(HingeElement { v: h.v, k: 0.5 * d * el2 / area, rest_angle: theta });
+            hinges.push(HingeElement {
+                v: h.v,
+                k: 0.5 * d * el2 / area,
+                rest_angle: theta,
+            });
         }
-        Ok(Self { hinges, rigidity: d, n_dofs: 3 * p.len() })
+        Ok(Self {
+            hinges,
+            rigidity: d,
+            n_dofs: 3 * p.len(),
+        })
     }
 
     /// Number of Hessian triplets emitted per evaluation.
@@ -268,7 +307,11 @@ impl Energy for BendingEnergy {
     ) -> f64 {
         let want_g = grad.is_some();
         let ne = self.hinges.len();
-        let mut gbuf = if want_g { vec![[0.0; 12]; ne] } else { Vec::new() };
+        let mut gbuf = if want_g {
+            vec![[0.0; 12]; ne]
+        } else {
+            Vec::new()
+        };
         let energy: f64 = if let Some(h) = hess {
             let start = h.len();
             h.resize(start + 144 * ne, (0, 0, 0.0));
@@ -289,8 +332,11 @@ impl Energy for BendingEnergy {
                     }
                     for r in 0..12 {
                         for c in 0..12 {
-                            tr[r * 12 + c] =
-                                (3 * el.v[r / 3] + r % 3, 3 * el.v[c / 3] + c % 3, he[r * 12 + c]);
+                            tr[r * 12 + c] = (
+                                3 * el.v[r / 3] + r % 3,
+                                3 * el.v[c / 3] + c % 3,
+                                he[r * 12 + c],
+                            );
                         }
                     }
                     e
@@ -302,7 +348,10 @@ impl Energy for BendingEnergy {
                 .map(|(g, el)| hinge_element(el, gather4(x, el.v), Some(g), None))
                 .sum()
         } else {
-            self.hinges.par_iter().map(|el| hinge_element(el, gather4(x, el.v), None, None)).sum()
+            self.hinges
+                .par_iter()
+                .map(|el| hinge_element(el, gather4(x, el.v), None, None))
+                .sum()
         };
         if let Some(g) = grad {
             for (el, ge) in self.hinges.iter().zip(&gbuf) {
@@ -323,7 +372,12 @@ mod tests {
 
     #[test]
     fn hinge_angle_gradient_matches_finite_differences() {
-        let x = [[0.0, 0.0, 0.0], [1.0, 0.1, 0.0], [0.3, 0.9, 0.2], [0.6, -0.8, 0.4]];
+        let x = [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.1, 0.0],
+            [0.3, 0.9, 0.2],
+            [0.6, -0.8, 0.4],
+        ];
         let (_, g) = hinge_angle(x);
         let h = 1e-6;
         for i in 0..4 {
@@ -333,7 +387,11 @@ mod tests {
                 let mut xm = x;
                 xm[i][c] -= h;
                 let num = (hinge_angle(xp).0 - hinge_angle(xm).0) / (2.0 * h);
-                assert!((num - g[i][c]).abs() < 1e-7, "{i} {c}: {num} vs {}", g[i][c]);
+                assert!(
+                    (num - g[i][c]).abs() < 1e-7,
+                    "{i} {c}: {num} vs {}",
+                    g[i][c]
+                );
             }
         }
     }

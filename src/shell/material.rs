@@ -76,12 +76,37 @@ mod tests {
 
     #[test]
     fn validation_names_field_and_rigidity_formula() {
-        let m = ShellMaterial { young: 1e6, poisson: 0.3, thickness: 1e-3 };
+        let m = ShellMaterial {
+            young: 1e6,
+            poisson: 0.3,
+            thickness: 1e-3,
+        };
         m.validate().unwrap();
         let d = 1e6 * 1e-9 / (12.0 * 0.91);
         assert!((m.bending_rigidity() - d).abs() < 1e-15);
-        assert_eq!(ShellMaterial { poisson: 0.5, ..m }.validate().unwrap_err().field, "poisson");
-        assert_eq!(ShellMaterial { young: -1.0, ..m }.validate().unwrap_err().field, "young");
-        assert_eq!(ShellMaterial { thickness: f64::NAN, ..m }.validate().unwrap_err().field, "thickness");
+        assert_eq!(
+            ShellMaterial { poisson: 0.5, ..m }
+                .validate()
+                .unwrap_err()
+                .field,
+            "poisson"
+        );
+        assert_eq!(
+            ShellMaterial { young: -1.0, ..m }
+                .validate()
+                .unwrap_err()
+                .field,
+            "young"
+        );
+        assert_eq!(
+            ShellMaterial {
+                thickness: f64::NAN,
+                ..m
+            }
+            .validate()
+            .unwrap_err()
+            .field,
+            "thickness"
+        );
     }
 }

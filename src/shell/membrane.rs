@@ -55,7 +55,11 @@ pub fn membrane_rest(v: [usize; 3], p: [Vector3<f64>; 3]) -> Option<MembraneElem
     let b1 = inv[0];
     let b2 = inv[1];
     let b0 = [-b1[0] - b2[0], -b1[1] - b2[1]];
-    Some(MembraneElement { v, b: [b0, b1, b2], area })
+    Some(MembraneElement {
+        v,
+        b: [b0, b1, b2],
+        area,
+    })
 }
 
 /// Energy (J) of one element at positions `x`; adds the 9-vector gradient and fills the
@@ -85,7 +89,10 @@ pub fn membrane_element(
             cg[a][bb] = (0..3).map(|c| f[c][a] * f[c][bb]).sum();
         }
     }
-    let e = [[0.5 * (cg[0][0] - 1.0), 0.5 * cg[0][1]], [0.5 * cg[1][0], 0.5 * (cg[1][1] - 1.0)]];
+    let e = [
+        [0.5 * (cg[0][0] - 1.0), 0.5 * cg[0][1]],
+        [0.5 * cg[1][0], 0.5 * (cg[1][1] - 1.0)],
+    ];
     let tr = e[0][0] + e[1][1];
     let ee = e[0][0] * e[0][0] + 2.0 * e[0][1] * e[0][1] + e[1][1] * e[1][1];
     let energy = el.area * (mu_h * ee + 0.5 * lambda_h * tr * tr);
@@ -114,7 +121,10 @@ pub fn membrane_element(
     if let Some(h) = hess {
         // S b_i
         let sb: [[f64; 2]; 3] = std::array::from_fn(|i| {
-            [s[0][0] * b[i][0] + s[0][1] * b[i][1], s[1][0] * b[i][0] + s[1][1] * b[i][1]]
+            [
+                s[0][0] * b[i][0] + s[0][1] * b[i][1],
+                s[1][0] * b[i][0] + s[1][1] * b[i][1],
+            ]
         });
         for j in 0..3 {
             for d in 0..3 {
@@ -126,8 +136,14 @@ pub fn membrane_element(
                 ];
                 let dtr = de[0][0] + de[1][1];
                 let ds = [
-                    [2.0 * mu_h * de[0][0] + lambda_h * dtr, 2.0 * mu_h * de[0][1]],
-                    [2.0 * mu_h * de[1][0], 2.0 * mu_h * de[1][1] + lambda_h * dtr],
+                    [
+                        2.0 * mu_h * de[0][0] + lambda_h * dtr,
+                        2.0 * mu_h * de[0][1],
+                    ],
+                    [
+                        2.0 * mu_h * de[1][0],
+                        2.0 * mu_h * de[1][1] + lambda_h * dtr,
+                    ],
                 ];
                 let col = 3 * j + d;
                 for i in 0..3 {
@@ -166,7 +182,12 @@ impl MembraneEnergy {
             })?;
             elements.push(el);
         }
-        Ok(Self { elements, mu_h, lambda_h, n_dofs: 3 * rest.positions.len() })
+        Ok(Self {
+            elements,
+            mu_h,
+            lambda_h,
+            n_dofs: 3 * rest.positions.len(),
+        })
     }
 
     /// Number of Hessian triplets emitted per evaluation.
@@ -199,7 +220,11 @@ impl Energy for MembraneEnergy {
             h.resize(start + 81 * ne, (0, 0, 0.0));
             hbuf = Some(&mut h[start..]);
         }
-        let mut gbuf = if want_g { vec![[0.0; 9]; ne] } else { Vec::new() };
+        let mut gbuf = if want_g {
+            vec![[0.0; 9]; ne]
+        } else {
+            Vec::new()
+        };
         let energy: f64 = match (hbuf, want_g) {
             (Some(hb), _) => {
                 let gchunks: Vec<Option<&mut [f64; 9]>> = if want_g {
@@ -225,8 +250,11 @@ impl Energy for MembraneEnergy {
                         }
                         for r in 0..9 {
                             for c in 0..9 {
-                                tr[r * 9 + c] =
-                                    (3 * el.v[r / 3] + r % 3, 3 * el.v[c / 3] + c % 3, he[r * 9 + c]);
+                                tr[r * 9 + c] = (
+                                    3 * el.v[r / 3] + r % 3,
+                                    3 * el.v[c / 3] + c % 3,
+                                    he[r * 9 + c],
+                                );
                             }
                         }
                         e
@@ -237,7 +265,14 @@ impl Energy for MembraneEnergy {
                 .par_iter_mut()
                 .zip(self.elements.par_iter())
                 .map(|(g, el)| {
-                    membrane_element(el, gather3(x, el.v), self.mu_h, self.lambda_h, Some(g), None)
+                    membrane_element(
+                        el,
+                        gather3(x, el.v),
+                        self.mu_h,
+                        self.lambda_h,
+                        Some(g),
+                        None,
+                    )
                 })
                 .sum(),
             (None, false) => self

@@ -31,7 +31,13 @@ impl Shell {
         let topology = Topology::new(&rest)?;
         let membrane = MembraneEnergy::new(&rest, &material)?;
         let bending = BendingEnergy::new(&rest, &topology, &material)?;
-        Ok(Self { rest, material, topology, membrane, bending })
+        Ok(Self {
+            rest,
+            material,
+            topology,
+            membrane,
+            bending,
+        })
     }
 
     /// Number of Hessian triplets one evaluation emits (fixed order: membrane, then bending).
@@ -52,7 +58,9 @@ impl Energy for Shell {
         mut hess: Option<&mut Vec<(usize, usize, f64)>>,
         project_psd: bool,
     ) -> f64 {
-        let em = self.membrane.eval(x, grad.as_deref_mut(), hess.as_deref_mut(), project_psd);
+        let em = self
+            .membrane
+            .eval(x, grad.as_deref_mut(), hess.as_deref_mut(), project_psd);
         let eb = self.bending.eval(x, grad, hess, project_psd);
         em + eb
     }

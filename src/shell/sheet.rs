@@ -68,7 +68,11 @@ pub fn equilateral_sheet(nx: usize, ny: usize, a: f64) -> Sheet {
             tris.push([o[nx], o[nx + 1], e[nx]]);
         }
     }
-    Sheet { mesh: TriMesh::new(positions, tris), rows, edge: a }
+    Sheet {
+        mesh: TriMesh::new(positions, tris),
+        rows,
+        edge: a,
+    }
 }
 
 #[cfg(test)]
@@ -85,7 +89,10 @@ mod tests {
         for t in 0..s.mesh.triangle_count() {
             let [a, b, c] = s.mesh.triangles[t];
             let p = &s.mesh.positions;
-            assert!((p[b] - p[a]).cross(&(p[c] - p[a])).z > 0.0, "triangle {t} not ccw");
+            assert!(
+                (p[b] - p[a]).cross(&(p[c] - p[a])).z > 0.0,
+                "triangle {t} not ccw"
+            );
         }
         Topology::new(&s.mesh).unwrap();
     }

@@ -7,7 +7,7 @@
 //! [ γC      −δI  ] [μ ] = [b]
 //! ```
 //!
-//! with γ balancing the rows, τ ≥ 0 an optional shift and δ = 1e-8 γ a tiny negative
+//! with γ balancing the rows, τ ≥ 0 an optional shift and δ (1e-4 γ from the Newton solver) a small negative
 //! regularisation of the constraint block.
 //!
 //! Why this method: the KKT matrix is symmetric indefinite. With δ > 0 and K + τI positive
@@ -162,11 +162,21 @@ impl KktSolver {
         let numeric_s = t1.elapsed().as_secs_f64();
         if res.is_err() {
             self.factored = false;
-            return Ok(KktFactorInfo { negative_pivots: usize::MAX, inertia_ok: false, symbolic_s, numeric_s });
+            return Ok(KktFactorInfo {
+                negative_pivots: usize::MAX,
+                inertia_ok: false,
+                symbolic_s,
+                numeric_s,
+            });
         }
         self.factored = true;
         let neg = negative_pivots(sym, &self.values);
-        Ok(KktFactorInfo { negative_pivots: neg, inertia_ok: neg == n_cons, symbolic_s, numeric_s })
+        Ok(KktFactorInfo {
+            negative_pivots: neg,
+            inertia_ok: neg == n_cons,
+            symbolic_s,
+            numeric_s,
+        })
     }
 
     /// True when the last factorisation succeeded (no zero pivot).
@@ -177,7 +187,10 @@ impl KktSolver {
     /// Solve the *unregularised* KKT system (τ kept, δ removed) for `rhs` in place, with
     /// `refine` steps of iterative refinement.
     pub fn solve(&mut self, rhs: &mut [f64], refine: usize) {
-        assert!(self.factored, "KktSolver::solve before a successful factorize");
+        assert!(
+            self.factored,
+            "KktSolver::solve before a successful factorize"
+        );
         let b = rhs.to_vec();
         self.raw_solve(rhs);
         for _ in 0..refine {
@@ -206,7 +219,10 @@ impl KktSolver {
 
     /// Forget the cached analysis.
     pub fn reset(&mut self) {
-        *self = Self { symbolic_count: self.symbolic_count, ..Self::default() };
+        *self = Self {
+            symbolic_count: self.symbolic_count,
+            ..Self::default()
+        };
     }
 }
 
@@ -267,5 +283,65 @@ mod tests {
         let kn2 = vec![(0, 0, 1.0), (1, 1, 2.0), (2, 2, -0.1)];
         let info = s.factorize(3, 1, &kn2, &c2, 1.0, 0.0, 1e-8).unwrap();
         assert!(info.inertia_ok, "{info:?}");
+    }
+}
+
+#[cfg(test)]
+mod inertia_tests {
+    use super::*;
+
+    /// 3D Dirichlet Laplacian on an N³ grid minus σ I: the number of negative pivots must
+    /// equal the number of eigenvalues Σ 4 sin²(kπ/2(N+1)) below σ (supernodal factor).
+    #[test]
+    fn negative_pivots_count_eigenvalues_below_shift_on_a_large_supernodal_matrix() {
+        let nn = 16usize;
+        let n = nn * nn * nn;
+        let id = |i: usize, j: usize, k: usize| (i * nn + j) * nn + k;
+        let mut t = Vec::new();
+        for i in 0..nn {
+            for j in 0..nn {
+                for k in 0..nn {
+                    t.push((id(i, j, k), id(i, j, k), 6.0));
+                    let mut link = |a: usize, b: usize| {
+                        t.push((a, b, -1.0));
+                        t.push((b, a, -1.0));
+                    };
+                    if i + 1 < nn {
+                        link(id(i, j, k), id(i + 1, j, k));
+                    }
+                    if j + 1 < nn {
+                        link(id(i, j, k), id(i, j + 1, k));
+                    }
+                    if k + 1 < nn {
+                        link(id(i, j, k), id(i, j, k + 1));
+                    }
+                }
+            }
+        }
+        let ev: Vec<f64> = (1..=nn)
+            .map(|k| {
+                let s = (k as f64 * std::f64::consts::PI / (2.0 * (nn as f64 + 1.0))).sin();
+                4.0 * s * s
+            })
+            .collect();
+        let mut s = KktSolver::new();
+        for sigma in [0.01, 0.2, 0.5, 1.0] {
+            let mut expected = 0;
+            for a in &ev {
+                for b in &ev {
+                    for c in &ev {
+                        if a + b + c < sigma {
+                            expected += 1;
+                        }
+                    }
+                }
+            }
+            let info = s.factorize(n, 0, &t, &[], 1.0, -sigma, 0.0).unwrap();
+            assert_eq!(info.negative_pivots, expected, "sigma {sigma}");
+        }
+        assert!(matches!(
+            s.symbolic.as_ref().unwrap().raw(),
+            SymbolicCholeskyRaw::Supernodal(_)
+        ));
     }
 }

@@ -10,7 +10,7 @@
 //! frame after frame only numeric work is done.
 
 use super::kkt::{KktFactorInfo, KktSolver};
-use super::linesearch::{residual_line_search, LineSearch};
+use super::linesearch::{line_search, EnergyMerit, LineSearch, Trial};
 use super::status::{SolveReport, SolveStatus};
 use crate::math::sparse::SparseError;
 use crate::math::Energy;
@@ -84,6 +84,11 @@ pub struct StaticSettings {
     pub refinement_steps: usize,
     /// Maximum trial steps per line search.
     pub max_line_search: usize,
+    /// Also accept steps that satisfy Armijo on the energy merit (the Lagrangian with the
+    /// new multipliers), not only on the residual norm. DESIGN.md prescribes the residual
+    /// rule alone (`false`); thin shells moving out of plane need `true` (see
+    /// [`super::linesearch`]).
+    pub energy_merit: bool,
 }
 
 impl Default for StaticSettings {
@@ -93,8 +98,9 @@ impl Default for StaticSettings {
             max_iterations: 50,
             hessian: HessianMode::Auto,
             gamma: None,
-            refinement_steps: 2,
+            refinement_steps: 3,
             max_line_search: 30,
+            energy_merit: false,
         }
     }
 }
@@ -117,18 +123,27 @@ impl StaticSettings {
     /// Check the settings; the error names the bad field.
     pub fn validate(&self) -> Result<(), SolverError> {
         if !(self.tolerance.is_finite() && self.tolerance > 0.0) {
-            return Err(SolverError::Settings(format!("tolerance = {} must be > 0 (N)", self.tolerance)));
+            return Err(SolverError::Settings(format!(
+                "tolerance = {} must be > 0 (N)",
+                self.tolerance
+            )));
         }
         if self.max_iterations == 0 {
-            return Err(SolverError::Settings("max_iterations must be at least 1".into()));
+            return Err(SolverError::Settings(
+                "max_iterations must be at least 1".into(),
+            ));
         }
         if let Some(g) = self.gamma {
             if !(g.is_finite() && g > 0.0) {
-                return Err(SolverError::Settings(format!("gamma = {g} must be > 0 (N/m)")));
+                return Err(SolverError::Settings(format!(
+                    "gamma = {g} must be > 0 (N/m)"
+                )));
             }
         }
         if self.max_line_search == 0 {
-            return Err(SolverError::Settings("max_line_search must be at least 1".into()));
+            return Err(SolverError::Settings(
+                "max_line_search must be at least 1".into(),
+            ));
         }
         Ok(())
     }
@@ -145,6 +160,7 @@ pub struct StaticSolver {
     multipliers: Vec<f64>,
     trip: Vec<(usize, usize, f64)>,
     kfree: Vec<(usize, usize, f64)>,
+    last_shift: f64,
 }
 
 struct Setup {
@@ -155,11 +171,21 @@ struct Setup {
 
 const PINNED: usize = usize::MAX;
 
+/// Regularisation δ of the constraint block, relative to γ. The factorisation sees the
+/// penalty K + (γ²/δ) CᵀC on the free block; δ = 1e-4 γ keeps that penalty (1e4 γ) strong
+/// enough for the inertia test yet small enough that its round-off (1e4 γ × 1e-16) stays far
+/// below the soft bending eigenvalues of a thin skin (with δ = 1e-8 γ the Euler test strip
+/// lost its lowest mode in round-off). Iterative refinement removes δ from the solution.
+const KKT_DELTA: f64 = 1e-4;
+
 impl StaticSolver {
     /// A solver with `settings` (validated).
     pub fn new(settings: StaticSettings) -> Result<Self, SolverError> {
         settings.validate()?;
-        Ok(Self { settings, ..Default::default() })
+        Ok(Self {
+            settings,
+            ..Default::default()
+        })
     }
 
     /// Number of symbolic analyses done so far (1 while the problem's structure is fixed).
@@ -176,7 +202,10 @@ impl StaticSolver {
     fn setup(&self, e: &dyn Energy, p: &StaticProblem, x: &[f64]) -> Result<Setup, SolverError> {
         let n = e.dofs();
         if x.len() != n {
-            return Err(SolverError::Problem(format!("x has {} values, the energy has {n} dofs", x.len())));
+            return Err(SolverError::Problem(format!(
+                "x has {} values, the energy has {n} dofs",
+                x.len()
+            )));
         }
         if !p.forces.is_empty() && p.forces.len() != n {
             return Err(SolverError::Problem(format!(
@@ -195,7 +224,9 @@ impl StaticSolver {
         let mut free_of = vec![0usize; n];
         for &d in &p.pinned {
             if d >= n {
-                return Err(SolverError::Problem(format!("pinned dof {d} out of range ({n} dofs)")));
+                return Err(SolverError::Problem(format!(
+                    "pinned dof {d} out of range ({n} dofs)"
+                )));
             }
             free_of[d] = PINNED;
         }
@@ -219,9 +250,15 @@ impl StaticSolver {
             }
         }
         if x.iter().any(|v| !v.is_finite()) {
-            return Err(SolverError::Problem("start state x contains NaN or infinity".into()));
+            return Err(SolverError::Problem(
+                "start state x contains NaN or infinity".into(),
+            ));
         }
-        Ok(Setup { free_of, free, cfree })
+        Ok(Setup {
+            free_of,
+            free,
+            cfree,
+        })
     }
 
     /// Residual vector over [free dofs; constraint rows] and the energy, at (x, μ).
@@ -248,7 +285,11 @@ impl StaticSolver {
         }
         let cx = p.constraints.apply(x);
         let mut r: Vec<f64> = s.free.iter().map(|&d| g[d]).collect();
-        r.extend(cx.iter().zip(&p.constraints.rhs).map(|(a, b)| gamma * (a - b)));
+        r.extend(
+            cx.iter()
+                .zip(&p.constraints.rhs)
+                .map(|(a, b)| gamma * (a - b)),
+        );
         (r, energy)
     }
 
@@ -292,7 +333,9 @@ impl StaticSolver {
         let gamma = self.gamma_for(s.free.len());
         let (nf, nc) = (s.free.len(), p.constraints.rows);
         let kfree = std::mem::take(&mut self.kfree);
-        let r = self.kkt.factorize(nf, nc, &kfree, &s.cfree, gamma, 0.0, 1e-8 * gamma);
+        let r = self
+            .kkt
+            .factorize(nf, nc, &kfree, &s.cfree, gamma, 0.0, KKT_DELTA * gamma);
         self.kfree = kfree;
         Ok(r?)
     }
@@ -371,13 +414,37 @@ impl StaticSolver {
                 break;
             }
             // Newton direction with the inertia-controlled Hessian choice.
-            let modes: &[(bool, f64)] = match st.hessian {
-                HessianMode::Exact => &[(false, 0.0), (false, 1e-6), (false, 1e-4), (false, 1e-2)],
-                HessianMode::Projected => &[(true, 0.0), (true, 1e-6), (true, 1e-4), (true, 1e-2), (true, 1.0)],
-                HessianMode::Auto => &[(false, 0.0), (true, 0.0), (true, 1e-6), (true, 1e-4), (true, 1e-2), (true, 1.0)],
-            };
+            // Attempts (project, shift/γ): exact Hessian; if it is not positive definite on
+            // the constraint null space, the exact Hessian shifted by τ I (τ grown ×10 from a
+            // quarter of the last successful shift; keeps the negative-curvature information
+            // so Newton escapes saddles quickly, as in IPOPT's inertia correction); as a last
+            // resort the element-projected Hessian.
+            let start_shift = (self.last_shift / 4.0).max(1e-10);
+            let shifts: Vec<f64> = (0..12)
+                .map(|k| start_shift * 10f64.powi(k))
+                .filter(|&t| t <= 1.0)
+                .collect();
+            let mut modes: Vec<(bool, f64)> = Vec::new();
+            match st.hessian {
+                HessianMode::Exact => {
+                    modes.push((false, 0.0));
+                    modes.extend(shifts.iter().map(|&t| (false, t)));
+                }
+                HessianMode::Projected => {
+                    modes.push((true, 0.0));
+                    modes.extend(shifts.iter().map(|&t| (true, t)));
+                }
+                HessianMode::Auto => {
+                    modes.push((false, 0.0));
+                    modes.extend(shifts.iter().map(|&t| (false, t)));
+                    modes.push((true, 0.0));
+                    modes.push((true, 1e-6));
+                    modes.push((true, 1.0));
+                }
+            }
             let mut used = false;
             for (k, &(project, shift)) in modes.iter().enumerate() {
+                let shift: f64 = shift;
                 if have_hessian != Some(project) {
                     let t = Instant::now();
                     self.hessian(e, &s, x, project);
@@ -386,7 +453,15 @@ impl StaticSolver {
                 }
                 let kfree = std::mem::take(&mut self.kfree);
                 let t = Instant::now();
-                let info = self.kkt.factorize(nf, nc, &kfree, &s.cfree, gamma, shift * gamma, 1e-8 * gamma);
+                let info = self.kkt.factorize(
+                    nf,
+                    nc,
+                    &kfree,
+                    &s.cfree,
+                    gamma,
+                    shift * gamma,
+                    KKT_DELTA * gamma,
+                );
                 let el = t.elapsed().as_secs_f64();
                 self.kfree = kfree;
                 let info = info?;
@@ -395,13 +470,12 @@ impl StaticSolver {
                 rep.assembly_s += (el - info.numeric_s - info.symbolic_s).max(0.0);
                 rep.factor_s -= (el - info.numeric_s - info.symbolic_s).max(0.0);
                 let last = k + 1 == modes.len();
-                let ok = match st.hessian {
-                    HessianMode::Exact => self.kkt.is_factored(),
-                    _ => info.inertia_ok,
-                };
-                if ok || (last && self.kkt.is_factored()) {
+                if info.inertia_ok || (last && self.kkt.is_factored()) {
                     if k > 0 {
                         rep.modified_hessian_steps += 1;
+                    }
+                    if !project {
+                        self.last_shift = shift;
                     }
                     used = true;
                     break;
@@ -436,18 +510,58 @@ impl StaticSolver {
                 }
             };
             let mut best: Option<(Vec<f64>, f64)> = None;
+            // Energy merit ψ(t) = E − fᵀx + γ μ⁺ᵀ (Cx − d) with μ⁺ = μ + Δμ fixed;
+            // ψ'(0) = r_xᵀ Δx + γ Δμᵀ C Δx.
+            let merit0 = if st.energy_merit {
+                let mut cdx = vec![0.0; nc];
+                for &(row, j, v) in &s.cfree {
+                    cdx[row] += v * step[j];
+                }
+                let slope = r[..nf]
+                    .iter()
+                    .zip(&step[..nf])
+                    .map(|(a, b)| a * b)
+                    .sum::<f64>()
+                    + gamma * step[nf..].iter().zip(&cdx).map(|(a, b)| a * b).sum::<f64>();
+                let viol = p.constraints.apply(x);
+                let value = energy
+                    + gamma
+                        * viol
+                            .iter()
+                            .zip(&p.constraints.rhs)
+                            .zip(&mu0)
+                            .zip(&step[nf..])
+                            .map(|(((cx, d), m), dm)| (m + dm) * (cx - d))
+                            .sum::<f64>();
+                Some(EnergyMerit { value, slope })
+            } else {
+                None
+            };
+            let mu_plus: Vec<f64> = mu0.iter().zip(&step[nf..]).map(|(m, d)| m + d).collect();
             let ls = {
                 let mut xt = x0.clone();
                 let mut mt = mu0.clone();
                 let selfr = &*self;
-                residual_line_search(
+                line_search(
                     rn,
+                    merit0,
                     |a| {
                         trial(a, &mut xt, &mut mt);
                         let (rt, et) = selfr.residual(e, p, &s, &xt, &mt, gamma);
                         let n = norm(&rt);
+                        let merit = if merit0.is_some() {
+                            let cx = p.constraints.apply(&xt);
+                            et + gamma
+                                * cx.iter()
+                                    .zip(&p.constraints.rhs)
+                                    .zip(&mu_plus)
+                                    .map(|((c, d), m)| m * (c - d))
+                                    .sum::<f64>()
+                        } else {
+                            f64::NAN
+                        };
                         best = Some((rt, et));
-                        n
+                        Trial { residual: n, merit }
                     },
                     st.max_line_search,
                 )
@@ -470,8 +584,11 @@ impl StaticSolver {
         rep.residual = rn;
         rep.energy = energy;
         let cx = p.constraints.apply(x);
-        rep.constraint_violation =
-            cx.iter().zip(&p.constraints.rhs).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        rep.constraint_violation = cx
+            .iter()
+            .zip(&p.constraints.rhs)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
         self.multipliers = mu;
         rep.total_s = t_start.elapsed().as_secs_f64();
         Ok(rep)
@@ -516,10 +633,18 @@ mod tests {
     fn newton_finds_known_constrained_minimum_and_reuses_analysis() {
         let p = StaticProblem {
             pinned: vec![0],
-            constraints: LinearConstraints { rows: 1, entries: vec![(0, 1, 1.0), (0, 2, 1.0)], rhs: vec![2.0] },
+            constraints: LinearConstraints {
+                rows: 1,
+                entries: vec![(0, 1, 1.0), (0, 2, 1.0)],
+                rhs: vec![2.0],
+            },
             forces: vec![0.0, 0.0, 0.0, 8.0, -1.0, 0.0],
         };
-        let settings = StaticSettings { tolerance: 1e-10, gamma: Some(1.0), ..Default::default() };
+        let settings = StaticSettings {
+            tolerance: 1e-10,
+            gamma: Some(1.0),
+            ..Default::default()
+        };
         let mut solver = StaticSolver::new(settings).unwrap();
         let mut x = vec![0.5, 3.0, -0.5, 1.0, 1.0, 0.0];
         let rep = solver.solve(&Quartic, &p, &mut x).unwrap();
