@@ -28,14 +28,23 @@ pub struct BenchSheet {
 
 /// Build the benchmark sheet with about `faces` triangles.
 pub fn bench_sheet(faces: usize) -> anyhow::Result<BenchSheet> {
-    anyhow::ensure!(faces >= 50, "bench shell needs at least 50 faces (got {faces})");
+    anyhow::ensure!(
+        faces >= 50,
+        "bench shell needs at least 50 faces (got {faces})"
+    );
     let side = 0.1;
     // faces ≈ ny (2 nx + 1), ny ≈ nx · 2/√3 for a square.
-    let nx = ((faces as f64 / (4.0 / 3f64.sqrt())).sqrt()).round().max(4.0) as usize;
+    let nx = ((faces as f64 / (4.0 / 3f64.sqrt())).sqrt())
+        .round()
+        .max(4.0) as usize;
     let a = side / nx as f64;
     let ny = ((side / (a * 3f64.sqrt() / 2.0)).round() as usize).max(2);
     let sheet = equilateral_sheet(nx, ny, a);
-    let mat = ShellMaterial { young: 1.0e6, poisson: 0.3, thickness: 5.0e-4 };
+    let mat = ShellMaterial {
+        young: 1.0e6,
+        poisson: 0.3,
+        thickness: 5.0e-4,
+    };
     let mesh = sheet.mesh.clone();
     let shell = Shell::new(mesh, mat)?;
     let mut on_boundary = vec![false; shell.rest.vertex_count()];
@@ -51,7 +60,10 @@ pub fn bench_sheet(faces: usize) -> anyhow::Result<BenchSheet> {
     let mut c = LinearConstraints::none();
     let offsets = [[0.0, 0.0], [1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]];
     for off in offsets {
-        let cc = [centre[0] + 1.5 * sigma * off[0], centre[1] + 1.5 * sigma * off[1]];
+        let cc = [
+            centre[0] + 1.5 * sigma * off[0],
+            centre[1] + 1.5 * sigma * off[1],
+        ];
         let mut w: Vec<(usize, f64)> = Vec::new();
         for (v, p) in shell.rest.positions.iter().enumerate() {
             let d2 = (p.x - cc[0]).powi(2) + (p.y - cc[1]).powi(2);
@@ -71,7 +83,12 @@ pub fn bench_sheet(faces: usize) -> anyhow::Result<BenchSheet> {
             c.rows += 1;
         }
     }
-    Ok(BenchSheet { shell, boundary, constraints: c, side })
+    Ok(BenchSheet {
+        shell,
+        boundary,
+        constraints: c,
+        side,
+    })
 }
 
 impl BenchSheet {
@@ -89,7 +106,11 @@ impl BenchSheet {
             x[3 * v + 2] = 0.0;
             pinned.extend([3 * v, 3 * v + 1, 3 * v + 2]);
         }
-        StaticProblem { pinned, constraints: self.constraints.clone(), forces: Vec::new() }
+        StaticProblem {
+            pinned,
+            constraints: self.constraints.clone(),
+            forces: Vec::new(),
+        }
     }
 
     /// Residual tolerance (N): 1e-9 of the membrane force scale E h · side.
@@ -102,6 +123,8 @@ fn report_json(r: &SolveReport) -> serde_json::Value {
     json!({
         "status": r.status.as_str(),
         "newton_iterations": r.iterations,
+        "factorizations": r.factorizations,
+        "modified_hessian_steps": r.modified_hessian_steps,
         "residual": r.residual,
         "assembly_s": r.assembly_s,
         "factorisation_s": r.factor_s,

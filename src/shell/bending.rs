@@ -262,7 +262,7 @@ impl BendingEnergy {
         for h in &topo.hinges {
             let area = rest.triangle_area(h.tris[0]) + rest.triangle_area(h.tris[1]);
             let el2 = (p[h.v[1]] - p[h.v[0]]).norm_squared();
-            if !(area > 0.0) {
+            if area.is_nan() || area <= 0.0 {
                 anyhow::bail!(
                     "hinge on edge {:?} has zero rest area; remesh it",
                     [h.v[0], h.v[1]]

@@ -43,7 +43,7 @@ pub fn membrane_rest(v: [usize; 3], p: [Vector3<f64>; 3]) -> Option<MembraneElem
     let n = e1.cross(&e2);
     let area = 0.5 * n.norm();
     let scale = e1.norm_squared().max(e2.norm_squared());
-    if !(area > 1e-14 * scale) || !area.is_finite() {
+    if area.is_nan() || area <= 1e-14 * scale || !area.is_finite() {
         return None;
     }
     let t1 = e1.normalize();

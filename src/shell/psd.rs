@@ -10,7 +10,7 @@ use nalgebra::{DMatrix, SymmetricEigen};
 /// in the Householder reduction and produce NaN.
 pub fn project_psd(h: &mut [f64], n: usize) {
     let scale = h.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    if !(scale > 0.0) || !scale.is_finite() {
+    if scale.is_nan() || scale <= 0.0 || !scale.is_finite() {
         return;
     }
     let m = DMatrix::from_row_slice(n, n, h).map(|v| {

@@ -57,6 +57,8 @@ pub struct KktSolver {
     values: Vec<f64>,
     mem: Option<MemBuffer>,
     matrix: Option<SparseColMat<usize, f64>>,
+    base: Option<SparseColMat<usize, f64>>,
+    diag_pos: Vec<usize>,
     n_free: usize,
     n_cons: usize,
     shift: f64,
@@ -81,11 +83,8 @@ impl KktSolver {
         Self::default()
     }
 
-    /// Assemble and factorise the KKT matrix.
-    ///
-    /// `k` holds the Hessian triplets over free dofs `0..n_free` (both triangles),
-    /// `c` the constraint triplets `(row, free dof, value)` for rows `0..n_cons`, unscaled.
-    /// The triplet order must be the same from call to call for the analysis to be reused.
+    /// Assemble and factorise the KKT matrix ([`KktSolver::assemble`] then
+    /// [`KktSolver::factor`]).
     #[allow(clippy::too_many_arguments)]
     pub fn factorize(
         &mut self,
@@ -97,11 +96,32 @@ impl KktSolver {
         shift: f64,
         delta: f64,
     ) -> Result<KktFactorInfo, SparseError> {
+        let symbolic_s = self.assemble(n_free, n_cons, k, c, gamma, delta)?;
+        let mut info = self.factor(shift);
+        info.symbolic_s = symbolic_s;
+        Ok(info)
+    }
+
+    /// Assemble the unshifted KKT matrix (shift slots on the diagonal kept at zero).
+    ///
+    /// `k` holds the Hessian triplets over free dofs `0..n_free` (both triangles),
+    /// `c` the constraint triplets `(row, free dof, value)` for rows `0..n_cons`, unscaled.
+    /// The triplet order must be the same from call to call for the analysis to be reused.
+    /// Returns the seconds spent in a new symbolic analysis (0 when reused).
+    pub fn assemble(
+        &mut self,
+        n_free: usize,
+        n_cons: usize,
+        k: &[(usize, usize, f64)],
+        c: &[(usize, usize, f64)],
+        gamma: f64,
+        delta: f64,
+    ) -> Result<f64, SparseError> {
         let n = n_free + n_cons;
         let mut t = Vec::with_capacity(k.len() + 2 * c.len() + n);
         t.extend_from_slice(k);
         for i in 0..n_free {
-            t.push((i, i, shift));
+            t.push((i, i, 0.0));
         }
         for &(r, j, v) in c {
             t.push((n_free + r, j, gamma * v));
@@ -112,6 +132,8 @@ impl KktSolver {
         }
         let fp = fingerprint(n, &t);
         let mut symbolic_s = 0.0;
+        self.n_free = n_free;
+        self.n_cons = n_cons;
         if self.fingerprint != Some(fp) || self.pattern.is_none() {
             let t0 = std::time::Instant::now();
             let pattern = Pattern::new(n, &t)?;
@@ -123,22 +145,51 @@ impl KktSolver {
                 CholeskySymbolicParams::default(),
             )
             .map_err(|e| SparseError::Build(format!("{e:?}")))?;
-            let par = faer::get_global_parallelism();
+            let par = self.par();
             let req = sym
                 .factorize_numeric_ldlt_scratch::<f64>(par, Default::default())
                 .or(sym.solve_in_place_scratch::<f64>(1, par));
             self.mem = Some(MemBuffer::new(req));
             self.values = vec![0.0; sym.len_val()];
+            let cp = a.col_ptr();
+            let ri = a.row_idx();
+            self.diag_pos = (0..n)
+                .map(|j| {
+                    (cp[j]..cp[j + 1])
+                        .find(|&q| ri[q] == j)
+                        .expect("diagonal in pattern")
+                })
+                .collect();
             self.symbolic = Some(sym);
             self.pattern = Some(pattern);
             self.fingerprint = Some(fp);
             self.symbolic_count += 1;
             symbolic_s = t0.elapsed().as_secs_f64();
         }
+        self.base = Some(self.pattern.as_ref().expect("pattern set").assemble(&t)?);
+        self.n_free = n_free;
+        self.n_cons = n_cons;
+        self.delta = delta;
+        self.factored = false;
+        Ok(symbolic_s)
+    }
+
+    /// Numeric LDLᵀ of the assembled matrix with `shift` added to the free-dof diagonal.
+    /// Call repeatedly with growing shifts for inertia correction (no re-assembly).
+    pub fn factor(&mut self, shift: f64) -> KktFactorInfo {
         let t1 = std::time::Instant::now();
-        let a = self.pattern.as_ref().expect("pattern set").assemble(&t)?;
+        let mut a = self
+            .base
+            .clone()
+            .expect("KktSolver::factor before assemble");
+        if shift != 0.0 {
+            let v = a.val_mut();
+            for &q in &self.diag_pos[..self.n_free] {
+                v[q] += shift;
+            }
+        }
         let sym = self.symbolic.as_ref().expect("symbolic set");
-        let par = faer::get_global_parallelism();
+        let par = self.par();
         let stack = MemStack::new(self.mem.as_mut().expect("memory set"));
         let reg = LdltRegularization {
             dynamic_regularization_signs: None,
@@ -154,29 +205,36 @@ impl KktSolver {
             stack,
             Default::default(),
         );
-        self.n_free = n_free;
-        self.n_cons = n_cons;
         self.shift = shift;
-        self.delta = delta;
         self.matrix = Some(a);
         let numeric_s = t1.elapsed().as_secs_f64();
         if res.is_err() {
             self.factored = false;
-            return Ok(KktFactorInfo {
+            return KktFactorInfo {
                 negative_pivots: usize::MAX,
                 inertia_ok: false,
-                symbolic_s,
+                symbolic_s: 0.0,
                 numeric_s,
-            });
+            };
         }
         self.factored = true;
         let neg = negative_pivots(sym, &self.values);
-        Ok(KktFactorInfo {
+        KktFactorInfo {
             negative_pivots: neg,
-            inertia_ok: neg == n_cons,
-            symbolic_s,
+            inertia_ok: neg == self.n_cons,
+            symbolic_s: 0.0,
             numeric_s,
-        })
+        }
+    }
+
+    /// Parallelism for faer: sequential below 20 000 unknowns (thread start-up and
+    /// synchronisation cost more than they save on small factors), rayon above.
+    fn par(&self) -> faer::Par {
+        if self.n_free + self.n_cons < 20_000 {
+            faer::Par::Seq
+        } else {
+            faer::get_global_parallelism()
+        }
     }
 
     /// True when the last factorisation succeeded (no zero pivot).
@@ -212,7 +270,7 @@ impl KktSolver {
         let ldlt = LdltRef::<usize, f64>::new(sym, &self.values);
         let n = rhs.len();
         let m = MatMut::from_column_major_slice_mut(rhs, n, 1);
-        let par = faer::get_global_parallelism();
+        let par = self.par();
         let stack = MemStack::new(self.mem.as_mut().expect("memory"));
         ldlt.solve_in_place_with_conj(Conj::No, m, par, stack);
     }
