@@ -52,7 +52,8 @@ pub struct KktFactorInfo {
 #[derive(Default)]
 pub struct KktSolver {
     fingerprint: Option<(usize, usize, u64)>,
-    pattern: Option<Pattern>,
+    kmap: Vec<usize>,
+    cmap: Vec<(usize, usize)>,
     symbolic: Option<SymbolicCholesky<usize>>,
     values: Vec<f64>,
     mem: Option<MemBuffer>,
@@ -68,13 +69,28 @@ pub struct KktSolver {
     pub symbolic_count: usize,
 }
 
-fn fingerprint(n: usize, t: &[(usize, usize, f64)]) -> (usize, usize, u64) {
+fn layout_fingerprint(
+    n: usize,
+    free_of: &[usize],
+    k: &[(usize, usize, f64)],
+    c: &[(usize, usize, f64)],
+) -> (usize, usize, u64) {
     let mut h: u64 = 0xcbf29ce484222325;
-    for &(r, c, _) in t {
-        h = (h ^ (r as u64)).wrapping_mul(0x100000001b3);
-        h = (h ^ (c as u64)).wrapping_mul(0x100000001b3);
+    let mut mix = |v: usize| h = (h ^ (v as u64)).wrapping_mul(0x100000001b3);
+    mix(free_of.len());
+    for &f in free_of {
+        mix(f);
     }
-    (n, t.len(), h)
+    for &(r, j, _) in c {
+        mix(r);
+        mix(j);
+    }
+    mix(c.len());
+    for &(r, cc, _) in k.iter().step_by(31).chain(k.last()) {
+        mix(r);
+        mix(cc);
+    }
+    (n, k.len(), h)
 }
 
 impl KktSolver {
@@ -84,7 +100,7 @@ impl KktSolver {
     }
 
     /// Assemble and factorise the KKT matrix ([`KktSolver::assemble`] then
-    /// [`KktSolver::factor`]).
+    /// [`KktSolver::factor`]) when `k` is already indexed by free dofs.
     #[allow(clippy::too_many_arguments)]
     pub fn factorize(
         &mut self,
@@ -96,7 +112,8 @@ impl KktSolver {
         shift: f64,
         delta: f64,
     ) -> Result<KktFactorInfo, SparseError> {
-        let symbolic_s = self.assemble(n_free, n_cons, k, c, gamma, delta)?;
+        let identity: Vec<usize> = (0..n_free).collect();
+        let symbolic_s = self.assemble(&identity, n_free, n_cons, k, c, gamma, delta)?;
         let mut info = self.factor(shift);
         info.symbolic_s = symbolic_s;
         Ok(info)
@@ -104,12 +121,22 @@ impl KktSolver {
 
     /// Assemble the unshifted KKT matrix (shift slots on the diagonal kept at zero).
     ///
-    /// `k` holds the Hessian triplets over free dofs `0..n_free` (both triangles),
-    /// `c` the constraint triplets `(row, free dof, value)` for rows `0..n_cons`, unscaled.
-    /// The triplet order must be the same from call to call for the analysis to be reused.
-    /// Returns the seconds spent in a new symbolic analysis (0 when reused).
+    /// `k` holds the Hessian triplets over all dofs (both triangles, as an [`Energy`]
+    /// emits them); `free_of[dof]` is the free index of a dof or `usize::MAX` when it is
+    /// pinned. `c` holds the constraint triplets `(row, free dof, value)`, unscaled.
+    ///
+    /// The first call (or a call whose layout differs) builds the pattern, the AMD
+    /// ordering and symbolic factorisation, and a scatter map from each triplet to its slot
+    /// in the compressed values; later calls only scatter-add the values (one pass over
+    /// the triplets, no sorting or copying). The layout check compares the sizes, the
+    /// pinned set, the constraints and every 31st Hessian triplet index.
+    /// Returns the seconds spent building (0 when reused).
+    ///
+    /// [`Energy`]: crate::math::Energy
+    #[allow(clippy::too_many_arguments)]
     pub fn assemble(
         &mut self,
+        free_of: &[usize],
         n_free: usize,
         n_cons: usize,
         k: &[(usize, usize, f64)],
@@ -118,24 +145,26 @@ impl KktSolver {
         delta: f64,
     ) -> Result<f64, SparseError> {
         let n = n_free + n_cons;
-        let mut t = Vec::with_capacity(k.len() + 2 * c.len() + n);
-        t.extend_from_slice(k);
-        for i in 0..n_free {
-            t.push((i, i, 0.0));
-        }
-        for &(r, j, v) in c {
-            t.push((n_free + r, j, gamma * v));
-            t.push((j, n_free + r, gamma * v));
-        }
-        for r in 0..n_cons {
-            t.push((n_free + r, n_free + r, -delta));
-        }
-        let fp = fingerprint(n, &t);
+        let fp = layout_fingerprint(n, free_of, k, c);
         let mut symbolic_s = 0.0;
         self.n_free = n_free;
         self.n_cons = n_cons;
-        if self.fingerprint != Some(fp) || self.pattern.is_none() {
+        if self.fingerprint != Some(fp) || self.base.is_none() {
             let t0 = std::time::Instant::now();
+            let mut t = Vec::with_capacity(k.len() + 2 * c.len() + n);
+            for &(r, cc, v) in k {
+                let (fr, fc) = (free_of[r], free_of[cc]);
+                if fr != usize::MAX && fc != usize::MAX {
+                    t.push((fr, fc, v));
+                }
+            }
+            for i in 0..n {
+                t.push((i, i, 0.0));
+            }
+            for &(r, j, v) in c {
+                t.push((n_free + r, j, v));
+                t.push((j, n_free + r, v));
+            }
             let pattern = Pattern::new(n, &t)?;
             let a = pattern.assemble(&t)?;
             let sym = factorize_symbolic_cholesky(
@@ -151,24 +180,51 @@ impl KktSolver {
                 .or(sym.solve_in_place_scratch::<f64>(1, par));
             self.mem = Some(MemBuffer::new(req));
             self.values = vec![0.0; sym.len_val()];
-            let cp = a.col_ptr();
-            let ri = a.row_idx();
-            self.diag_pos = (0..n)
-                .map(|j| {
-                    (cp[j]..cp[j + 1])
-                        .find(|&q| ri[q] == j)
-                        .expect("diagonal in pattern")
+            let cp = a.col_ptr().to_vec();
+            let ri = a.row_idx().to_vec();
+            let slot = |r: usize, col: usize| -> Result<usize, SparseError> {
+                let rows = &ri[cp[col]..cp[col + 1]];
+                rows.binary_search(&r).map(|q| cp[col] + q).map_err(|_| {
+                    SparseError::Build(format!("entry ({r}, {col}) missing from pattern"))
                 })
-                .collect();
+            };
+            self.diag_pos = (0..n).map(|j| slot(j, j)).collect::<Result<_, _>>()?;
+            self.kmap = k
+                .iter()
+                .map(|&(r, cc, _)| {
+                    let (fr, fc) = (free_of[r], free_of[cc]);
+                    if fr != usize::MAX && fc != usize::MAX {
+                        slot(fr, fc)
+                    } else {
+                        Ok(usize::MAX)
+                    }
+                })
+                .collect::<Result<_, _>>()?;
+            self.cmap = c
+                .iter()
+                .map(|&(r, j, _)| Ok((slot(n_free + r, j)?, slot(j, n_free + r)?)))
+                .collect::<Result<_, SparseError>>()?;
             self.symbolic = Some(sym);
-            self.pattern = Some(pattern);
+            self.base = Some(a);
             self.fingerprint = Some(fp);
             self.symbolic_count += 1;
             symbolic_s = t0.elapsed().as_secs_f64();
         }
-        self.base = Some(self.pattern.as_ref().expect("pattern set").assemble(&t)?);
-        self.n_free = n_free;
-        self.n_cons = n_cons;
+        let base = self.base.as_mut().expect("base set");
+        let vals = base.val_mut();
+        vals.fill(0.0);
+        for (&q, t) in self.kmap.iter().zip(k) {
+            if q != usize::MAX {
+                vals[q] += t.2;
+            }
+        }
+        for (&(lo, hi), t) in self.cmap.iter().zip(c) {
+            vals[lo] += gamma * t.2;
+            vals[hi] += gamma * t.2;
+        }
+        for &q in &self.diag_pos[n_free..] {
+            vals[q] -= delta;
+        }
         self.delta = delta;
         self.factored = false;
         Ok(symbolic_s)

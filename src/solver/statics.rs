@@ -159,7 +159,6 @@ pub struct StaticSolver {
     gamma: Option<f64>,
     multipliers: Vec<f64>,
     trip: Vec<(usize, usize, f64)>,
-    kfree: Vec<(usize, usize, f64)>,
     last_shift: f64,
 }
 
@@ -293,23 +292,18 @@ impl StaticSolver {
         (r, energy)
     }
 
-    /// Assemble the Hessian over free dofs into `self.kfree`.
-    fn hessian(&mut self, e: &dyn Energy, s: &Setup, x: &[f64], project: bool) {
+    /// Evaluate the Hessian triplets (all dofs) into `self.trip`.
+    fn hessian(&mut self, e: &dyn Energy, x: &[f64], project: bool) {
         self.trip.clear();
         e.eval(x, None, Some(&mut self.trip), project);
-        self.kfree.clear();
-        let fo = &s.free_of;
-        self.kfree.extend(self.trip.iter().filter_map(|&(r, c, v)| {
-            let (fr, fc) = (fo[r], fo[c]);
-            (fr != PINNED && fc != PINNED).then_some((fr, fc, v))
-        }));
     }
 
-    fn mean_diag(&self, nfree: usize) -> f64 {
+    fn mean_diag(&self, s: &Setup) -> f64 {
+        let nfree = s.free.len();
         let mut d = vec![0.0; nfree];
-        for &(r, c, v) in &self.kfree {
-            if r == c {
-                d[r] += v;
+        for &(r, c, v) in &self.trip {
+            if r == c && s.free_of[r] != PINNED {
+                d[s.free_of[r]] += v;
             }
         }
         let m = d.iter().map(|v| v.abs()).sum::<f64>() / nfree.max(1) as f64;
@@ -329,25 +323,31 @@ impl StaticSolver {
         x: &[f64],
     ) -> Result<KktFactorInfo, SolverError> {
         let s = self.setup(e, p, x)?;
-        self.hessian(e, &s, x, false);
-        let gamma = self.gamma_for(s.free.len());
+        self.hessian(e, x, false);
+        let gamma = self.gamma_for(&s);
         let (nf, nc) = (s.free.len(), p.constraints.rows);
-        let kfree = std::mem::take(&mut self.kfree);
-        let r = self
-            .kkt
-            .factorize(nf, nc, &kfree, &s.cfree, gamma, 0.0, KKT_DELTA * gamma);
-        self.kfree = kfree;
-        Ok(r?)
+        let sym_s = self.kkt.assemble(
+            &s.free_of,
+            nf,
+            nc,
+            &self.trip,
+            &s.cfree,
+            gamma,
+            KKT_DELTA * gamma,
+        )?;
+        let mut info = self.kkt.factor(0.0);
+        info.symbolic_s = sym_s;
+        Ok(info)
     }
 
-    fn gamma_for(&mut self, nfree: usize) -> f64 {
+    fn gamma_for(&mut self, s: &Setup) -> f64 {
         if let Some(g) = self.settings.gamma {
             self.gamma = Some(g);
         }
         match self.gamma {
             Some(g) => g,
             None => {
-                let g = self.mean_diag(nfree);
+                let g = self.mean_diag(s);
                 self.gamma = Some(g);
                 g
             }
@@ -389,11 +389,11 @@ impl StaticSolver {
         let mut have_hessian = None;
         if self.gamma.is_none() && st.gamma.is_none() {
             let t = Instant::now();
-            self.hessian(e, &s, x, false);
+            self.hessian(e, x, false);
             rep.assembly_s += t.elapsed().as_secs_f64();
             have_hessian = Some(false);
         }
-        let gamma = self.gamma_for(nf);
+        let gamma = self.gamma_for(&s);
         let mut mu = std::mem::take(&mut self.multipliers);
         let t = Instant::now();
         let (mut r, mut energy) = self.residual(e, p, &s, x, &mu, gamma);
@@ -450,15 +450,16 @@ impl StaticSolver {
                 if have_hessian != Some(project) || assembled != Some(project) {
                     if have_hessian != Some(project) {
                         let t = Instant::now();
-                        self.hessian(e, &s, x, project);
+                        self.hessian(e, x, project);
                         rep.assembly_s += t.elapsed().as_secs_f64();
                         have_hessian = Some(project);
                     }
                     let t = Instant::now();
                     let sym_s = self.kkt.assemble(
+                        &s.free_of,
                         nf,
                         nc,
-                        &self.kfree,
+                        &self.trip,
                         &s.cfree,
                         gamma,
                         KKT_DELTA * gamma,
