@@ -63,35 +63,19 @@ fn read_component(bytes: &[u8], ct: u64, normalized: bool) -> f64 {
     match ct {
         5120 => {
             let v = bytes[0] as i8 as f64;
-            if normalized {
-                (v / 127.0).max(-1.0)
-            } else {
-                v
-            }
+            if normalized { (v / 127.0).max(-1.0) } else { v }
         }
         5121 => {
             let v = bytes[0] as f64;
-            if normalized {
-                v / 255.0
-            } else {
-                v
-            }
+            if normalized { v / 255.0 } else { v }
         }
         5122 => {
             let v = i16::from_le_bytes([bytes[0], bytes[1]]) as f64;
-            if normalized {
-                (v / 32767.0).max(-1.0)
-            } else {
-                v
-            }
+            if normalized { (v / 32767.0).max(-1.0) } else { v }
         }
         5123 => {
             let v = u16::from_le_bytes([bytes[0], bytes[1]]) as f64;
-            if normalized {
-                v / 65535.0
-            } else {
-                v
-            }
+            if normalized { v / 65535.0 } else { v }
         }
         5125 => u32::from_le_bytes([bytes[0], bytes[1], bytes[2], bytes[3]]) as f64,
         _ => f32::from_le_bytes([bytes[0], bytes[1], bytes[2], bytes[3]]) as f64,
@@ -105,12 +89,7 @@ fn usize_of(v: &serde_json::Value) -> Option<usize> {
 impl<'a> AccessorReader<'a> {
     /// A reader over the buffers of `c`, which was read from `path`.
     pub fn new(path: &'a Path, c: &'a Container) -> Self {
-        Self {
-            path,
-            json: &c.json,
-            buffers: &c.buffers,
-            decoded_views: RefCell::new(HashMap::new()),
-        }
+        Self { path, json: &c.json, buffers: &c.buffers, decoded_views: RefCell::new(HashMap::new()) }
     }
 
     fn err(&self, m: String) -> GltfError {
@@ -122,7 +101,8 @@ impl<'a> AccessorReader<'a> {
         if let Some(b) = self.decoded_views.borrow().get(&v) {
             return Ok(b.clone());
         }
-        let view = self.json["bufferViews"]
+        let view = self
+            .json["bufferViews"]
             .get(v)
             .ok_or_else(|| self.err(format!("bufferView {v} does not exist")))?;
         let ext = &view["extensions"]["EXT_meshopt_compression"];
@@ -175,18 +155,11 @@ impl<'a> AccessorReader<'a> {
         use_stride: bool,
     ) -> GltfResult<Vec<f64>> {
         let bytes = self.view_bytes(v)?;
-        let cs = component_size(ct)
-            .ok_or_else(|| self.err(format!("{what}: bad componentType {ct}")))?;
+        let cs = component_size(ct).ok_or_else(|| self.err(format!("{what}: bad componentType {ct}")))?;
         let elem = cs * ncomp;
-        let stride = if use_stride {
-            self.view_stride(v).unwrap_or(elem)
-        } else {
-            elem
-        };
+        let stride = if use_stride { self.view_stride(v).unwrap_or(elem) } else { elem };
         if stride < elem {
-            return Err(self.err(format!(
-                "{what}: byteStride {stride} is smaller than an element ({elem} bytes)"
-            )));
+            return Err(self.err(format!("{what}: byteStride {stride} is smaller than an element ({elem} bytes)")));
         }
         if count > 0 {
             let need = offset
@@ -212,28 +185,22 @@ impl<'a> AccessorReader<'a> {
 
     /// Decode accessor `a` into f64 values (sparse substitution applied).
     pub fn read(&self, a: usize) -> GltfResult<Decoded> {
-        let acc = self.json["accessors"]
+        let acc = self
+            .json["accessors"]
             .get(a)
             .ok_or_else(|| self.err(format!("accessor {a} does not exist")))?;
         let what = format!("accessor {a}");
-        let count =
-            usize_of(&acc["count"]).ok_or_else(|| self.err(format!("{what}: missing count")))?;
+        let count = usize_of(&acc["count"]).ok_or_else(|| self.err(format!("{what}: missing count")))?;
         let ct = acc["componentType"].as_u64().unwrap_or(0);
-        let cs = component_size(ct)
-            .ok_or_else(|| self.err(format!("{what}: bad componentType {ct}")))?;
+        let cs = component_size(ct).ok_or_else(|| self.err(format!("{what}: bad componentType {ct}")))?;
         let ty = acc["type"].as_str().unwrap_or("");
-        let ncomp =
-            type_components(ty).ok_or_else(|| self.err(format!("{what}: bad type {ty:?}")))?;
+        let ncomp = type_components(ty).ok_or_else(|| self.err(format!("{what}: bad type {ty:?}")))?;
         if ty.starts_with("MAT") && cs < 4 {
-            return Err(self.err(format!(
-                "{what}: matrices of 1- or 2-byte components are not supported"
-            )));
+            return Err(self.err(format!("{what}: matrices of 1- or 2-byte components are not supported")));
         }
         let normalized = acc["normalized"].as_bool().unwrap_or(false);
         if normalized && (ct == 5125 || ct == 5126) {
-            return Err(self.err(format!(
-                "{what}: normalized is only allowed for 8- and 16-bit integers"
-            )));
+            return Err(self.err(format!("{what}: normalized is only allowed for 8- and 16-bit integers")));
         }
         if count > (1 << 28) {
             return Err(self.err(format!("{what}: count {count} is implausibly large")));
@@ -245,8 +212,7 @@ impl<'a> AccessorReader<'a> {
         };
         let sparse = &acc["sparse"];
         if sparse.is_object() {
-            let sc = usize_of(&sparse["count"])
-                .ok_or_else(|| self.err(format!("{what}: sparse.count missing")))?;
+            let sc = usize_of(&sparse["count"]).ok_or_else(|| self.err(format!("{what}: sparse.count missing")))?;
             if sc > count {
                 return Err(self.err(format!("{what}: sparse.count {sc} exceeds count {count}")));
             }
@@ -255,9 +221,7 @@ impl<'a> AccessorReader<'a> {
             let ioff = usize_of(&sparse["indices"]["byteOffset"]).unwrap_or(0);
             let ict = sparse["indices"]["componentType"].as_u64().unwrap_or(0);
             if !matches!(ict, 5121 | 5123 | 5125) {
-                return Err(self.err(format!(
-                    "{what}: sparse index componentType {ict} must be unsigned"
-                )));
+                return Err(self.err(format!("{what}: sparse index componentType {ict} must be unsigned")));
             }
             let idx = self.read_packed(&what, iv, ioff, sc, 1, ict, false, false)?;
             let vv = usize_of(&sparse["values"]["bufferView"])
@@ -267,29 +231,19 @@ impl<'a> AccessorReader<'a> {
             for (j, &i) in idx.iter().enumerate() {
                 let i = i as usize;
                 if i >= count {
-                    return Err(self.err(format!(
-                        "{what}: sparse index {i} is out of range (count {count})"
-                    )));
+                    return Err(self.err(format!("{what}: sparse index {i} is out of range (count {count})")));
                 }
                 data[i * ncomp..(i + 1) * ncomp].copy_from_slice(&vals[j * ncomp..(j + 1) * ncomp]);
             }
         }
-        Ok(Decoded {
-            count,
-            components: ncomp,
-            data,
-        })
+        Ok(Decoded { count, components: ncomp, data })
     }
 
     /// Decode an index accessor into vertex indices, checking they are unsigned integers.
     pub fn read_indices(&self, a: usize) -> GltfResult<Vec<usize>> {
-        let ct = self.json["accessors"][a]["componentType"]
-            .as_u64()
-            .unwrap_or(0);
+        let ct = self.json["accessors"][a]["componentType"].as_u64().unwrap_or(0);
         if !matches!(ct, 5121 | 5123 | 5125) {
-            return Err(self.err(format!(
-                "accessor {a}: indices must be unsigned integers (componentType {ct})"
-            )));
+            return Err(self.err(format!("accessor {a}: indices must be unsigned integers (componentType {ct})")));
         }
         let d = self.read(a)?;
         if d.components != 1 {

@@ -52,66 +52,29 @@ fn usize_of(v: &serde_json::Value) -> Option<usize> {
 }
 
 /// Check every animation's channels and samplers refer to things that exist, and summarise.
-pub fn summarize(
-    path: &Path,
-    reader: &AccessorReader,
-    json: &serde_json::Value,
-) -> GltfResult<Vec<AnimationInfo>> {
+pub fn summarize(path: &Path, reader: &AccessorReader, json: &serde_json::Value) -> GltfResult<Vec<AnimationInfo>> {
     let node_count = json["nodes"].as_array().map_or(0, |a| a.len());
     let mut out = Vec::new();
-    for (ai, a) in json["animations"]
-        .as_array()
-        .map(|a| a.as_slice())
-        .unwrap_or(&[])
-        .iter()
-        .enumerate()
-    {
-        let samplers = a["samplers"]
-            .as_array()
-            .map(|s| s.as_slice())
-            .unwrap_or(&[]);
+    for (ai, a) in json["animations"].as_array().map(|a| a.as_slice()).unwrap_or(&[]).iter().enumerate() {
+        let samplers = a["samplers"].as_array().map(|s| s.as_slice()).unwrap_or(&[]);
         let mut counts: Vec<(String, usize)> = Vec::new();
         let mut duration: f64 = 0.0;
-        for (ci, c) in a["channels"]
-            .as_array()
-            .map(|c| c.as_slice())
-            .unwrap_or(&[])
-            .iter()
-            .enumerate()
-        {
+        for (ci, c) in a["channels"].as_array().map(|c| c.as_slice()).unwrap_or(&[]).iter().enumerate() {
             let tgt = &c["target"];
             if let Some(n) = tgt.get("node") {
                 let n = usize_of(n).filter(|&n| n < node_count).ok_or_else(|| {
-                    GltfError::new(
-                        path,
-                        format!(
-                            "animation {ai} channel {ci} targets node {n}, which does not exist"
-                        ),
-                    )
+                    GltfError::new(path, format!("animation {ai} channel {ci} targets node {n}, which does not exist"))
                 })?;
                 let _ = n;
             }
-            let si = usize_of(&c["sampler"])
-                .filter(|&s| s < samplers.len())
-                .ok_or_else(|| {
-                    GltfError::new(
-                        path,
-                        format!(
-                            "animation {ai} channel {ci} uses sampler {}, which does not exist",
-                            c["sampler"]
-                        ),
-                    )
-                })?;
+            let si = usize_of(&c["sampler"]).filter(|&s| s < samplers.len()).ok_or_else(|| {
+                GltfError::new(path, format!("animation {ai} channel {ci} uses sampler {}, which does not exist", c["sampler"]))
+            })?;
             let input = usize_of(&samplers[si]["input"]).ok_or_else(|| {
                 GltfError::new(path, format!("animation {ai} sampler {si} has no input"))
             })?;
             let times = reader.read(input)?;
-            if let Some(t) = times
-                .data
-                .iter()
-                .copied()
-                .fold(None, |m: Option<f64>, t| Some(m.map_or(t, |m| m.max(t))))
-            {
+            if let Some(t) = times.data.iter().copied().fold(None, |m: Option<f64>, t| Some(m.map_or(t, |m| m.max(t)))) {
                 duration = duration.max(t);
             }
             let p = tgt["path"].as_str().unwrap_or("?").to_string();
@@ -122,10 +85,7 @@ pub fn summarize(
         }
         out.push(AnimationInfo {
             index: ai,
-            name: a["name"]
-                .as_str()
-                .map(String::from)
-                .unwrap_or(format!("animation_{ai}")),
+            name: a["name"].as_str().map(String::from).unwrap_or(format!("animation_{ai}")),
             channels: counts,
             duration_s: duration,
         });
@@ -145,53 +105,28 @@ pub fn weight_track(
 ) -> GltfResult<Option<WeightTrack>> {
     let a = &json["animations"][anim];
     let Some(ch) = a["channels"].as_array().and_then(|cs| {
-        cs.iter().find(|c| {
-            c["target"]["path"] == "weights" && usize_of(&c["target"]["node"]) == Some(node)
-        })
+        cs.iter().find(|c| c["target"]["path"] == "weights" && usize_of(&c["target"]["node"]) == Some(node))
     }) else {
         return Ok(None);
     };
     let si = usize_of(&ch["sampler"]).unwrap_or(usize::MAX);
-    let s = a["samplers"].get(si).ok_or_else(|| {
-        GltfError::new(
-            path,
-            format!("animation {anim}: sampler {si} does not exist"),
-        )
-    })?;
+    let s = a["samplers"].get(si).ok_or_else(|| GltfError::new(path, format!("animation {anim}: sampler {si} does not exist")))?;
     let interpolation = match s["interpolation"].as_str().unwrap_or("LINEAR") {
         "LINEAR" => Interpolation::Linear,
         "STEP" => Interpolation::Step,
         "CUBICSPLINE" => Interpolation::CubicSpline,
-        o => {
-            return Err(GltfError::new(
-                path,
-                format!("animation {anim} sampler {si}: unknown interpolation {o:?}"),
-            ))
-        }
+        o => return Err(GltfError::new(path, format!("animation {anim} sampler {si}: unknown interpolation {o:?}"))),
     };
     let input = reader.read(usize_of(&s["input"]).unwrap_or(usize::MAX))?;
     let output = reader.read(usize_of(&s["output"]).unwrap_or(usize::MAX))?;
     let times = input.data.clone();
     if let Some(w) = times.windows(2).position(|w| !(w[1] >= w[0])) {
-        return Err(GltfError::new(
-            path,
-            format!(
-                "animation {anim} sampler {si}: key times must increase (key {})",
-                w + 1
-            ),
-        ));
+        return Err(GltfError::new(path, format!("animation {anim} sampler {si}: key times must increase (key {})", w + 1)));
     }
     if times.iter().any(|t| !t.is_finite()) {
-        return Err(GltfError::new(
-            path,
-            format!("animation {anim} sampler {si}: non-finite key time"),
-        ));
+        return Err(GltfError::new(path, format!("animation {anim} sampler {si}: non-finite key time")));
     }
-    let per_key = if interpolation == Interpolation::CubicSpline {
-        3 * targets
-    } else {
-        targets
-    };
+    let per_key = if interpolation == Interpolation::CubicSpline { 3 * targets } else { targets };
     if targets == 0 || output.data.len() != times.len() * per_key {
         return Err(GltfError::new(path, format!(
             "animation {anim} sampler {si}: {} output values do not match {} keys × {per_key} (mesh has {targets} morph targets)",
@@ -199,10 +134,7 @@ pub fn weight_track(
         )));
     }
     if output.data.iter().any(|v| !v.is_finite()) {
-        return Err(GltfError::new(
-            path,
-            format!("animation {anim} sampler {si}: non-finite weight"),
-        ));
+        return Err(GltfError::new(path, format!("animation {anim} sampler {si}: non-finite weight")));
     }
     let mut values = Vec::new();
     let mut tin = Vec::new();
@@ -217,14 +149,7 @@ pub fn weight_track(
             values.push(row.to_vec());
         }
     }
-    Ok(Some(WeightTrack {
-        node,
-        times,
-        values,
-        tangents_in: tin,
-        tangents_out: tout,
-        interpolation,
-    }))
+    Ok(Some(WeightTrack { node, times, values, tangents_in: tin, tangents_out: tout, interpolation }))
 }
 
 impl WeightTrack {
@@ -270,10 +195,7 @@ impl WeightTrack {
     /// Sample at `fps` frames per second from t = 0 to the last key inclusive:
     /// frame k is at k / fps seconds.
     pub fn sample_frames(&self, fps: f64) -> Vec<Vec<f64>> {
-        frame_times(self.duration(), fps)
-            .into_iter()
-            .map(|t| self.sample(t))
-            .collect()
+        frame_times(self.duration(), fps).into_iter().map(|t| self.sample(t)).collect()
     }
 }
 
@@ -311,8 +233,7 @@ mod tests {
         // Hermite on [0,1]: p(s) = h10·2 + h01·1 with h10 = s³−2s²+s, h01 = −2s³+3s².
         let c = track(Interpolation::CubicSpline);
         let sv = 0.5;
-        let expect =
-            2.0 * (sv * sv * sv - 2.0 * sv * sv + sv) + (-2.0 * sv * sv * sv + 3.0 * sv * sv);
+        let expect = 2.0 * (sv * sv * sv - 2.0 * sv * sv + sv) + (-2.0 * sv * sv * sv + 3.0 * sv * sv);
         assert!((c.sample(0.5)[0] - expect).abs() < 1e-15);
         assert_eq!(c.sample(1.0), vec![1.0]);
         assert_eq!(frame_times(2.0, 30.0).len(), 61);

@@ -16,21 +16,14 @@ pub enum Overwrite {
 /// Write `bytes` to `path` atomically (temporary file + rename). Parent folders are created.
 pub fn write(path: &Path, bytes: &[u8], overwrite: Overwrite) -> anyhow::Result<()> {
     if overwrite == Overwrite::Refuse && path.exists() {
-        anyhow::bail!(
-            "{}: already exists; furrow does not overwrite files unless told to (pass --force)",
-            path.display()
-        );
+        anyhow::bail!("{}: already exists; furrow does not overwrite files unless told to (pass --force)", path.display());
     }
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
         _ => PathBuf::from("."),
     };
-    std::fs::create_dir_all(&dir)
-        .map_err(|e| anyhow::anyhow!("{}: cannot create folder: {e}", dir.display()))?;
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "out".into());
+    std::fs::create_dir_all(&dir).map_err(|e| anyhow::anyhow!("{}: cannot create folder: {e}", dir.display()))?;
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
     let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
     let result = (|| -> std::io::Result<()> {
         let mut f = std::fs::File::create(&tmp)?;
@@ -55,9 +48,7 @@ mod tests {
         let p = d.path().join("sub/a.bin");
         write(&p, b"one", Overwrite::Refuse).unwrap();
         assert_eq!(std::fs::read(&p).unwrap(), b"one");
-        let e = write(&p, b"two", Overwrite::Refuse)
-            .unwrap_err()
-            .to_string();
+        let e = write(&p, b"two", Overwrite::Refuse).unwrap_err().to_string();
         assert!(e.contains("--force"), "{e}");
         assert_eq!(std::fs::read(&p).unwrap(), b"one");
         write(&p, b"two", Overwrite::Replace).unwrap();

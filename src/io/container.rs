@@ -31,8 +31,9 @@ pub const SUPPORTED_REQUIRED: &[&str] = &[
 
 /// Read and parse the file at `path`.
 pub fn read(path: &Path) -> GltfResult<Container> {
-    let bytes = std::fs::read(path)
-        .map_err(|e| GltfError::new(path, format!("cannot read the file: {e}")))?;
+    let bytes = std::fs::read(path).map_err(|e| {
+        GltfError::new(path, format!("cannot read the file: {e}"))
+    })?;
     parse(path, &bytes)
 }
 
@@ -40,16 +41,10 @@ pub fn read(path: &Path) -> GltfResult<Container> {
 pub fn parse(path: &Path, bytes: &[u8]) -> GltfResult<Container> {
     let err = |m: String| GltfError::new(path, m);
     let (json_bytes, bin): (&[u8], Option<&[u8]>) = if bytes.starts_with(b"glTF") {
-        let glb = gltf::binary::Glb::from_slice(bytes).map_err(|e| {
-            err(format!(
-                "not a valid GLB container (cut short or corrupt): {e}"
-            ))
-        })?;
+        let glb = gltf::binary::Glb::from_slice(bytes)
+            .map_err(|e| err(format!("not a valid GLB container (cut short or corrupt): {e}")))?;
         if glb.header.version != 2 {
-            return Err(err(format!(
-                "GLB version {} is not glTF 2.0",
-                glb.header.version
-            )));
+            return Err(err(format!("GLB version {} is not glTF 2.0", glb.header.version)));
         }
         let json: &[u8] = match glb.json {
             std::borrow::Cow::Borrowed(b) => b,
@@ -69,15 +64,13 @@ pub fn parse(path: &Path, bytes: &[u8]) -> GltfResult<Container> {
         }
         (bytes, None)
     };
-    let json: serde_json::Value =
-        serde_json::from_slice(json_bytes).map_err(|e| err(format!("broken JSON: {e}")))?;
+    let json: serde_json::Value = serde_json::from_slice(json_bytes)
+        .map_err(|e| err(format!("broken JSON: {e}")))?;
     let root: gltf_json::Root = serde_json::from_value(json.clone())
         .map_err(|e| err(format!("JSON is not a valid glTF 2.0 document: {e}")))?;
     let version = root.asset.version.as_str();
     if !version.starts_with("2.") {
-        return Err(err(format!(
-            "asset.version is {version:?}; furrow reads glTF 2.0"
-        )));
+        return Err(err(format!("asset.version is {version:?}; furrow reads glTF 2.0")));
     }
     for ext in &root.extensions_required {
         if !SUPPORTED_REQUIRED.contains(&ext.as_str()) {
@@ -88,12 +81,7 @@ pub fn parse(path: &Path, bytes: &[u8]) -> GltfResult<Container> {
         }
     }
     let buffers = resolve_buffers(path, &json, &root, bin)?;
-    Ok(Container {
-        json,
-        root,
-        buffers,
-        binary: bin.is_some() || bytes.starts_with(b"glTF"),
-    })
+    Ok(Container { json, root, buffers, binary: bin.is_some() || bytes.starts_with(b"glTF") })
 }
 
 fn is_meshopt_fallback(json: &serde_json::Value, index: usize) -> bool {
@@ -116,9 +104,7 @@ fn resolve_buffers(
             None if is_meshopt_fallback(json, i) => Vec::new(),
             None => {
                 if i != 0 {
-                    return Err(err(format!(
-                        "buffer {i} has no uri; only buffer 0 may use the GLB binary chunk"
-                    )));
+                    return Err(err(format!("buffer {i} has no uri; only buffer 0 may use the GLB binary chunk")));
                 }
                 let bin = bin.ok_or_else(|| {
                     err("buffer 0 has no uri and the file has no GLB binary chunk".into())
@@ -126,9 +112,9 @@ fn resolve_buffers(
                 bin.to_vec()
             }
             Some(uri) if uri.starts_with("data:") => {
-                let comma = uri
-                    .find(',')
-                    .ok_or_else(|| err(format!("buffer {i}: malformed data URI (no comma)")))?;
+                let comma = uri.find(',').ok_or_else(|| {
+                    err(format!("buffer {i}: malformed data URI (no comma)"))
+                })?;
                 if !uri[..comma].ends_with(";base64") {
                     return Err(err(format!("buffer {i}: data URI is not base64")));
                 }
@@ -143,10 +129,7 @@ fn resolve_buffers(
                 }
                 let p = path.parent().unwrap_or(Path::new(".")).join(&decoded);
                 std::fs::read(&p).map_err(|e| {
-                    err(format!(
-                        "buffer {i}: cannot read external buffer {}: {e}",
-                        p.display()
-                    ))
+                    err(format!("buffer {i}: cannot read external buffer {}: {e}", p.display()))
                 })?
             }
         };

@@ -15,10 +15,7 @@ pub struct GltfError {
 impl GltfError {
     /// An error about `path`.
     pub fn new(path: &Path, message: impl Into<String>) -> Self {
-        Self {
-            path: path.to_path_buf(),
-            message: message.into(),
-        }
+        Self { path: path.to_path_buf(), message: message.into() }
     }
 }
 

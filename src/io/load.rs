@@ -75,9 +75,7 @@ fn usize_of(v: &serde_json::Value) -> Option<usize> {
 }
 
 /// Load every mesh instance of the file at `path` without choosing a face (for `inspect`).
-pub fn load_instances(
-    path: &Path,
-) -> GltfResult<(Container, Vec<MeshInstance>, Vec<AnimationInfo>)> {
+pub fn load_instances(path: &Path) -> GltfResult<(Container, Vec<MeshInstance>, Vec<AnimationInfo>)> {
     let c = container::read(path)?;
     let (inst, anims) = instances_of(path, &c)?;
     Ok((c, inst, anims))
@@ -87,11 +85,7 @@ fn instances_of(path: &Path, c: &Container) -> GltfResult<(Vec<MeshInstance>, Ve
     let reader = AccessorReader::new(path, c);
     let (world, order) = scene::world_matrices(path, &c.json)?;
     let mut inst = Vec::new();
-    let mut in_scene: Vec<usize> = order
-        .iter()
-        .copied()
-        .filter(|&n| c.json["nodes"][n]["mesh"].is_u64())
-        .collect();
+    let mut in_scene: Vec<usize> = order.iter().copied().filter(|&n| c.json["nodes"][n]["mesh"].is_u64()).collect();
     in_scene.sort_unstable();
     for n in in_scene {
         inst.push(mesh::extract(path, &reader, &c.json, n, &world)?);
@@ -104,9 +98,7 @@ fn instances_of(path: &Path, c: &Container) -> GltfResult<(Vec<MeshInstance>, Ve
 pub fn load(path: &Path, opts: &LoadOptions) -> GltfResult<Rig> {
     let c = container::read(path)?;
     let (instances, animations) = instances_of(path, &c)?;
-    let morphs: Vec<usize> = (0..instances.len())
-        .filter(|&i| !instances[i].targets.is_empty())
-        .collect();
+    let morphs: Vec<usize> = (0..instances.len()).filter(|&i| !instances[i].targets.is_empty()).collect();
     if morphs.is_empty() {
         return Err(GltfError::new(path, format!(
             "no mesh with morph targets (blend shapes) in the displayed scene ({} mesh instances); furrow needs a blend-shape rig",
@@ -115,13 +107,7 @@ pub fn load(path: &Path, opts: &LoadOptions) -> GltfResult<Rig> {
     }
     let describe = |i: usize| {
         let m = &instances[i];
-        format!(
-            "'{}' (mesh {}, node {}, {} targets)",
-            m.name,
-            m.mesh,
-            m.node,
-            m.targets.len()
-        )
+        format!("'{}' (mesh {}, node {}, {} targets)", m.name, m.mesh, m.node, m.targets.len())
     };
     let (face, face_reason) = match &opts.mesh {
         Some(want) => {
@@ -135,22 +121,12 @@ pub fn load(path: &Path, opts: &LoadOptions) -> GltfResult<Rig> {
                 Some(i) => (i, format!("face {} chosen by --mesh {want}", describe(i))),
                 None => {
                     let list: Vec<String> = morphs.iter().map(|&i| describe(i)).collect();
-                    return Err(GltfError::new(
-                        path,
-                        format!(
-                            "no mesh with morph targets matches --mesh {want:?}; candidates: {}",
-                            list.join(", ")
-                        ),
-                    ));
+                    return Err(GltfError::new(path, format!("no mesh with morph targets matches --mesh {want:?}; candidates: {}", list.join(", "))));
                 }
             }
         }
         None => {
-            let best = morphs
-                .iter()
-                .copied()
-                .max_by_key(|&i| (instances[i].targets.len(), usize::MAX - i))
-                .expect("non-empty");
+            let best = morphs.iter().copied().max_by_key(|&i| (instances[i].targets.len(), usize::MAX - i)).expect("non-empty");
             let reason = if morphs.len() > 1 {
                 format!("face {} chosen as the mesh with the most morph targets of {} candidates (use --mesh to pick another)", describe(best), morphs.len())
             } else {
@@ -164,27 +140,16 @@ pub fn load(path: &Path, opts: &LoadOptions) -> GltfResult<Rig> {
     let nt = instances[face].targets.len();
     let animation = match &opts.animation {
         Some(want) => {
-            let a = animations
-                .iter()
-                .find(|a| a.name == *want || want.parse::<usize>().ok() == Some(a.index))
-                .ok_or_else(|| {
-                    let names: Vec<&str> = animations.iter().map(|a| a.name.as_str()).collect();
-                    GltfError::new(
-                        path,
-                        format!("no animation {want:?}; the file has: {}", names.join(", ")),
-                    )
-                })?;
+            let a = animations.iter().find(|a| a.name == *want || want.parse::<usize>().ok() == Some(a.index)).ok_or_else(|| {
+                let names: Vec<&str> = animations.iter().map(|a| a.name.as_str()).collect();
+                GltfError::new(path, format!("no animation {want:?}; the file has: {}", names.join(", ")))
+            })?;
             Some(a.index)
         }
         None => animations.iter().map(|a| a.index).find(|&ai| {
-            c.json["animations"][ai]["channels"]
-                .as_array()
-                .is_some_and(|cs| {
-                    cs.iter().any(|ch| {
-                        ch["target"]["path"] == "weights"
-                            && usize_of(&ch["target"]["node"]) == Some(node)
-                    })
-                })
+            c.json["animations"][ai]["channels"].as_array().is_some_and(|cs| {
+                cs.iter().any(|ch| ch["target"]["path"] == "weights" && usize_of(&ch["target"]["node"]) == Some(node))
+            })
         }),
     };
     let track = match animation {
@@ -193,15 +158,5 @@ pub fn load(path: &Path, opts: &LoadOptions) -> GltfResult<Rig> {
     };
     let extensions_used = c.root.extensions_used.clone();
     drop(reader);
-    Ok(Rig {
-        path: path.to_path_buf(),
-        container: c,
-        instances,
-        face,
-        face_reason,
-        animations,
-        animation,
-        track,
-        extensions_used,
-    })
+    Ok(Rig { path: path.to_path_buf(), container: c, instances, face, face_reason, animations, animation, track, extensions_used })
 }

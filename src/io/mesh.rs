@@ -59,10 +59,7 @@ fn usize_of(v: &serde_json::Value) -> Option<usize> {
 
 fn check_finite(path: &Path, what: &str, v: &[f64]) -> GltfResult<()> {
     if let Some(i) = v.iter().position(|x| !x.is_finite()) {
-        return Err(GltfError::new(
-            path,
-            format!("{what} has a non-finite value (NaN or infinity) at component {i}"),
-        ));
+        return Err(GltfError::new(path, format!("{what} has a non-finite value (NaN or infinity) at component {i}")));
     }
     Ok(())
 }
@@ -72,17 +69,9 @@ fn triangulate(mode: u64, idx: &[usize]) -> Vec<[usize; 3]> {
     match mode {
         4 => idx.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
         5 => (2..idx.len())
-            .map(|i| {
-                if i % 2 == 0 {
-                    [idx[i - 2], idx[i - 1], idx[i]]
-                } else {
-                    [idx[i - 1], idx[i - 2], idx[i]]
-                }
-            })
+            .map(|i| if i % 2 == 0 { [idx[i - 2], idx[i - 1], idx[i]] } else { [idx[i - 1], idx[i - 2], idx[i]] })
             .collect(),
-        6 => (2..idx.len())
-            .map(|i| [idx[0], idx[i - 1], idx[i]])
-            .collect(),
+        6 => (2..idx.len()).map(|i| [idx[0], idx[i - 1], idx[i]]).collect(),
         _ => Vec::new(),
     }
 }
@@ -97,83 +86,49 @@ fn skin_matrices(
     attrs: &serde_json::Value,
     count: usize,
 ) -> GltfResult<Vec<Matrix4<f64>>> {
-    let s = json["skins"]
-        .get(skin)
-        .ok_or_else(|| GltfError::new(path, format!("skin {skin} does not exist")))?;
-    let joints: Vec<usize> = s["joints"]
-        .as_array()
-        .map(|a| a.iter().filter_map(usize_of).collect())
-        .unwrap_or_default();
+    let s = json["skins"].get(skin).ok_or_else(|| GltfError::new(path, format!("skin {skin} does not exist")))?;
+    let joints: Vec<usize> = s["joints"].as_array().map(|a| a.iter().filter_map(usize_of).collect()).unwrap_or_default();
     for &j in &joints {
         if j >= world.len() {
-            return Err(GltfError::new(
-                path,
-                format!("skin {skin} names joint node {j}, which does not exist"),
-            ));
+            return Err(GltfError::new(path, format!("skin {skin} names joint node {j}, which does not exist")));
         }
     }
     let ibm: Vec<Matrix4<f64>> = match usize_of(&s["inverseBindMatrices"]) {
         Some(a) => {
             let d = reader.read(a)?;
             if d.components != 16 || d.count < joints.len() {
-                return Err(GltfError::new(
-                    path,
-                    format!("skin {skin}: inverseBindMatrices must be MAT4 with one per joint"),
-                ));
+                return Err(GltfError::new(path, format!("skin {skin}: inverseBindMatrices must be MAT4 with one per joint")));
             }
-            (0..joints.len())
-                .map(|i| Matrix4::from_column_slice(&d.data[i * 16..i * 16 + 16]))
-                .collect()
+            (0..joints.len()).map(|i| Matrix4::from_column_slice(&d.data[i * 16..i * 16 + 16])).collect()
         }
         None => vec![Matrix4::identity(); joints.len()],
     };
-    let jm: Vec<Matrix4<f64>> = joints
-        .iter()
-        .zip(&ibm)
-        .map(|(&j, b)| world[j] * b)
-        .collect();
+    let jm: Vec<Matrix4<f64>> = joints.iter().zip(&ibm).map(|(&j, b)| world[j] * b).collect();
     let mut out = vec![Matrix4::zeros(); count];
     let mut any = false;
     for set in 0..4 {
-        let (Some(ja), Some(wa)) = (
-            usize_of(&attrs[format!("JOINTS_{set}")]),
-            usize_of(&attrs[format!("WEIGHTS_{set}")]),
-        ) else {
+        let (Some(ja), Some(wa)) = (usize_of(&attrs[format!("JOINTS_{set}")]), usize_of(&attrs[format!("WEIGHTS_{set}")])) else {
             continue;
         };
         any = true;
         let j = reader.read(ja)?;
         let w = reader.read(wa)?;
         if j.count != count || w.count != count || j.components != 4 || w.components != 4 {
-            return Err(GltfError::new(
-                path,
-                format!("JOINTS_{set}/WEIGHTS_{set} must be VEC4 with one entry per vertex"),
-            ));
+            return Err(GltfError::new(path, format!("JOINTS_{set}/WEIGHTS_{set} must be VEC4 with one entry per vertex")));
         }
         for v in 0..count {
             for k in 0..4 {
                 let wt = w.data[v * 4 + k];
                 if wt != 0.0 {
                     let ji = j.data[v * 4 + k] as usize;
-                    let m = jm.get(ji).ok_or_else(|| {
-                        GltfError::new(
-                            path,
-                            format!(
-                                "vertex {v} uses joint {ji} of skin {skin}, which has {} joints",
-                                jm.len()
-                            ),
-                        )
-                    })?;
+                    let m = jm.get(ji).ok_or_else(|| GltfError::new(path, format!("vertex {v} uses joint {ji} of skin {skin}, which has {} joints", jm.len())))?;
                     out[v] += m * wt;
                 }
             }
         }
     }
     if !any {
-        return Err(GltfError::new(
-            path,
-            format!("a primitive skinned by skin {skin} has no JOINTS_0/WEIGHTS_0"),
-        ));
+        return Err(GltfError::new(path, format!("a primitive skinned by skin {skin} has no JOINTS_0/WEIGHTS_0")));
     }
     Ok(out)
 }
@@ -187,28 +142,12 @@ pub fn extract(
     world: &[Matrix4<f64>],
 ) -> GltfResult<MeshInstance> {
     let nj = &json["nodes"][node];
-    let mesh = usize_of(&nj["mesh"])
-        .ok_or_else(|| GltfError::new(path, format!("node {node} has no mesh")))?;
-    let mj = json["meshes"].get(mesh).ok_or_else(|| {
-        GltfError::new(
-            path,
-            format!("node {node} refers to mesh {mesh}, which does not exist"),
-        )
-    })?;
-    let name = mj["name"]
-        .as_str()
-        .or(nj["name"].as_str())
-        .map(String::from)
-        .unwrap_or(format!("mesh_{mesh}"));
-    let prims = mj["primitives"]
-        .as_array()
-        .map(|a| a.as_slice())
-        .unwrap_or(&[]);
+    let mesh = usize_of(&nj["mesh"]).ok_or_else(|| GltfError::new(path, format!("node {node} has no mesh")))?;
+    let mj = json["meshes"].get(mesh).ok_or_else(|| GltfError::new(path, format!("node {node} refers to mesh {mesh}, which does not exist")))?;
+    let name = mj["name"].as_str().or(nj["name"].as_str()).map(String::from).unwrap_or(format!("mesh_{mesh}"));
+    let prims = mj["primitives"].as_array().map(|a| a.as_slice()).unwrap_or(&[]);
     let skin = usize_of(&nj["skin"]);
-    let target_count = prims
-        .first()
-        .and_then(|p| p["targets"].as_array())
-        .map_or(0, |t| t.len());
+    let target_count = prims.first().and_then(|p| p["targets"].as_array()).map_or(0, |t| t.len());
     for (pi, p) in prims.iter().enumerate() {
         let tc = p["targets"].as_array().map_or(0, |t| t.len());
         if tc != target_count {
@@ -216,23 +155,14 @@ pub fn extract(
         }
     }
     let names: Vec<String> = (0..target_count)
-        .map(|t| {
-            mj["extras"]["targetNames"][t]
-                .as_str()
-                .map(String::from)
-                .unwrap_or(format!("target_{t}"))
-        })
+        .map(|t| mj["extras"]["targetNames"][t].as_str().map(String::from).unwrap_or(format!("target_{t}")))
         .collect();
     let mut positions = Vec::new();
     let mut normals: Option<Vec<Vector3<f64>>> = Some(Vec::new());
     let mut triangles = Vec::new();
     let mut targets: Vec<MorphTarget> = names
         .iter()
-        .map(|n| MorphTarget {
-            name: n.clone(),
-            positions: Vec::new(),
-            normals: Some(Vec::new()),
-        })
+        .map(|n| MorphTarget { name: n.clone(), positions: Vec::new(), normals: Some(Vec::new()) })
         .collect();
     let mut per_vertex: Vec<Matrix4<f64>> = Vec::new();
     let mut ranges = Vec::new();
@@ -244,21 +174,12 @@ pub fn extract(
             continue;
         }
         let attrs = &p["attributes"];
-        let pa = usize_of(&attrs["POSITION"]).ok_or_else(|| {
-            GltfError::new(path, format!("mesh {mesh} primitive {pi} has no POSITION"))
-        })?;
+        let pa = usize_of(&attrs["POSITION"]).ok_or_else(|| GltfError::new(path, format!("mesh {mesh} primitive {pi} has no POSITION")))?;
         let pos = reader.read(pa)?;
         if pos.components != 3 {
-            return Err(GltfError::new(
-                path,
-                format!("accessor {pa}: POSITION must be VEC3"),
-            ));
+            return Err(GltfError::new(path, format!("accessor {pa}: POSITION must be VEC3")));
         }
-        check_finite(
-            path,
-            &format!("mesh {mesh} ({name}) primitive {pi} POSITION (accessor {pa})"),
-            &pos.data,
-        )?;
+        check_finite(path, &format!("mesh {mesh} ({name}) primitive {pi} POSITION (accessor {pa})"), &pos.data)?;
         let count = pos.count;
         let base = positions.len();
         let xf: Vec<Matrix4<f64>> = match skin {
@@ -270,12 +191,7 @@ pub fn extract(
             None => (0..count).collect(),
         };
         if let Some(&bad) = idx.iter().find(|&&i| i >= count) {
-            return Err(GltfError::new(
-                path,
-                format!(
-                    "mesh {mesh} primitive {pi}: index {bad} is out of range ({count} vertices)"
-                ),
-            ));
+            return Err(GltfError::new(path, format!("mesh {mesh} primitive {pi}: index {bad} is out of range ({count} vertices)")));
         }
         for t in triangulate(mode, &idx) {
             triangles.push([t[0] + base, t[1] + base, t[2] + base]);
@@ -287,10 +203,7 @@ pub fn extract(
             (Some(na), Some(ns)) => {
                 let n = reader.read(na)?;
                 if n.count != count || n.components != 3 {
-                    return Err(GltfError::new(
-                        path,
-                        format!("accessor {na}: NORMAL must be VEC3 with one per vertex"),
-                    ));
+                    return Err(GltfError::new(path, format!("accessor {na}: NORMAL must be VEC3 with one per vertex")));
                 }
                 check_finite(path, &format!("accessor {na} (NORMAL)"), &n.data)?;
                 ns.extend((0..count).map(|v| transform_normal(&xf[v], &n.vec3(v))));
@@ -307,16 +220,8 @@ pub fn extract(
                         if d.count != count || d.components != 3 {
                             return Err(GltfError::new(path, format!("accessor {a}: target {ti} {key} must be VEC3 with one per vertex ({count})")));
                         }
-                        check_finite(
-                            path,
-                            &format!("mesh {mesh} target {ti} {key} (accessor {a})"),
-                            &d.data,
-                        )?;
-                        Ok(Some(
-                            (0..count)
-                                .map(|v| transform_vector(&xf[v], &d.vec3(v)))
-                                .collect(),
-                        ))
+                        check_finite(path, &format!("mesh {mesh} target {ti} {key} (accessor {a})"), &d.data)?;
+                        Ok(Some((0..count).map(|v| transform_vector(&xf[v], &d.vec3(v))).collect()))
                     }
                 }
             };
@@ -346,11 +251,7 @@ pub fn extract(
         triangles,
         targets,
         default_weights,
-        to_world: if skin.is_some() {
-            VertexTransform::PerVertex(per_vertex)
-        } else {
-            VertexTransform::Node(world[node])
-        },
+        to_world: if skin.is_some() { VertexTransform::PerVertex(per_vertex) } else { VertexTransform::Node(world[node]) },
         primitive_ranges: ranges,
         skipped_primitives: skipped,
     })

@@ -11,12 +11,7 @@ pub fn decode(
     ext: &serde_json::Value,
     buffers: &[Vec<u8>],
 ) -> GltfResult<Vec<u8>> {
-    let err = |m: String| {
-        GltfError::new(
-            path,
-            format!("bufferView {view} (EXT_meshopt_compression): {m}"),
-        )
-    };
+    let err = |m: String| GltfError::new(path, format!("bufferView {view} (EXT_meshopt_compression): {m}"));
     let get = |k: &str| ext[k].as_u64().map(|v| v as usize);
     let buffer = get("buffer").ok_or_else(|| err("missing 'buffer'".into()))?;
     let offset = get("byteOffset").unwrap_or(0);
@@ -28,27 +23,19 @@ pub fn decode(
     let src = buffers
         .get(buffer)
         .ok_or_else(|| err(format!("buffer {buffer} does not exist")))?;
-    let end = offset
-        .checked_add(length)
-        .ok_or_else(|| err("byte range overflows".into()))?;
+    let end = offset.checked_add(length).ok_or_else(|| err("byte range overflows".into()))?;
     let src = src.get(offset..end).ok_or_else(|| {
-        err(format!(
-            "compressed bytes {offset}..{end} lie outside buffer {buffer} ({} bytes)",
-            src.len()
-        ))
+        err(format!("compressed bytes {offset}..{end} lie outside buffer {buffer} ({} bytes)", src.len()))
     })?;
-    let size = count
-        .checked_mul(stride)
-        .filter(|&s| s <= 1 << 31)
-        .ok_or_else(|| err(format!("count {count} × byteStride {stride} is too large")))?;
+    let size = count.checked_mul(stride).filter(|&s| s <= 1 << 31).ok_or_else(|| {
+        err(format!("count {count} × byteStride {stride} is too large"))
+    })?;
     let mut dst = vec![0u8; size];
     // meshoptimizer asserts (aborts) on invalid sizes, so every parameter is checked first.
     let rc = match mode {
         "ATTRIBUTES" => {
             if stride == 0 || stride > 256 || stride % 4 != 0 {
-                return Err(err(format!(
-                    "ATTRIBUTES byteStride {stride} must be a multiple of 4 in 4..=256"
-                )));
+                return Err(err(format!("ATTRIBUTES byteStride {stride} must be a multiple of 4 in 4..=256")));
             }
             // SAFETY: dst holds count*stride bytes; src is a valid slice.
             unsafe {
@@ -66,9 +53,7 @@ pub fn decode(
                 return Err(err(format!("{mode} byteStride {stride} must be 2 or 4")));
             }
             if mode == "TRIANGLES" && count % 3 != 0 {
-                return Err(err(format!(
-                    "TRIANGLES count {count} is not a multiple of 3"
-                )));
+                return Err(err(format!("TRIANGLES count {count} is not a multiple of 3")));
             }
             // SAFETY: as above; index size is 2 or 4 and the count a multiple of 3 for triangles.
             unsafe {
@@ -94,9 +79,7 @@ pub fn decode(
         other => return Err(err(format!("unknown mode {other:?}"))),
     };
     if rc != 0 {
-        return Err(err(format!(
-            "compressed data is corrupt (meshopt error {rc})"
-        )));
+        return Err(err(format!("compressed data is corrupt (meshopt error {rc})")));
     }
     if mode == "ATTRIBUTES" {
         // SAFETY: strides are checked against what each filter accepts.
@@ -113,16 +96,12 @@ pub fn decode(
                     meshopt::ffi::meshopt_decodeFilterExp(dst.as_mut_ptr().cast(), count, stride)
                 }
                 other => {
-                    return Err(err(format!(
-                        "filter {other:?} is unknown or does not fit byteStride {stride}"
-                    )))
+                    return Err(err(format!("filter {other:?} is unknown or does not fit byteStride {stride}")))
                 }
             }
         }
     } else if filter != "NONE" {
-        return Err(err(format!(
-            "filter {filter:?} is only allowed with ATTRIBUTES"
-        )));
+        return Err(err(format!("filter {filter:?} is only allowed with ATTRIBUTES")));
     }
     Ok(dst)
 }

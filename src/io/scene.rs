@@ -34,29 +34,16 @@ pub fn local_matrix(node: &serde_json::Value) -> Matrix4<f64> {
 
 /// World matrices of every node (identity for nodes outside the displayed scene), and the
 /// list of nodes reachable from the displayed scene. Cycles and multiple parents are errors.
-pub fn world_matrices(
-    path: &Path,
-    json: &serde_json::Value,
-) -> GltfResult<(Vec<Matrix4<f64>>, Vec<usize>)> {
-    let nodes = json["nodes"]
-        .as_array()
-        .map(|a| a.as_slice())
-        .unwrap_or(&[]);
+pub fn world_matrices(path: &Path, json: &serde_json::Value) -> GltfResult<(Vec<Matrix4<f64>>, Vec<usize>)> {
+    let nodes = json["nodes"].as_array().map(|a| a.as_slice()).unwrap_or(&[]);
     let n = nodes.len();
     let mut parent: Vec<Option<usize>> = vec![None; n];
     for (i, node) in nodes.iter().enumerate() {
         if let Some(ch) = node["children"].as_array() {
             for c in ch {
-                let c = c
-                    .as_u64()
-                    .map(|c| c as usize)
-                    .filter(|&c| c < n)
-                    .ok_or_else(|| {
-                        GltfError::new(
-                            path,
-                            format!("node {i} has a child {c} that does not exist"),
-                        )
-                    })?;
+                let c = c.as_u64().map(|c| c as usize).filter(|&c| c < n).ok_or_else(|| {
+                    GltfError::new(path, format!("node {i} has a child {c} that does not exist"))
+                })?;
                 if parent[c].is_some() || c == i {
                     return Err(GltfError::new(path, format!("node {c} has more than one parent or is its own child (the node hierarchy must be a tree)")));
                 }
@@ -65,15 +52,8 @@ pub fn world_matrices(
         }
     }
     let scene_index = json["scene"].as_u64().unwrap_or(0) as usize;
-    let roots: Vec<usize> = match json["scenes"]
-        .get(scene_index)
-        .and_then(|s| s["nodes"].as_array())
-    {
-        Some(a) => a
-            .iter()
-            .filter_map(|v| v.as_u64())
-            .map(|v| v as usize)
-            .collect(),
+    let roots: Vec<usize> = match json["scenes"].get(scene_index).and_then(|s| s["nodes"].as_array()) {
+        Some(a) => a.iter().filter_map(|v| v.as_u64()).map(|v| v as usize).collect(),
         None => (0..n).filter(|&i| parent[i].is_none()).collect(),
     };
     let mut world = vec![Matrix4::identity(); n];
@@ -82,21 +62,13 @@ pub fn world_matrices(
     let mut stack: Vec<(usize, Matrix4<f64>)> = Vec::new();
     for &r in &roots {
         if r >= n {
-            return Err(GltfError::new(
-                path,
-                format!("scene {scene_index} lists node {r}, which does not exist"),
-            ));
+            return Err(GltfError::new(path, format!("scene {scene_index} lists node {r}, which does not exist")));
         }
         stack.push((r, Matrix4::identity()));
     }
     while let Some((i, pm)) = stack.pop() {
         if visited[i] {
-            return Err(GltfError::new(
-                path,
-                format!(
-                    "node {i} is reached twice: the node hierarchy has a cycle or a shared child"
-                ),
-            ));
+            return Err(GltfError::new(path, format!("node {i} is reached twice: the node hierarchy has a cycle or a shared child")));
         }
         visited[i] = true;
         order.push(i);
@@ -127,9 +99,5 @@ pub fn transform_normal(m: &Matrix4<f64>, n: &Vector3<f64>) -> Vector3<f64> {
     let it = l.try_inverse().map(|i| i.transpose()).unwrap_or(l);
     let r = it * n;
     let len = r.norm();
-    if len > 0.0 {
-        r / len
-    } else {
-        *n
-    }
+    if len > 0.0 { r / len } else { *n }
 }

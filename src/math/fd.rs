@@ -19,12 +19,7 @@ pub struct FdReport {
 const STEPS: [f64; 7] = [1e-2, 3e-3, 1e-3, 3e-4, 1e-4, 3e-5, 1e-5];
 
 fn rel(a: &[f64], b: &[f64]) -> f64 {
-    let diff: f64 = a
-        .iter()
-        .zip(b)
-        .map(|(x, y)| (x - y).powi(2))
-        .sum::<f64>()
-        .sqrt();
+    let diff: f64 = a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum::<f64>().sqrt();
     let na: f64 = a.iter().map(|x| x * x).sum::<f64>().sqrt();
     let nb: f64 = b.iter().map(|x| x * x).sum::<f64>().sqrt();
     diff / na.max(nb).max(1e-300)
@@ -36,10 +31,7 @@ pub fn check_gradient(e: &dyn Energy, x: &[f64], scale: f64) -> FdReport {
     let n = x.len();
     let mut g = vec![0.0; n];
     e.eval(x, Some(&mut g), None, false);
-    let mut best = FdReport {
-        rel_error: f64::INFINITY,
-        step: 0.0,
-    };
+    let mut best = FdReport { rel_error: f64::INFINITY, step: 0.0 };
     let mut xp = x.to_vec();
     for s in STEPS {
         let h = s * scale;
@@ -54,10 +46,7 @@ pub fn check_gradient(e: &dyn Energy, x: &[f64], scale: f64) -> FdReport {
         }
         let r = rel(&g, &num);
         if r < best.rel_error {
-            best = FdReport {
-                rel_error: r,
-                step: h,
-            };
+            best = FdReport { rel_error: r, step: h };
         }
     }
     best
@@ -70,10 +59,7 @@ pub fn check_hessian(e: &dyn Energy, x: &[f64], scale: f64) -> FdReport {
     let mut trip = Vec::new();
     e.eval(x, None, Some(&mut trip), false);
     let h_an = dense_from_triplets(n, &trip);
-    let mut best = FdReport {
-        rel_error: f64::INFINITY,
-        step: 0.0,
-    };
+    let mut best = FdReport { rel_error: f64::INFINITY, step: 0.0 };
     let mut xp = x.to_vec();
     for s in STEPS {
         let h = s * scale;
@@ -92,10 +78,7 @@ pub fn check_hessian(e: &dyn Energy, x: &[f64], scale: f64) -> FdReport {
         }
         let r = rel(&h_an, &num);
         if r < best.rel_error {
-            best = FdReport {
-                rel_error: r,
-                step: h,
-            };
+            best = FdReport { rel_error: r, step: h };
         }
     }
     best

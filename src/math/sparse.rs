@@ -5,9 +5,9 @@
 //! later assemblies with the same triplet order only refill values ([`Pattern::assemble`]),
 //! and the symbolic Cholesky factorisation is reused across iterations and frames.
 
-use faer::linalg::solvers::Solve;
 use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
 use faer::sparse::{Argsort, Pair, SparseColMat, SymbolicSparseColMat};
+use faer::linalg::solvers::Solve;
 use faer::{MatMut, Side};
 
 /// Errors from sparse assembly and factorisation.
@@ -40,18 +40,11 @@ pub struct Pattern {
 impl Pattern {
     /// Build the pattern of an `n × n` matrix from the indices of `triplets` (values ignored).
     pub fn new(n: usize, triplets: &[(usize, usize, f64)]) -> Result<Self, SparseError> {
-        let idx: Vec<Pair<usize, usize>> = triplets
-            .iter()
-            .map(|&(r, c, _)| Pair { row: r, col: c })
-            .collect();
+        let idx: Vec<Pair<usize, usize>> =
+            triplets.iter().map(|&(r, c, _)| Pair { row: r, col: c }).collect();
         let (symbolic, argsort) = SymbolicSparseColMat::try_new_from_indices(n, n, &idx)
             .map_err(|e| SparseError::Build(format!("{e:?}")))?;
-        Ok(Self {
-            n,
-            triplet_count: triplets.len(),
-            symbolic,
-            argsort,
-        })
+        Ok(Self { n, triplet_count: triplets.len(), symbolic, argsort })
     }
 
     /// Matrix size.
@@ -137,10 +130,7 @@ impl SpdSolver {
 
     /// Solve A x = b in place (b overwritten by x). Panics if not factorised.
     pub fn solve_in_place(&self, b: &mut [f64]) {
-        let f = self
-            .factor
-            .as_ref()
-            .expect("SpdSolver::solve before factorize");
+        let f = self.factor.as_ref().expect("SpdSolver::solve before factorize");
         let n = b.len();
         let m = MatMut::from_column_major_slice_mut(b, n, 1);
         f.solve_in_place(m);
@@ -199,10 +189,7 @@ mod tests {
             s.solve_in_place(&mut b);
             for (i, bi) in b.iter().enumerate() {
                 let exact = ((i + 1) * (n - i)) as f64 / 2.0 / scale;
-                assert!(
-                    (bi - exact).abs() < 1e-9 * exact.max(1.0),
-                    "{i}: {bi} vs {exact}"
-                );
+                assert!((bi - exact).abs() < 1e-9 * exact.max(1.0), "{i}: {bi} vs {exact}");
             }
         }
         let y = mul_vec(&a, &vec![1.0; n]);

@@ -18,10 +18,7 @@ pub struct TriMesh {
 impl TriMesh {
     /// A mesh from positions and triangles.
     pub fn new(positions: Vec<Vector3<f64>>, triangles: Vec<[usize; 3]>) -> Self {
-        Self {
-            positions,
-            triangles,
-        }
+        Self { positions, triangles }
     }
 
     /// Number of vertices.
@@ -37,11 +34,7 @@ impl TriMesh {
     /// Axis-aligned bounding box (min, max) in metres; `None` for an empty mesh.
     pub fn bounding_box(&self) -> Option<(Vector3<f64>, Vector3<f64>)> {
         let first = *self.positions.first()?;
-        Some(
-            self.positions
-                .iter()
-                .fold((first, first), |(lo, hi), p| (lo.inf(p), hi.sup(p))),
-        )
+        Some(self.positions.iter().fold((first, first), |(lo, hi), p| (lo.inf(p), hi.sup(p))))
     }
 
     /// Area (m²) of triangle `t`.
@@ -53,9 +46,7 @@ impl TriMesh {
 
     /// Total surface area (m²).
     pub fn area(&self) -> f64 {
-        (0..self.triangles.len())
-            .map(|t| self.triangle_area(t))
-            .sum()
+        (0..self.triangles.len()).map(|t| self.triangle_area(t)).sum()
     }
 
     /// Area-weighted unit vertex normals for the given positions (same topology as `self`).
@@ -87,18 +78,13 @@ impl TriMesh {
 
     /// Flat `[x0, y0, z0, x1, …]` copy of the positions (the layout solvers use).
     pub fn flat_positions(&self) -> Vec<f64> {
-        self.positions
-            .iter()
-            .flat_map(|p| [p.x, p.y, p.z])
-            .collect()
+        self.positions.iter().flat_map(|p| [p.x, p.y, p.z]).collect()
     }
 }
 
 /// Convert a flat `[x0, y0, z0, …]` vector into points.
 pub fn points_from_flat(x: &[f64]) -> Vec<Vector3<f64>> {
-    x.chunks_exact(3)
-        .map(|c| Vector3::new(c[0], c[1], c[2]))
-        .collect()
+    x.chunks_exact(3).map(|c| Vector3::new(c[0], c[1], c[2])).collect()
 }
 
 #[cfg(test)]
