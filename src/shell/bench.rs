@@ -6,7 +6,9 @@
 //! patches), like the skin's cluster constraints. A preparation solve from the flat sheet
 //! (with a small out-of-plane imperfection) at 1 % compression finds the wrinkled
 //! equilibrium; the measured solve then moves the boundary to 1.05 % and re-solves from that
-//! state, as one animation frame follows the previous one.
+//! state, as one animation frame follows the previous one. Both solves use
+//! [`HessianMode::Auto`](crate::solver::HessianMode) and the energy merit in the line search
+//! (the residual-only rule of DESIGN.md crawls once the sheet wrinkles).
 
 use super::sheet::equilateral_sheet;
 use super::{Shell, ShellMaterial};

@@ -5,7 +5,10 @@
 //! Each iteration solves
 //! `[K γCᵀ; γC 0] [Δx; μ⁺] = [−(∇E − f); −γ(Cx − d)]` over the free dofs (see
 //! [`super::kkt`]) and searches along (Δx, μ⁺ − μ) on ‖r‖, r = [∇E − f + γCᵀμ; γ(Cx − d)].
-//! The multiplier of the constraints in newtons is λ = γ μ. The solver object keeps the
+//! The multiplier of the constraints in newtons is λ = γ μ. The Hessian is the exact one
+//! when the KKT inertia says it is positive definite on the constraint null space, else the
+//! exact one shifted by τ I (inertia correction), else the element-projected one
+//! ([`HessianMode::Auto`]). The solver object keeps the
 //! sparsity pattern, the symbolic factorisation, γ and the multipliers between calls, so
 //! frame after frame only numeric work is done.
 
