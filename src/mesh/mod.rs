@@ -2,6 +2,9 @@
 
 use nalgebra::Vector3;
 
+pub mod quality;
+pub mod topology;
+
 /// A triangle mesh. Positions are in metres (world space); triangles index into `positions`
 /// with counter-clockwise winding seen from outside (the normal side).
 #[derive(Debug, Clone, Default, PartialEq)]

@@ -1,3 +1,12 @@
 //! The skin: discrete thin shell energies (membrane and hinge bending).
 
 pub mod bench;
+pub mod bending;
+pub mod material;
+pub mod membrane;
+pub mod model;
+pub mod psd;
+pub mod sheet;
+
+pub use material::ShellMaterial;
+pub use model::Shell;

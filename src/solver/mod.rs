@@ -1,1 +1,9 @@
 //! Nonlinear solvers: Newton with line search, sparse KKT systems, quasi-static equilibrium.
+
+pub mod kkt;
+pub mod linesearch;
+pub mod statics;
+pub mod status;
+
+pub use statics::{HessianMode, LinearConstraints, StaticProblem, StaticSettings, StaticSolver};
+pub use status::{SolveReport, SolveStatus};

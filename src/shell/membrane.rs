@@ -1,0 +1,297 @@
+//! Membrane (stretch and shear) energy: isotropic Saint Venant–Kirchhoff per triangle with
+//! plane-stress Lamé parameters times thickness.
+//!
+//! Per triangle with rest area A and deformation gradient F (3 × 2, from the rest triangle's
+//! own 2D frame), Green strain E = ½ (FᵀF − I), energy
+//! W = A [ μh E:E + ½ λh (tr E)² ], μ = E_x / (2(1+ν)), λ = E_x ν / (1 − ν²) (plane stress),
+//! so that uniaxial stress gives Young's modulus and biaxial strain gives E_x h / (1 − ν²).
+
+use super::material::ShellMaterial;
+use super::psd::project_psd;
+use crate::math::Energy;
+use crate::mesh::TriMesh;
+use nalgebra::Vector3;
+use rayon::prelude::*;
+
+/// Rest data of one membrane triangle.
+#[derive(Debug, Clone, Copy)]
+pub struct MembraneElement {
+    /// Vertex indices.
+    pub v: [usize; 3],
+    /// Shape-function gradients in the rest 2D frame (1/m): F = Σ_i x_i b_iᵀ.
+    pub b: [[f64; 2]; 3],
+    /// Rest area (m²).
+    pub area: f64,
+}
+
+/// The membrane energy of a triangle mesh (J), over flat positions (m).
+#[derive(Debug, Clone)]
+pub struct MembraneEnergy {
+    /// Elements with their rest data.
+    pub elements: Vec<MembraneElement>,
+    /// μ h (N/m).
+    pub mu_h: f64,
+    /// λ h (N/m), plane stress.
+    pub lambda_h: f64,
+    n_dofs: usize,
+}
+
+/// Rest data for the triangle `p`, or `None` if it has (numerically) zero area.
+pub fn membrane_rest(v: [usize; 3], p: [Vector3<f64>; 3]) -> Option<MembraneElement> {
+    let e1 = p[1] - p[0];
+    let e2 = p[2] - p[0];
+    let n = e1.cross(&e2);
+    let area = 0.5 * n.norm();
+    let scale = e1.norm_squared().max(e2.norm_squared());
+    if area.is_nan() || area <= 1e-14 * scale || !area.is_finite() {
+        return None;
+    }
+    let t1 = e1.normalize();
+    let t2 = n.normalize().cross(&t1);
+    // Dm columns are the rest edges in 2D.
+    let (a, b, c, d) = (e1.dot(&t1), e2.dot(&t1), e1.dot(&t2), e2.dot(&t2));
+    let det = a * d - b * c;
+    let inv = [[d / det, -b / det], [-c / det, a / det]];
+    let b1 = inv[0];
+    let b2 = inv[1];
+    let b0 = [-b1[0] - b2[0], -b1[1] - b2[1]];
+    Some(MembraneElement {
+        v,
+        b: [b0, b1, b2],
+        area,
+    })
+}
+
+/// Energy (J) of one element at positions `x`; adds the 9-vector gradient and fills the
+/// row-major 9 × 9 Hessian when asked.
+pub fn membrane_element(
+    el: &MembraneElement,
+    x: [[f64; 3]; 3],
+    mu_h: f64,
+    lambda_h: f64,
+    grad: Option<&mut [f64; 9]>,
+    hess: Option<&mut [f64; 81]>,
+) -> f64 {
+    let b = &el.b;
+    // F[c][a]
+    let mut f = [[0.0; 2]; 3];
+    for i in 0..3 {
+        for c in 0..3 {
+            for a in 0..2 {
+                f[c][a] += x[i][c] * b[i][a];
+            }
+        }
+    }
+    // C = FᵀF
+    let mut cg = [[0.0; 2]; 2];
+    for a in 0..2 {
+        for bb in 0..2 {
+            cg[a][bb] = (0..3).map(|c| f[c][a] * f[c][bb]).sum();
+        }
+    }
+    let e = [
+        [0.5 * (cg[0][0] - 1.0), 0.5 * cg[0][1]],
+        [0.5 * cg[1][0], 0.5 * (cg[1][1] - 1.0)],
+    ];
+    let tr = e[0][0] + e[1][1];
+    let ee = e[0][0] * e[0][0] + 2.0 * e[0][1] * e[0][1] + e[1][1] * e[1][1];
+    let energy = el.area * (mu_h * ee + 0.5 * lambda_h * tr * tr);
+    if grad.is_none() && hess.is_none() {
+        return energy;
+    }
+    // S = 2μh E + λh tr E I
+    let s = [
+        [2.0 * mu_h * e[0][0] + lambda_h * tr, 2.0 * mu_h * e[0][1]],
+        [2.0 * mu_h * e[1][0], 2.0 * mu_h * e[1][1] + lambda_h * tr],
+    ];
+    if let Some(g) = grad {
+        // P = F S; grad_i = A P b_i
+        let mut p = [[0.0; 2]; 3];
+        for c in 0..3 {
+            for a in 0..2 {
+                p[c][a] = f[c][0] * s[0][a] + f[c][1] * s[1][a];
+            }
+        }
+        for i in 0..3 {
+            for c in 0..3 {
+                g[3 * i + c] += el.area * (p[c][0] * b[i][0] + p[c][1] * b[i][1]);
+            }
+        }
+    }
+    if let Some(h) = hess {
+        // S b_i
+        let sb: [[f64; 2]; 3] = std::array::from_fn(|i| {
+            [
+                s[0][0] * b[i][0] + s[0][1] * b[i][1],
+                s[1][0] * b[i][0] + s[1][1] * b[i][1],
+            ]
+        });
+        for j in 0..3 {
+            for d in 0..3 {
+                let fd = f[d];
+                // δE = ½(b_j f_dᵀ + f_d b_jᵀ)
+                let de = [
+                    [b[j][0] * fd[0], 0.5 * (b[j][0] * fd[1] + fd[0] * b[j][1])],
+                    [0.5 * (b[j][1] * fd[0] + fd[1] * b[j][0]), b[j][1] * fd[1]],
+                ];
+                let dtr = de[0][0] + de[1][1];
+                let ds = [
+                    [
+                        2.0 * mu_h * de[0][0] + lambda_h * dtr,
+                        2.0 * mu_h * de[0][1],
+                    ],
+                    [
+                        2.0 * mu_h * de[1][0],
+                        2.0 * mu_h * de[1][1] + lambda_h * dtr,
+                    ],
+                ];
+                let col = 3 * j + d;
+                for i in 0..3 {
+                    let dsb = [
+                        ds[0][0] * b[i][0] + ds[0][1] * b[i][1],
+                        ds[1][0] * b[i][0] + ds[1][1] * b[i][1],
+                    ];
+                    let geo = b[j][0] * sb[i][0] + b[j][1] * sb[i][1];
+                    for c in 0..3 {
+                        let mut v = f[c][0] * dsb[0] + f[c][1] * dsb[1];
+                        if c == d {
+                            v += geo;
+                        }
+                        h[(3 * i + c) * 9 + col] = el.area * v;
+                    }
+                }
+            }
+        }
+    }
+    energy
+}
+
+impl MembraneEnergy {
+    /// Membrane of `rest` with `material`. Fails on a degenerate triangle (names it).
+    pub fn new(rest: &TriMesh, material: &ShellMaterial) -> anyhow::Result<Self> {
+        material.validate()?;
+        let (mu_h, lambda_h) = material.lame_times_thickness();
+        let mut elements = Vec::with_capacity(rest.triangles.len());
+        for (t, &v) in rest.triangles.iter().enumerate() {
+            let p = v.map(|i| rest.positions[i]);
+            let el = membrane_rest(v, p).ok_or_else(|| {
+                anyhow::anyhow!(
+                    "triangle {t} (vertices {v:?}) has zero rest area; remove or remesh it \
+                     (see mesh::quality::check)"
+                )
+            })?;
+            elements.push(el);
+        }
+        Ok(Self {
+            elements,
+            mu_h,
+            lambda_h,
+            n_dofs: 3 * rest.positions.len(),
+        })
+    }
+
+    /// Number of Hessian triplets emitted per evaluation.
+    pub fn triplet_count(&self) -> usize {
+        81 * self.elements.len()
+    }
+}
+
+fn gather3(x: &[f64], v: [usize; 3]) -> [[f64; 3]; 3] {
+    v.map(|i| [x[3 * i], x[3 * i + 1], x[3 * i + 2]])
+}
+
+impl Energy for MembraneEnergy {
+    fn dofs(&self) -> usize {
+        self.n_dofs
+    }
+
+    fn eval(
+        &self,
+        x: &[f64],
+        grad: Option<&mut [f64]>,
+        hess: Option<&mut Vec<(usize, usize, f64)>>,
+        project: bool,
+    ) -> f64 {
+        let want_g = grad.is_some();
+        let ne = self.elements.len();
+        let mut hbuf: Option<&mut [(usize, usize, f64)]> = None;
+        if let Some(h) = hess {
+            let start = h.len();
+            h.resize(start + 81 * ne, (0, 0, 0.0));
+            hbuf = Some(&mut h[start..]);
+        }
+        let mut gbuf = if want_g {
+            vec![[0.0; 9]; ne]
+        } else {
+            Vec::new()
+        };
+        let energy: f64 = match (hbuf, want_g) {
+            (Some(hb), _) => {
+                let gchunks: Vec<Option<&mut [f64; 9]>> = if want_g {
+                    gbuf.iter_mut().map(Some).collect()
+                } else {
+                    (0..ne).map(|_| None).collect()
+                };
+                hb.par_chunks_mut(81)
+                    .zip(gchunks.into_par_iter())
+                    .zip(self.elements.par_iter())
+                    .map(|((tr, g), el)| {
+                        let mut he = [0.0; 81];
+                        let e = membrane_element(
+                            el,
+                            gather3(x, el.v),
+                            self.mu_h,
+                            self.lambda_h,
+                            g,
+                            Some(&mut he),
+                        );
+                        if project {
+                            project_psd(&mut he, 9);
+                        }
+                        for r in 0..9 {
+                            for c in 0..9 {
+                                tr[r * 9 + c] = (
+                                    3 * el.v[r / 3] + r % 3,
+                                    3 * el.v[c / 3] + c % 3,
+                                    he[r * 9 + c],
+                                );
+                            }
+                        }
+                        e
+                    })
+                    .sum()
+            }
+            (None, true) => gbuf
+                .par_iter_mut()
+                .zip(self.elements.par_iter())
+                .map(|(g, el)| {
+                    membrane_element(
+                        el,
+                        gather3(x, el.v),
+                        self.mu_h,
+                        self.lambda_h,
+                        Some(g),
+                        None,
+                    )
+                })
+                .sum(),
+            (None, false) => self
+                .elements
+                .par_iter()
+                .map(|el| {
+                    membrane_element(el, gather3(x, el.v), self.mu_h, self.lambda_h, None, None)
+                })
+                .sum(),
+        };
+        if let Some(g) = grad {
+            for (el, ge) in self.elements.iter().zip(&gbuf) {
+                for (k, &vi) in el.v.iter().enumerate() {
+                    for c in 0..3 {
+                        g[3 * vi + c] += ge[3 * k + c];
+                    }
+                }
+            }
+        }
+        energy
+    }
+}

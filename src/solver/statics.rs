@@ -1,0 +1,678 @@
+//! Quasi-static equilibrium: minimise E(x) − fᵀx subject to linear equality constraints
+//! C x = d and pinned dofs, by Newton's method on the KKT system with the residual-norm
+//! line search of DESIGN.md, from a warm start.
+//!
+//! Each iteration solves
+//! `[K γCᵀ; γC 0] [Δx; μ⁺] = [−(∇E − f); −γ(Cx − d)]` over the free dofs (see
+//! [`super::kkt`]) and searches along (Δx, μ⁺ − μ) on ‖r‖, r = [∇E − f + γCᵀμ; γ(Cx − d)].
+//! The multiplier of the constraints in newtons is λ = γ μ. The Hessian is the exact one
+//! when the KKT inertia says it is positive definite on the constraint null space, else the
+//! exact one shifted by τ I (inertia correction), else the element-projected one
+//! ([`HessianMode::Auto`]). The solver object keeps the
+//! sparsity pattern, the symbolic factorisation, γ and the multipliers between calls, so
+//! frame after frame only numeric work is done.
+
+use super::kkt::{KktFactorInfo, KktSolver};
+use super::linesearch::{line_search, EnergyMerit, LineSearch, Trial};
+use super::status::{SolveReport, SolveStatus};
+use crate::math::sparse::SparseError;
+use crate::math::Energy;
+use std::time::Instant;
+
+/// Linear equality constraints C x = d over the flat dofs (c rows × 3n columns).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct LinearConstraints {
+    /// Number of rows c.
+    pub rows: usize,
+    /// Nonzeros `(row, dof, coefficient)` of C (dimensionless weights for position
+    /// constraints); duplicates are summed.
+    pub entries: Vec<(usize, usize, f64)>,
+    /// Right-hand side d (length `rows`, units of the constrained quantity, m).
+    pub rhs: Vec<f64>,
+}
+
+impl LinearConstraints {
+    /// No constraints.
+    pub fn none() -> Self {
+        Self::default()
+    }
+
+    /// C x (length `rows`).
+    pub fn apply(&self, x: &[f64]) -> Vec<f64> {
+        let mut y = vec![0.0; self.rows];
+        for &(r, j, v) in &self.entries {
+            y[r] += v * x[j];
+        }
+        y
+    }
+}
+
+/// A quasi-static problem: which dofs are pinned (held at their value in the start state),
+/// the linear constraints, and the external forces.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct StaticProblem {
+    /// Pinned dof indices (3 × vertex + axis); their values are taken from the start state.
+    pub pinned: Vec<usize>,
+    /// Linear equality constraints.
+    pub constraints: LinearConstraints,
+    /// External forces per dof (N); empty for none.
+    pub forces: Vec<f64>,
+}
+
+/// Which Hessian Newton uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum HessianMode {
+    /// The exact Hessian always (quadratic convergence; may head for saddles).
+    Exact,
+    /// Element Hessians projected to PSD always (robust, linear convergence near the end).
+    Projected,
+    /// Exact when it is positive definite on the constraint null space (checked by the
+    /// inertia of the KKT factorisation), else projected, else shifted.
+    Auto,
+}
+
+/// Settings of the quasi-static solve.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct StaticSettings {
+    /// Convergence tolerance on the residual norm (N).
+    pub tolerance: f64,
+    /// Maximum Newton iterations.
+    pub max_iterations: usize,
+    /// Hessian choice.
+    pub hessian: HessianMode,
+    /// Row balance γ of the KKT system (N/m); `None`: the mean diagonal of the first
+    /// Hessian (of the order of E h for a shell).
+    pub gamma: Option<f64>,
+    /// Iterative refinement steps per KKT solve.
+    pub refinement_steps: usize,
+    /// Maximum trial steps per line search.
+    pub max_line_search: usize,
+    /// Also accept steps that satisfy Armijo on the energy merit (the Lagrangian with the
+    /// new multipliers), not only on the residual norm. DESIGN.md prescribes the residual
+    /// rule alone (`false`); thin shells moving out of plane need `true` (see
+    /// [`super::linesearch`]).
+    pub energy_merit: bool,
+}
+
+impl Default for StaticSettings {
+    fn default() -> Self {
+        Self {
+            tolerance: 1e-8,
+            max_iterations: 50,
+            hessian: HessianMode::Auto,
+            gamma: None,
+            refinement_steps: 3,
+            max_line_search: 30,
+            energy_merit: false,
+        }
+    }
+}
+
+/// Bad input to the quasi-static solver.
+#[derive(Debug, thiserror::Error)]
+pub enum SolverError {
+    /// Settings out of range (the field is named).
+    #[error("static solver settings: {0}")]
+    Settings(String),
+    /// Sizes or indices that do not match the energy.
+    #[error("static problem: {0}")]
+    Problem(String),
+    /// Sparse assembly failure.
+    #[error(transparent)]
+    Sparse(#[from] SparseError),
+}
+
+impl StaticSettings {
+    /// Check the settings; the error names the bad field.
+    pub fn validate(&self) -> Result<(), SolverError> {
+        if !(self.tolerance.is_finite() && self.tolerance > 0.0) {
+            return Err(SolverError::Settings(format!(
+                "tolerance = {} must be > 0 (N)",
+                self.tolerance
+            )));
+        }
+        if self.max_iterations == 0 {
+            return Err(SolverError::Settings(
+                "max_iterations must be at least 1".into(),
+            ));
+        }
+        if let Some(g) = self.gamma {
+            if !(g.is_finite() && g > 0.0) {
+                return Err(SolverError::Settings(format!(
+                    "gamma = {g} must be > 0 (N/m)"
+                )));
+            }
+        }
+        if self.max_line_search == 0 {
+            return Err(SolverError::Settings(
+                "max_line_search must be at least 1".into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// A quasi-static Newton solver that keeps its factorisation analysis, γ and the constraint
+/// multipliers between calls (hold one per skin, call [`StaticSolver::solve`] every frame).
+#[derive(Default)]
+pub struct StaticSolver {
+    /// Settings used by every solve.
+    pub settings: StaticSettings,
+    kkt: KktSolver,
+    gamma: Option<f64>,
+    multipliers: Vec<f64>,
+    trip: Vec<(usize, usize, f64)>,
+    last_shift: f64,
+}
+
+struct Setup {
+    free_of: Vec<usize>,
+    free: Vec<usize>,
+    cfree: Vec<(usize, usize, f64)>,
+}
+
+const PINNED: usize = usize::MAX;
+
+/// Regularisation δ of the constraint block, relative to γ. The factorisation sees the
+/// penalty K + (γ²/δ) CᵀC on the free block; δ = 1e-4 γ keeps that penalty (1e4 γ) strong
+/// enough for the inertia test yet small enough that its round-off (1e4 γ × 1e-16) stays far
+/// below the soft bending eigenvalues of a thin skin (with δ = 1e-8 γ the Euler test strip
+/// lost its lowest mode in round-off). Iterative refinement removes δ from the solution.
+const KKT_DELTA: f64 = 1e-4;
+
+impl StaticSolver {
+    /// A solver with `settings` (validated).
+    pub fn new(settings: StaticSettings) -> Result<Self, SolverError> {
+        settings.validate()?;
+        Ok(Self {
+            settings,
+            ..Default::default()
+        })
+    }
+
+    /// Number of symbolic analyses done so far (1 while the problem's structure is fixed).
+    pub fn symbolic_analyses(&self) -> usize {
+        self.kkt.symbolic_count
+    }
+
+    /// Constraint forces multipliers λ = γ μ (N per unit of constraint), one per row.
+    pub fn multipliers(&self) -> Vec<f64> {
+        let g = self.gamma.unwrap_or(1.0);
+        self.multipliers.iter().map(|m| g * m).collect()
+    }
+
+    fn setup(&self, e: &dyn Energy, p: &StaticProblem, x: &[f64]) -> Result<Setup, SolverError> {
+        let n = e.dofs();
+        if x.len() != n {
+            return Err(SolverError::Problem(format!(
+                "x has {} values, the energy has {n} dofs",
+                x.len()
+            )));
+        }
+        if !p.forces.is_empty() && p.forces.len() != n {
+            return Err(SolverError::Problem(format!(
+                "forces has {} values, expected {n} (or none)",
+                p.forces.len()
+            )));
+        }
+        let c = &p.constraints;
+        if c.rhs.len() != c.rows {
+            return Err(SolverError::Problem(format!(
+                "constraint rhs has {} values for {} rows",
+                c.rhs.len(),
+                c.rows
+            )));
+        }
+        let mut free_of = vec![0usize; n];
+        for &d in &p.pinned {
+            if d >= n {
+                return Err(SolverError::Problem(format!(
+                    "pinned dof {d} out of range ({n} dofs)"
+                )));
+            }
+            free_of[d] = PINNED;
+        }
+        let mut free = Vec::with_capacity(n);
+        for (d, f) in free_of.iter_mut().enumerate() {
+            if *f != PINNED {
+                *f = free.len();
+                free.push(d);
+            }
+        }
+        let mut cfree = Vec::with_capacity(c.entries.len());
+        for &(r, d, v) in &c.entries {
+            if r >= c.rows || d >= n || !v.is_finite() {
+                return Err(SolverError::Problem(format!(
+                    "constraint entry ({r}, {d}, {v}) out of range ({} rows, {n} dofs) or not finite",
+                    c.rows
+                )));
+            }
+            if free_of[d] != PINNED {
+                cfree.push((r, free_of[d], v));
+            }
+        }
+        if x.iter().any(|v| !v.is_finite()) {
+            return Err(SolverError::Problem(
+                "start state x contains NaN or infinity".into(),
+            ));
+        }
+        Ok(Setup {
+            free_of,
+            free,
+            cfree,
+        })
+    }
+
+    /// Residual vector over [free dofs; constraint rows] and the energy, at (x, μ).
+    fn residual(
+        &self,
+        e: &dyn Energy,
+        p: &StaticProblem,
+        s: &Setup,
+        x: &[f64],
+        mu: &[f64],
+        gamma: f64,
+    ) -> (Vec<f64>, f64) {
+        let n = x.len();
+        let mut g = vec![0.0; n];
+        let mut energy = e.eval(x, Some(&mut g), None, false);
+        if !p.forces.is_empty() {
+            for i in 0..n {
+                g[i] -= p.forces[i];
+                energy -= p.forces[i] * x[i];
+            }
+        }
+        for &(r, d, v) in &p.constraints.entries {
+            g[d] += gamma * v * mu[r];
+        }
+        let cx = p.constraints.apply(x);
+        let mut r: Vec<f64> = s.free.iter().map(|&d| g[d]).collect();
+        r.extend(
+            cx.iter()
+                .zip(&p.constraints.rhs)
+                .map(|(a, b)| gamma * (a - b)),
+        );
+        (r, energy)
+    }
+
+    /// Evaluate the Hessian triplets (all dofs) into `self.trip`.
+    fn hessian(&mut self, e: &dyn Energy, x: &[f64], project: bool) {
+        self.trip.clear();
+        e.eval(x, None, Some(&mut self.trip), project);
+    }
+
+    fn mean_diag(&self, s: &Setup) -> f64 {
+        let nfree = s.free.len();
+        let mut d = vec![0.0; nfree];
+        for &(r, c, v) in &self.trip {
+            if r == c && s.free_of[r] != PINNED {
+                d[s.free_of[r]] += v;
+            }
+        }
+        let m = d.iter().map(|v| v.abs()).sum::<f64>() / nfree.max(1) as f64;
+        if m > 0.0 && m.is_finite() {
+            m
+        } else {
+            1.0
+        }
+    }
+
+    /// Inertia check of the exact Hessian at `x`: whether it is positive definite on the
+    /// null space of the constraints (a stable equilibrium if x is one).
+    pub fn stability(
+        &mut self,
+        e: &dyn Energy,
+        p: &StaticProblem,
+        x: &[f64],
+    ) -> Result<KktFactorInfo, SolverError> {
+        let s = self.setup(e, p, x)?;
+        self.hessian(e, x, false);
+        let gamma = self.gamma_for(&s);
+        let (nf, nc) = (s.free.len(), p.constraints.rows);
+        let sym_s = self.kkt.assemble(
+            &s.free_of,
+            nf,
+            nc,
+            &self.trip,
+            &s.cfree,
+            gamma,
+            KKT_DELTA * gamma,
+        )?;
+        let mut info = self.kkt.factor(0.0);
+        info.symbolic_s = sym_s;
+        Ok(info)
+    }
+
+    fn gamma_for(&mut self, s: &Setup) -> f64 {
+        if let Some(g) = self.settings.gamma {
+            self.gamma = Some(g);
+        }
+        match self.gamma {
+            Some(g) => g,
+            None => {
+                let g = self.mean_diag(s);
+                self.gamma = Some(g);
+                g
+            }
+        }
+    }
+
+    /// Solve for equilibrium from the warm start `x` (updated in place; pinned dofs keep
+    /// their values). Returns the report; check its status.
+    pub fn solve(
+        &mut self,
+        e: &dyn Energy,
+        p: &StaticProblem,
+        x: &mut [f64],
+    ) -> Result<SolveReport, SolverError> {
+        let t_start = Instant::now();
+        let st = self.settings;
+        st.validate()?;
+        let s = self.setup(e, p, x)?;
+        let (nf, nc) = (s.free.len(), p.constraints.rows);
+        let mut rep = SolveReport {
+            status: SolveStatus::IterationLimit,
+            iterations: 0,
+            residual: f64::NAN,
+            initial_residual: f64::NAN,
+            constraint_violation: 0.0,
+            energy: f64::NAN,
+            modified_hessian_steps: 0,
+            factorizations: 0,
+            assembly_s: 0.0,
+            symbolic_s: 0.0,
+            factor_s: 0.0,
+            solve_s: 0.0,
+            line_search_s: 0.0,
+            total_s: 0.0,
+        };
+        if self.multipliers.len() != nc {
+            self.multipliers = vec![0.0; nc];
+        }
+        let mut have_hessian = None;
+        if self.gamma.is_none() && st.gamma.is_none() {
+            let t = Instant::now();
+            self.hessian(e, x, false);
+            rep.assembly_s += t.elapsed().as_secs_f64();
+            have_hessian = Some(false);
+        }
+        let gamma = self.gamma_for(&s);
+        let mut mu = std::mem::take(&mut self.multipliers);
+        let t = Instant::now();
+        let (mut r, mut energy) = self.residual(e, p, &s, x, &mu, gamma);
+        rep.line_search_s += t.elapsed().as_secs_f64();
+        let norm = |v: &[f64]| v.iter().map(|a| a * a).sum::<f64>().sqrt();
+        let mut rn = norm(&r);
+        rep.initial_residual = rn;
+        loop {
+            if !rn.is_finite() {
+                rep.status = SolveStatus::NotFinite;
+                break;
+            }
+            if rn <= st.tolerance {
+                rep.status = SolveStatus::Converged;
+                break;
+            }
+            if rep.iterations >= st.max_iterations {
+                rep.status = SolveStatus::IterationLimit;
+                break;
+            }
+            // Newton direction with the inertia-controlled Hessian choice.
+            // Attempts (project, shift/γ): exact Hessian; if it is not positive definite on
+            // the constraint null space, the exact Hessian shifted by τ I (τ grown ×30 from a
+            // quarter of the last successful shift, or 1e-8 γ; keeps the negative-curvature information
+            // so Newton escapes saddles quickly, as in IPOPT's inertia correction); as a last
+            // resort the element-projected Hessian.
+            let start_shift = (self.last_shift / 4.0).max(1e-10);
+            let shifts: Vec<f64> = (0..12)
+                .map(|k| start_shift * 10f64.powi(k))
+                .filter(|&t| t <= 1.0)
+                .collect();
+            let mut modes: Vec<(bool, f64)> = Vec::new();
+            match st.hessian {
+                HessianMode::Exact => {
+                    modes.push((false, 0.0));
+                    modes.extend(shifts.iter().map(|&t| (false, t)));
+                }
+                HessianMode::Projected => {
+                    modes.push((true, 0.0));
+                    modes.extend(shifts.iter().map(|&t| (true, t)));
+                }
+                HessianMode::Auto => {
+                    modes.push((false, 0.0));
+                    modes.extend(shifts.iter().map(|&t| (false, t)));
+                    modes.push((true, 0.0));
+                    modes.push((true, 1e-6));
+                    modes.push((true, 1.0));
+                }
+            }
+            let mut used = false;
+            let mut assembled: Option<bool> = None;
+            for (k, &(project, shift)) in modes.iter().enumerate() {
+                let shift: f64 = shift;
+                if have_hessian != Some(project) || assembled != Some(project) {
+                    if have_hessian != Some(project) {
+                        let t = Instant::now();
+                        self.hessian(e, x, project);
+                        rep.assembly_s += t.elapsed().as_secs_f64();
+                        have_hessian = Some(project);
+                    }
+                    let t = Instant::now();
+                    let sym_s = self.kkt.assemble(
+                        &s.free_of,
+                        nf,
+                        nc,
+                        &self.trip,
+                        &s.cfree,
+                        gamma,
+                        KKT_DELTA * gamma,
+                    )?;
+                    rep.symbolic_s += sym_s;
+                    rep.factor_s += sym_s;
+                    rep.assembly_s += t.elapsed().as_secs_f64() - sym_s;
+                    assembled = Some(project);
+                }
+                let info = self.kkt.factor(shift * gamma);
+                rep.factor_s += info.numeric_s;
+                rep.factorizations += 1;
+                let last = k + 1 == modes.len();
+                if info.inertia_ok || (last && self.kkt.is_factored()) {
+                    if k > 0 {
+                        rep.modified_hessian_steps += 1;
+                    }
+                    if !project {
+                        self.last_shift = shift;
+                    }
+                    used = true;
+                    break;
+                }
+            }
+            have_hessian = None;
+            if !used {
+                rep.status = SolveStatus::NotFinite;
+                break;
+            }
+            let t = Instant::now();
+            let mut step: Vec<f64> = r.iter().map(|v| -v).collect();
+            // The multiplier block solves for μ⁺ directly: rhs is −γ(Cx − d) there.
+            self.kkt.solve(&mut step, st.refinement_steps);
+            rep.solve_s += t.elapsed().as_secs_f64();
+            // rhs of the x block was −(∇E − f + γCᵀμ); the solution's multiplier part is
+            // then μ⁺ − μ directly (the γCᵀμ term moved to the rhs).
+            if step.iter().any(|v| !v.is_finite()) {
+                rep.status = SolveStatus::NotFinite;
+                break;
+            }
+            rep.iterations += 1;
+            let t = Instant::now();
+            let x0: Vec<f64> = x.to_vec();
+            let mu0 = mu.clone();
+            let trial = |a: f64, x: &mut [f64], mu: &mut [f64]| {
+                for (k, &d) in s.free.iter().enumerate() {
+                    x[d] = x0[d] + a * step[k];
+                }
+                for (i, m) in mu.iter_mut().enumerate() {
+                    *m = mu0[i] + a * step[nf + i];
+                }
+            };
+            let mut best: Option<(Vec<f64>, f64)> = None;
+            // Energy merit ψ(t) = E − fᵀx + γ μ⁺ᵀ (Cx − d) with μ⁺ = μ + Δμ fixed;
+            // ψ'(0) = r_xᵀ Δx + γ Δμᵀ C Δx.
+            let merit0 = if st.energy_merit {
+                let mut cdx = vec![0.0; nc];
+                for &(row, j, v) in &s.cfree {
+                    cdx[row] += v * step[j];
+                }
+                let slope = r[..nf]
+                    .iter()
+                    .zip(&step[..nf])
+                    .map(|(a, b)| a * b)
+                    .sum::<f64>()
+                    + gamma * step[nf..].iter().zip(&cdx).map(|(a, b)| a * b).sum::<f64>();
+                let viol = p.constraints.apply(x);
+                let value = energy
+                    + gamma
+                        * viol
+                            .iter()
+                            .zip(&p.constraints.rhs)
+                            .zip(&mu0)
+                            .zip(&step[nf..])
+                            .map(|(((cx, d), m), dm)| (m + dm) * (cx - d))
+                            .sum::<f64>();
+                Some(EnergyMerit { value, slope })
+            } else {
+                None
+            };
+            let mu_plus: Vec<f64> = mu0.iter().zip(&step[nf..]).map(|(m, d)| m + d).collect();
+            let ls = {
+                let mut xt = x0.clone();
+                let mut mt = mu0.clone();
+                let selfr = &*self;
+                line_search(
+                    rn,
+                    merit0,
+                    |a| {
+                        trial(a, &mut xt, &mut mt);
+                        let (rt, et) = selfr.residual(e, p, &s, &xt, &mt, gamma);
+                        let n = norm(&rt);
+                        let merit = if merit0.is_some() {
+                            let cx = p.constraints.apply(&xt);
+                            et + gamma
+                                * cx.iter()
+                                    .zip(&p.constraints.rhs)
+                                    .zip(&mu_plus)
+                                    .map(|((c, d), m)| m * (c - d))
+                                    .sum::<f64>()
+                        } else {
+                            f64::NAN
+                        };
+                        best = Some((rt, et));
+                        Trial { residual: n, merit }
+                    },
+                    st.max_line_search,
+                )
+            };
+            rep.line_search_s += t.elapsed().as_secs_f64();
+            match ls {
+                LineSearch::Accepted { step: a, residual } => {
+                    trial(a, x, &mut mu);
+                    let (rt, et) = best.expect("evaluated");
+                    r = rt;
+                    energy = et;
+                    rn = residual;
+                }
+                LineSearch::Failed => {
+                    rep.status = SolveStatus::LineSearchFailed;
+                    break;
+                }
+            }
+        }
+        rep.residual = rn;
+        rep.energy = energy;
+        let cx = p.constraints.apply(x);
+        rep.constraint_violation = cx
+            .iter()
+            .zip(&p.constraints.rhs)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        self.multipliers = mu;
+        rep.total_s = t_start.elapsed().as_secs_f64();
+        Ok(rep)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// E = Σ x_i⁴ / 4 over 6 dofs.
+    struct Quartic;
+    impl Energy for Quartic {
+        fn dofs(&self) -> usize {
+            6
+        }
+        fn eval(
+            &self,
+            x: &[f64],
+            grad: Option<&mut [f64]>,
+            hess: Option<&mut Vec<(usize, usize, f64)>>,
+            _p: bool,
+        ) -> f64 {
+            if let Some(g) = grad {
+                for (gi, xi) in g.iter_mut().zip(x) {
+                    *gi += xi.powi(3);
+                }
+            }
+            if let Some(h) = hess {
+                for (i, xi) in x.iter().enumerate() {
+                    h.push((i, i, 3.0 * xi * xi));
+                }
+            }
+            x.iter().map(|v| v.powi(4) / 4.0).sum()
+        }
+    }
+
+    /// Pinned x0 = 0.5; x1 + x2 = 2 → x1 = x2 = 1, multiplier λ = −1; force 8 on x3 →
+    /// x3 = 2; force −1 on x4 → x4 = −1; x5 free, no force → 0 (Hessian singular there at
+    /// the solution, so the solver must cope with a vanishing curvature).
+    #[test]
+    fn newton_finds_known_constrained_minimum_and_reuses_analysis() {
+        let p = StaticProblem {
+            pinned: vec![0],
+            constraints: LinearConstraints {
+                rows: 1,
+                entries: vec![(0, 1, 1.0), (0, 2, 1.0)],
+                rhs: vec![2.0],
+            },
+            forces: vec![0.0, 0.0, 0.0, 8.0, -1.0, 0.0],
+        };
+        let settings = StaticSettings {
+            tolerance: 1e-10,
+            gamma: Some(1.0),
+            ..Default::default()
+        };
+        let mut solver = StaticSolver::new(settings).unwrap();
+        let mut x = vec![0.5, 3.0, -0.5, 1.0, 1.0, 0.0];
+        let rep = solver.solve(&Quartic, &p, &mut x).unwrap();
+        assert_eq!(rep.status, SolveStatus::Converged, "{rep:?}");
+        let exact = [0.5, 1.0, 1.0, 2.0, -1.0, 0.0];
+        for (a, b) in x.iter().zip(exact) {
+            assert!((a - b).abs() < 1e-9, "{x:?}");
+        }
+        assert!((solver.multipliers()[0] + 1.0).abs() < 1e-9);
+        // Warm start at the answer: zero iterations; new rhs: one analysis in total.
+        let rep2 = solver.solve(&Quartic, &p, &mut x).unwrap();
+        assert_eq!((rep2.status, rep2.iterations), (SolveStatus::Converged, 0));
+        let mut p3 = p.clone();
+        p3.constraints.rhs[0] = -4.0;
+        let rep3 = solver.solve(&Quartic, &p3, &mut x).unwrap();
+        assert_eq!(rep3.status, SolveStatus::Converged);
+        assert!((x[1] + 2.0).abs() < 1e-9 && (x[2] + 2.0).abs() < 1e-9);
+        assert_eq!(solver.symbolic_analyses(), 1);
+        // Bad input is an error naming the problem.
+        let mut short = vec![0.0; 3];
+        assert!(solver.solve(&Quartic, &p, &mut short).is_err());
+        let mut nan = vec![f64::NAN; 6];
+        assert!(solver.solve(&Quartic, &p, &mut nan).is_err());
+    }
+}

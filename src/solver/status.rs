@@ -1,0 +1,61 @@
+//! Outcome of a nonlinear solve: a status and the measurements a report needs.
+
+/// How a nonlinear solve ended. Only `Converged` means the returned state is an equilibrium
+/// within tolerance; the others must be reported, never silently used.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum SolveStatus {
+    /// Residual below tolerance.
+    Converged,
+    /// The line search found no step that reduces the residual norm enough (Armijo).
+    LineSearchFailed,
+    /// The iteration limit was reached before convergence.
+    IterationLimit,
+    /// A NaN or infinity appeared in the energy, residual or step.
+    NotFinite,
+}
+
+impl SolveStatus {
+    /// A short lower-case name for reports and JSON.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            SolveStatus::Converged => "converged",
+            SolveStatus::LineSearchFailed => "line_search_failed",
+            SolveStatus::IterationLimit => "iteration_limit",
+            SolveStatus::NotFinite => "not_finite",
+        }
+    }
+}
+
+/// Report of one quasi-static solve.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SolveReport {
+    /// How the solve ended.
+    pub status: SolveStatus,
+    /// Newton iterations taken (factorisations used for a step).
+    pub iterations: usize,
+    /// Final residual norm ‖[∇E − f + γCᵀμ ; γ(Cx − d)]‖₂ over free dofs (N).
+    pub residual: f64,
+    /// Residual norm at the start (N).
+    pub initial_residual: f64,
+    /// Largest constraint violation |Cx − d| at the end (units of the constraint, m).
+    pub constraint_violation: f64,
+    /// Energy at the end, including the work of external forces (J).
+    pub energy: f64,
+    /// Iterations whose step used a projected or shifted Hessian because the exact one was
+    /// not positive definite on the constraint null space.
+    pub modified_hessian_steps: usize,
+    /// Numeric factorisations done (more than `iterations` when inertia correction retried).
+    pub factorizations: usize,
+    /// Seconds evaluating Hessians and assembling the KKT matrix.
+    pub assembly_s: f64,
+    /// Seconds in the symbolic analysis (first call, or when the pattern changes).
+    pub symbolic_s: f64,
+    /// Seconds in numeric factorisations (including the symbolic analysis).
+    pub factor_s: f64,
+    /// Seconds in triangular solves and iterative refinement.
+    pub solve_s: f64,
+    /// Seconds in energy/gradient evaluations of the line search and residuals.
+    pub line_search_s: f64,
+    /// Wall-clock seconds of the whole solve.
+    pub total_s: f64,
+}
