@@ -39,36 +39,54 @@ pub fn read(path: &Path) -> GltfResult<Container> {
 /// Parse glTF bytes that came from `path` (the path names errors and anchors relative URIs).
 pub fn parse(path: &Path, bytes: &[u8]) -> GltfResult<Container> {
     let err = |m: String| GltfError::new(path, m);
-    let (json_bytes, bin): (&[u8], Option<&[u8]>) = if bytes.starts_with(b"glTF") {
-        let glb = gltf::binary::Glb::from_slice(bytes).map_err(|e| {
-            err(format!(
-                "not a valid GLB container (cut short or corrupt): {e}"
-            ))
-        })?;
-        if glb.header.version != 2 {
-            return Err(err(format!(
-                "GLB version {} is not glTF 2.0",
-                glb.header.version
-            )));
-        }
-        let json: &[u8] = match glb.json {
-            std::borrow::Cow::Borrowed(b) => b,
-            std::borrow::Cow::Owned(_) => unreachable!("Glb::from_slice borrows"),
+    let (json_bytes, bin): (&[u8], Option<&[u8]>) =
+        if bytes.starts_with(b"glTF") {
+            // The header's total length must cover at least the header itself (the gltf crate
+            // subtracts without checking; found by fuzzing).
+            let declared = bytes
+                .get(8..12)
+                .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize);
+            match declared {
+                Some(n) if n >= 12 => {}
+                Some(n) => {
+                    return Err(err(format!(
+                        "not a valid GLB container: header declares a total length of {n} bytes"
+                    )))
+                }
+                None => return Err(err(
+                    "not a valid GLB container: the file is cut short inside the 12-byte header"
+                        .into(),
+                )),
+            }
+            let glb = gltf::binary::Glb::from_slice(bytes).map_err(|e| {
+                err(format!(
+                    "not a valid GLB container (cut short or corrupt): {e}"
+                ))
+            })?;
+            if glb.header.version != 2 {
+                return Err(err(format!(
+                    "GLB version {} is not glTF 2.0",
+                    glb.header.version
+                )));
+            }
+            let json: &[u8] = match glb.json {
+                std::borrow::Cow::Borrowed(b) => b,
+                std::borrow::Cow::Owned(_) => unreachable!("Glb::from_slice borrows"),
+            };
+            let bin = glb.bin.map(|b| match b {
+                std::borrow::Cow::Borrowed(b) => b,
+                std::borrow::Cow::Owned(_) => unreachable!("Glb::from_slice borrows"),
+            });
+            (json, bin)
+        } else {
+            let first = bytes.iter().find(|b| !b.is_ascii_whitespace());
+            if first != Some(&b'{') {
+                return Err(err(
+                    "not a glTF file: neither a GLB header ('glTF') nor a JSON object".into(),
+                ));
+            }
+            (bytes, None)
         };
-        let bin = glb.bin.map(|b| match b {
-            std::borrow::Cow::Borrowed(b) => b,
-            std::borrow::Cow::Owned(_) => unreachable!("Glb::from_slice borrows"),
-        });
-        (json, bin)
-    } else {
-        let first = bytes.iter().find(|b| !b.is_ascii_whitespace());
-        if first != Some(&b'{') {
-            return Err(err(
-                "not a glTF file: neither a GLB header ('glTF') nor a JSON object".into(),
-            ));
-        }
-        (bytes, None)
-    };
     let json: serde_json::Value =
         serde_json::from_slice(json_bytes).map_err(|e| err(format!("broken JSON: {e}")))?;
     let root: gltf_json::Root = serde_json::from_value(json.clone())
@@ -183,6 +201,25 @@ fn percent_decode(s: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Found by fuzzing: a GLB header whose declared length is below 12 bytes.
+    #[test]
+    fn glb_header_with_tiny_length_is_an_error_not_a_panic() {
+        let mut b = b"glTF".to_vec();
+        b.extend(2u32.to_le_bytes());
+        b.extend(5u32.to_le_bytes());
+        b.extend([0u8; 40]);
+        let e = parse(Path::new("x.glb"), &b)
+            .err()
+            .expect("refused")
+            .to_string();
+        assert!(e.contains("x.glb") && e.contains("length of 5"), "{e}");
+        let e = parse(Path::new("y.glb"), b"glTF\x02\0")
+            .err()
+            .expect("refused")
+            .to_string();
+        assert!(e.contains("cut short"), "{e}");
+    }
 
     #[test]
     fn percent_decoding() {
