@@ -56,6 +56,22 @@ fn shared_files_have_their_documented_contents() {
         .all(|m| m.targets == ["Angry", "Surprised", "Sad"]));
     assert_eq!(s.animations.len(), 14);
     assert!(s.meshes.iter().any(|m| m.skinned));
+    // The robot's feet hold zero-area triangles (gltfpack drops exactly these: 33 → 32, 34 → 32).
+    let feet: Vec<(usize, f64)> = s
+        .meshes
+        .iter()
+        .filter(|m| m.name.starts_with("Foot"))
+        .map(|m| (m.slivers, m.worst_quality))
+        .collect();
+    assert_eq!(feet, vec![(1, 0.0), (2, 0.0)]);
+    let face = summarize(
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("rigs/face.glb")
+            .as_path(),
+    )
+    .unwrap();
+    assert_eq!(face.meshes[0].slivers, 0);
+    assert!(face.meshes[0].worst_quality > 0.5);
     // Face choice: ties on target count go to the first; --mesh picks by name.
     let r = load(
         &common::shared_data("RobotExpressive.glb"),

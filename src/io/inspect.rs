@@ -31,7 +31,15 @@ pub struct MeshSummary {
     pub skinned: bool,
     /// World-space bounding box size (m).
     pub size_m: [f64; 3],
+    /// Triangles whose quality 2·r_in/r_circ is below [`SLIVER_QUALITY`] (slivers).
+    pub slivers: usize,
+    /// Worst triangle quality (1 equilateral, 0 degenerate).
+    pub worst_quality: f64,
 }
+
+/// Quality 2·r_in/r_circ below which `inspect` counts a triangle as a sliver (a smallest
+/// angle of about 3°).
+pub const SLIVER_QUALITY: f64 = 0.1;
 
 /// Summary of a file.
 #[derive(Debug, Clone, Serialize)]
@@ -62,6 +70,10 @@ pub fn summarize(path: &Path) -> GltfResult<Summary> {
                 .bounding_box()
                 .unwrap_or_default();
             let d = hi - lo;
+            let q = crate::mesh::quality::check(
+                &crate::mesh::TriMesh::new(m.positions.clone(), m.triangles.clone()),
+                SLIVER_QUALITY,
+            );
             MeshSummary {
                 node: m.node,
                 mesh: m.mesh,
@@ -74,6 +86,8 @@ pub fn summarize(path: &Path) -> GltfResult<Summary> {
                     && m.targets.iter().all(|t| t.normals.is_some()),
                 skinned: matches!(m.to_world, VertexTransform::PerVertex(_)),
                 size_m: [d.x, d.y, d.z],
+                slivers: q.slivers.len(),
+                worst_quality: q.worst_quality,
             }
         })
         .collect();
@@ -122,6 +136,13 @@ impl std::fmt::Display for Summary {
                 m.node, m.mesh, format!("'{}'", m.name), m.vertices, m.triangles, m.primitives,
                 if m.skinned { " skinned" } else { "" }, m.size_m[0], m.size_m[1], m.size_m[2]
             )?;
+            if m.slivers > 0 {
+                writeln!(
+                    f,
+                    "      {} sliver triangles (quality 2·r_in/r_circ below {SLIVER_QUALITY}; worst {:.2e})",
+                    m.slivers, m.worst_quality
+                )?;
+            }
             if !m.targets.is_empty() {
                 writeln!(
                     f,
