@@ -278,6 +278,49 @@ impl Interior {
         let want_g = grad.is_some();
         let want_h = hess.is_some();
         let k = self.nodes_per_element();
+        if !want_h {
+            // Energy (and gradient) only: per-thread accumulation, no per-element buffers.
+            let len = if want_g { 3 * self.nodes } else { 0 };
+            let (energy, g) = (0..self.elements.len())
+                .into_par_iter()
+                .with_min_len(32)
+                .fold(
+                    || (0.0, vec![0.0; len]),
+                    |(mut en, mut g), e| {
+                        let mut loc = [0.0; 81];
+                        let fr = frozen.map(|f| &f[e]);
+                        en += self.element_energy(
+                            x,
+                            e,
+                            fr,
+                            if want_g {
+                                Some(&mut loc[..3 * k])
+                            } else {
+                                None
+                            },
+                        );
+                        if want_g {
+                            for (a, &n) in self.elements[e].iter().enumerate() {
+                                for i in 0..3 {
+                                    g[3 * n + i] += loc[3 * a + i];
+                                }
+                            }
+                        }
+                        (en, g)
+                    },
+                )
+                .reduce(
+                    || (0.0, vec![0.0; len]),
+                    |(ea, mut ga), (eb, gb)| {
+                        ga.iter_mut().zip(&gb).for_each(|(p, q)| *p += q);
+                        (ea + eb, ga)
+                    },
+                );
+            if let Some(gr) = grad {
+                gr.iter_mut().zip(&g).for_each(|(p, q)| *p += q);
+            }
+            return energy;
+        }
         let per: Vec<(f64, Vec<f64>, Vec<f64>)> = (0..self.elements.len())
             .into_par_iter()
             .map(|e| {
