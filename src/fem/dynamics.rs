@@ -175,12 +175,19 @@ struct System {
     colptr: Vec<usize>,
     /// For each free node b: (element, local index of b) of the elements containing it.
     node_elems: Vec<Vec<(u32, u16)>>,
+    /// Assembly map, aligned with `node_elems[b]` × local node a: where block (a, b) goes in
+    /// column b (`SLOT_DIAG`, `SLOT_SKIP` for pinned or upper-triangle nodes, else the rank
+    /// of a in `nbrs[b][1..]`); `slot_ptr[b]` is the start of node b's run.
+    slots: Vec<u32>,
+    slot_ptr: Vec<usize>,
     /// Signature of the extra stiffness pattern this system was built for.
     extra_sig: Vec<(usize, usize)>,
     mat: SparseColMat<usize, f64>,
 }
 
 const NONE: usize = usize::MAX;
+const SLOT_SKIP: u32 = u32::MAX;
+const SLOT_DIAG: u32 = u32::MAX - 1;
 
 impl System {
     fn new(
@@ -238,6 +245,24 @@ impl System {
                 colptr.push(rows.len());
             }
         }
+        let mut slots = Vec::new();
+        let mut slot_ptr = Vec::with_capacity(nfree + 1);
+        for fb in 0..nfree {
+            slot_ptr.push(slots.len());
+            for &(e, _) in &node_elems[fb] {
+                for &na in &interior.elements[e as usize] {
+                    let fa = free[na];
+                    slots.push(if fa == NONE || fa < fb {
+                        SLOT_SKIP
+                    } else if fa == fb {
+                        SLOT_DIAG
+                    } else {
+                        nbrs[fb][1..].binary_search(&fa).expect("pattern") as u32
+                    });
+                }
+            }
+        }
+        slot_ptr.push(slots.len());
         let nnz = rows.len();
         let sym = SymbolicSparseColMat::new_checked(n, n, colptr.clone(), None, rows);
         let mat = SparseColMat::new(sym, vec![0.0; nnz]);
@@ -247,6 +272,8 @@ impl System {
             nbrs,
             colptr,
             node_elems,
+            slots,
+            slot_ptr,
             extra_sig: extra.to_vec(),
             mat,
         })
@@ -277,10 +304,8 @@ impl System {
         extra: Option<&[(usize, usize, f64)]>,
     ) {
         let k = interior.nodes_per_element();
-        let n3 = 3 * k;
         let colptr = &self.colptr;
         let free = &self.free;
-        let nbrs = &self.nbrs;
         let node_elems = &self.node_elems;
         // Split the value array into the three columns of each free node.
         let vals = self.mat.val_mut();
@@ -292,43 +317,46 @@ impl System {
             slices.push(head);
             rest = tail;
         }
+        let slots = &self.slots;
+        let slot_ptr = &self.slot_ptr;
         slices.into_par_iter().enumerate().for_each(|(fb, col)| {
             col.fill(0.0);
             let c0 = colptr[3 * fb];
-            let l = &nbrs[fb];
+            let cj = [0, colptr[3 * fb + 1] - c0, colptr[3 * fb + 2] - c0];
+            let mut s = slot_ptr[fb];
             for &(e, lb) in &node_elems[fb] {
                 let (e, lb) = (e as usize, lb as usize);
                 let r = &rotations[e];
-                let nodes = &interior.elements[e];
-                for (la, &na) in nodes.iter().enumerate() {
-                    let fa = free[na];
-                    if fa == NONE || fa < fb {
+                let rt = r.transpose();
+                for la in 0..k {
+                    let slot = slots[s + la];
+                    if slot == SLOT_SKIP {
                         continue;
                     }
-                    let blk = M3::from_fn(|i, j| interior.k0[(3 * la + i) * n3 + 3 * lb + j]);
-                    let mut rb = (r * blk * r.transpose()) * stiff_coef;
+                    let mut rb = (r * interior.k0_blocks[la * k + lb] * rt) * stiff_coef;
                     if lumped.is_none() {
                         let m = mass_coef * interior.m0[la * k + lb];
                         for i in 0..3 {
                             rb[(i, i)] += m;
                         }
                     }
-                    if fa == fb {
+                    if slot == SLOT_DIAG {
                         for j in 0..3 {
                             for i in j..3 {
-                                col[colptr[3 * fb + j] - c0 + i - j] += rb[(i, j)];
+                                col[cj[j] + i - j] += rb[(i, j)];
                             }
                         }
                     } else {
-                        let rk = l[1..].binary_search(&fa).expect("pattern");
+                        let rk = 3 * slot as usize;
                         for j in 0..3 {
-                            let base = colptr[3 * fb + j] - c0 + (3 - j) + 3 * rk;
+                            let base = cj[j] + (3 - j) + rk;
                             for i in 0..3 {
                                 col[base + i] += rb[(i, j)];
                             }
                         }
                     }
                 }
+                s += k;
             }
         });
         if let Some(m) = lumped {

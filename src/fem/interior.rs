@@ -67,6 +67,8 @@ pub struct Interior {
     pub(crate) m0: Vec<f64>,
     /// Rest positions of the element's nodes relative to its first node (local, 3K, m).
     x_ref: Vec<f64>,
+    /// K₀ as 3 × 3 node blocks, block (a, b) at index a·K + b (N/m).
+    pub(crate) k0_blocks: Vec<M3>,
 }
 
 impl Interior {
@@ -126,6 +128,12 @@ impl Interior {
                 }
             }
         }
+        let k0_blocks = (0..k * k)
+            .map(|ab| {
+                let (a, b) = (ab / k, ab % k);
+                M3::from_fn(|i, j| k0[(3 * a + i) * n3 + 3 * b + j])
+            })
+            .collect();
         Ok(Self {
             mu,
             lambda,
@@ -139,6 +147,7 @@ impl Interior {
             k0,
             m0,
             x_ref,
+            k0_blocks,
         })
     }
 
