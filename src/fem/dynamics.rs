@@ -1001,11 +1001,16 @@ fn pcg(
         return (x, 0);
     }
     if let Some(g) = guess.filter(|g| g.len() == n) {
+        // Scale the guess to minimise the quadratic along it: α = gᵀb / gᵀAg.
         let ag = block_sym_mul(sys, g);
-        let r0: Vec<f64> = b.iter().zip(&ag).map(|(bi, ai)| bi - ai).collect();
-        if dot(&r0, &r0).sqrt() < bn {
-            x.copy_from_slice(g);
-            r = r0;
+        let gag = dot(g, &ag);
+        if gag > 0.0 {
+            let alpha = dot(g, b) / gag;
+            let r0: Vec<f64> = b.iter().zip(&ag).map(|(bi, ai)| bi - alpha * ai).collect();
+            if dot(&r0, &r0).sqrt() < bn {
+                x.iter_mut().zip(g).for_each(|(xi, gi)| *xi = alpha * gi);
+                r = r0;
+            }
         }
     }
     let mut z = precond(&r);

@@ -217,14 +217,22 @@ impl Interior {
                 u[3 * a + i] = ya[i] - self.x_ref[3 * a + i];
             }
         }
+        // f = K₀ u as a sum of columns (K₀ is symmetric: column c = row c), which
+        // vectorises, unlike row dot products.
         let mut f = [0.0; 81];
-        let mut energy = 0.0;
-        for row in 0..n3 {
-            let kr = &self.k0[row * n3..(row + 1) * n3];
-            let v: f64 = kr.iter().zip(&u[..n3]).map(|(a, b)| a * b).sum();
-            f[row] = v;
-            energy += 0.5 * u[row] * v;
+        for c in 0..n3 {
+            let uc = u[c];
+            let kc = &self.k0[c * n3..(c + 1) * n3];
+            for (fr, kv) in f[..n3].iter_mut().zip(kc) {
+                *fr += kv * uc;
+            }
         }
+        let energy = 0.5
+            * u[..n3]
+                .iter()
+                .zip(&f[..n3])
+                .map(|(a, b)| a * b)
+                .sum::<f64>();
         if let Some(gr) = grad {
             for a in 0..k {
                 let fa = r * Vector3::new(f[3 * a], f[3 * a + 1], f[3 * a + 2]);
