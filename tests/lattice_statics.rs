@@ -1,27 +1,57 @@
 //! A cantilever of quadratic B-spline elements under its own weight against Euler–Bernoulli.
 //!
-//! Beam 0.8 m × 0.1 m × 0.1 m (L/b = 8) along x, clamped at x = 0 by pinning the two control
-//! point layers whose support reaches x = 0 (value and slope zero there), gravity along −y,
+//! Beam 0.8 m × 0.1 m × 0.1 m (L/b = 8) along x, clamped at x = 0 by a stiff penalty on the
+//! displacement of the wall face (see [`wall_clamp`]; no node is pinned), gravity along −y,
 //! E = 1 GPa so the tip deflection (~1e-3 L) is in the linear regime.
 //!
 //! Poisson ratio ν = 0: Euler–Bernoulli theory assumes uniaxial stress; with ν > 0 the 3D
 //! clamp also blocks the lateral contraction at the wall (stiffening near it) and anticlastic
 //! bending appears, both absent from the 1D formula. With ν = 0 the remaining model
 //! difference is Timoshenko shear, + 2(1+ν)/(3κ) (b/L)² = +1.25 % (κ = 5/6).
-//! Locking: the through-thickness bending field is represented exactly, but the section
-//! rotation and the slope of the deflection live in the same C¹ quadratic spline space, so
-//! the slope (a C⁰ linear spline) cannot match the rotation exactly and 27-point integration
-//! enforces zero transverse shear too strongly: coarse lattices lock (measured below).
+//! Locking: none measurable; the error against Euler–Bernoulli is the Timoshenko term to
+//! within 0.3 % already at one element through the thickness.
 #![allow(clippy::needless_range_loop)]
 
 mod lattice_support;
 
-use furrow::fem::{BackwardEuler, Interior, Material, SolveStatus, StepSettings};
+use furrow::fem::{BackwardEuler, ExtraTerms, Interior, Material, SolveStatus, StepSettings};
 use furrow::lattice::{ElementOrder, Lattice, LatticeSettings};
 use lattice_support::box_mesh;
 use nalgebra::Vector3;
 
 type V = Vector3<f64>;
+
+/// The clamp u = 0 on the wall face x = 0 as a penalty (N/m) on the face's displacement field.
+///
+/// With uniform quadratic B-splines the face x = 0 lies halfway between the control point
+/// layers at x = −h/2 and x = +h/2, and u(0, y, z) = Σ_jk N_j(y) N_k(z) ½ (d₋,jk + d₊,jk) with d
+/// the control point displacements. The face is clamped iff every pair sum vanishes, so the
+/// penalty is Σ_pairs ½ k |½ (d₋ + d₊)|². Pinning both layers instead would also force
+/// ∂u/∂x = 0 at the wall, i.e. zero bending strain where the bending moment is largest: an
+/// over-stiff clamp whose error is O(h) (measured: −15 % at 8 elements along the length).
+fn wall_clamp(lat: &Lattice, k: f64) -> Vec<(usize, usize, f64)> {
+    let h = lat.cell_size;
+    let key = |p: &V| ((p.y / h).round() as i64, (p.z / h).round() as i64);
+    let mut inner = std::collections::HashMap::new();
+    for (n, p) in lat.rest.iter().enumerate() {
+        if p.x > 0.0 && p.x < h {
+            inner.insert(key(p), n);
+        }
+    }
+    let mut t = Vec::new();
+    for (a, p) in lat.rest.iter().enumerate() {
+        if p.x < 0.0 {
+            let b = inner[&key(p)];
+            for i in 0..3 {
+                for (r, c) in [(a, a), (a, b), (b, a), (b, b)] {
+                    t.push((3 * r + i, 3 * c + i, 0.25 * k));
+                }
+            }
+        }
+    }
+    assert!(!t.is_empty());
+    t
+}
 
 fn tip_deflection(per_width: usize) -> (usize, f64) {
     let (l, b) = (0.8, 0.1);
@@ -43,10 +73,15 @@ fn tip_deflection(per_width: usize) -> (usize, f64) {
         density: 1000.0,
     };
     let int = Interior::new(&lat, &mat).unwrap();
-    let pinned: Vec<bool> = lat.rest.iter().map(|p| p.x < h).collect();
+    let stiffness = wall_clamp(&lat, 1e4 * mat.young * h);
+    let pinned = vec![false; lat.node_count()];
     let mut be = BackwardEuler::new(int, lat.rest_flat(), pinned, StepSettings::default()).unwrap();
     let zero = vec![0.0; be.q.len()];
-    let rep = be.quasi_static(&zero, None).unwrap();
+    let clamp = ExtraTerms {
+        stiffness: &stiffness,
+        force: &zero,
+    };
+    let rep = be.quasi_static(&zero, Some(&clamp)).unwrap();
     assert_eq!(rep.status, SolveStatus::Converged, "{rep:?}");
     let tip = V::new(l - 1e-9, b / 2.0, b / 2.0);
     let e = lat.elements_at(&tip)[0];
@@ -83,13 +118,19 @@ fn cantilever_matches_euler_bernoulli_and_converges() {
         }
         prev = Some(w);
     }
-    // Measured: −15.3 % (8 along L, one element across: shear locking of equal-order
-    // quadratic splines), −6.2 % (16), −2.4 % (32). Errors shrink monotonically toward the
-    // +1.25 % Timoshenko shear correction; within 5 % from 32 elements along the length.
+    // Measured with the face clamp: +0.99 % (8 along L, one element across), +1.23 % (16),
+    // +1.24 % (32): within 5 % of Euler–Bernoulli from the coarsest lattice, converging to the
+    // +1.25 % Timoshenko shear correction (so no shear locking). With the two control point
+    // layers pinned (over-stiff clamp) it was −15.3 %, −6.2 %, −2.4 %.
+    let timoshenko = 2.0 / (3.0 * 5.0 / 6.0) * (b / l).powi(2);
+    let to_timoshenko: Vec<f64> = errors.iter().map(|e| (e - timoshenko).abs()).collect();
+    assert!(errors.iter().all(|e| e.abs() < 0.05), "{errors:?}");
     assert!(
-        errors.windows(2).all(|w| w[1].abs() < w[0].abs()),
-        "{errors:?}"
+        to_timoshenko.windows(2).all(|w| w[1] < w[0]),
+        "{errors:?} vs Timoshenko {timoshenko}"
     );
-    assert!(errors[2].abs() < 0.05, "finest error {}", errors[2]);
-    assert!(errors.iter().all(|e| *e < 0.0 && *e > -0.2), "{errors:?}");
+    assert!(
+        to_timoshenko.iter().all(|d| *d < 0.005),
+        "{to_timoshenko:?}"
+    );
 }

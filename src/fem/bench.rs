@@ -52,7 +52,7 @@ fn cube_mesh(a: f64, m: usize) -> TriMesh {
 /// and the symbolic Cholesky analysis, then one step is timed: `assembly_s` (element
 /// rotations and matrix assembly), `solve_s` (numeric factorisation and solve), `step_s`
 /// (the whole step including energy and gradient evaluations and the line search), per
-/// `newton_iterations`. `face_lattice_build_s` times [`Lattice::build`] with default
+/// `newton_iterations` (with CG, the timed step starts from the warm-up step's direction). `face_lattice_build_s` times [`Lattice::build`] with default
 /// settings on the procedural face rig (`rig::face::generate()`, ~10k vertices), and
 /// `face_1cm_lattice_build_s` with 1 cm cells.
 pub fn bench_lattice(elements: usize) -> anyhow::Result<serde_json::Value> {

@@ -1,19 +1,26 @@
-//! The interior energy: corotated linear elasticity on lattice elements.
+//! The interior energy: corotational linear elasticity on lattice elements, one rotation per
+//! element (standard corotational FEM, Müller–Gross warped stiffness).
 //!
-//! Energy (J) E(q) = Σ_elements Σ_{27 Gauss points} w ψ(F), with F = Σ_a q_a ⊗ ∇N_a the
-//! deformation gradient of the B-spline (or trilinear) map and ψ the corotated density of
-//! [`super::corot::corotated`] with R the polar rotation of F at that Gauss point (Irving et
-//! al.'s reflection handling for inverted F). The gradient is exact.
+//! Energy (J) E(q) = Σ_e ½ u_eᵀ K₀ u_e with u_e = R_eᵀ x_e − X_e (element-local, 3K), K₀ the
+//! linear-elastic stiffness of the undeformed element (27-point Gauss quadrature, computed
+//! once), X_e the rest positions of the element's nodes and R_e the rotation of the
+//! deformation gradient at the element centre: its polar rotation, with the reflection moved
+//! into the smallest singular value when the centre is inverted (Irving et al. 2004, see
+//! [`super::corot::rotation`]). The energy is invariant under rigid motions and equals
+//! Σ w ψ(F) of [`super::corot::corotated`] with R frozen at R_e.
 //!
-//! Hessian (what Newton uses, and what [`Energy::eval`] emits): standard corotational
-//! stiffness with ONE rotation per element held fixed, H_e = R_e K₀ R_eᵀ, where K₀ is the
-//! linear-elastic stiffness of the undeformed element and R_e the polar rotation of F at the
-//! element centre. It is symmetric positive semi-definite by construction (so `project_psd`
-//! needs no work) and it is the exact Hessian of the frozen-rotation energy
-//! ([`FrozenInterior`]), which is how it is tested. It omits the derivative of the rotation,
-//! so Newton converges linearly rather than quadratically under large rotation.
+//! The gradient is exact, including the derivative of R_e: with f = K₀ u (rotated frame),
+//! τ = Σ_a (R_eᵀ x_a) × f_a and S = R_eᵀ F_c, ∂E/∂x_a = R_e f_a − R_e (c × ∇N_a(centre)),
+//! c = (tr S · I − S)⁻¹ τ (δR = R [ω]×, skew(Rᵀ δF) = [½ (tr S · I − S) ω]×). τ is second
+//! order in u (K₀ annihilates infinitesimal rotations), so the term is small but kept.
+//!
+//! Hessian (what Newton uses, and what [`Energy::eval`] emits): H_e = R_e K₀ R_eᵀ, the exact
+//! Hessian of the frozen-rotation energy ([`FrozenInterior`]), which is how it is tested. It
+//! is symmetric positive semi-definite by construction (so `project_psd` needs no work). It
+//! omits the derivative of the rotation, so Newton converges linearly rather than
+//! quadratically under large rotation.
 
-use super::corot::{corotated, rotation};
+use super::corot::rotation;
 use super::{FemError, Material};
 use crate::lattice::basis::gauss27;
 use crate::lattice::{shape, ElementOrder, Lattice};
@@ -58,6 +65,10 @@ pub struct Interior {
     pub(crate) k0: Vec<f64>,
     /// Consistent mass of one element, (K × K) row-major, kg.
     pub(crate) m0: Vec<f64>,
+    /// Rest positions of the element's nodes relative to its first node (local, 3K, m).
+    x_ref: Vec<f64>,
+    /// K₀ as 3 × 3 node blocks, block (a, b) at index a·K + b (N/m).
+    pub(crate) k0_blocks: Vec<M3>,
 }
 
 impl Interior {
@@ -103,6 +114,26 @@ impl Interior {
                 }
             }
         }
+        // Local node (a, b, c) (index a + k·b + k²·c) sits at h·((a, b, c) + offset) in its
+        // cell; only differences matter (K₀ annihilates translations).
+        let side = if k == 27 { 3 } else { 2 };
+        let mut x_ref = vec![0.0; 3 * k];
+        for c in 0..side {
+            for b in 0..side {
+                for a in 0..side {
+                    let l = a + side * b + side * side * c;
+                    x_ref[3 * l] = h * a as f64;
+                    x_ref[3 * l + 1] = h * b as f64;
+                    x_ref[3 * l + 2] = h * c as f64;
+                }
+            }
+        }
+        let k0_blocks = (0..k * k)
+            .map(|ab| {
+                let (a, b) = (ab / k, ab % k);
+                M3::from_fn(|i, j| k0[(3 * a + i) * n3 + 3 * b + j])
+            })
+            .collect();
         Ok(Self {
             mu,
             lambda,
@@ -115,6 +146,8 @@ impl Interior {
             center_g,
             k0,
             m0,
+            x_ref,
+            k0_blocks,
         })
     }
 
@@ -152,30 +185,81 @@ impl Interior {
     }
 
     /// Energy (J) of element `e`, adding its gradient (N) into `grad` (local, 3K) when
-    /// given. `frozen` replaces the per-Gauss-point polar rotation by a fixed rotation.
+    /// given. `frozen` replaces the element rotation R_e(x) by a fixed rotation (and drops
+    /// the rotation-derivative term of the gradient).
     pub(crate) fn element_energy(
         &self,
         x: &[f64],
         e: usize,
         frozen: Option<&M3>,
-        mut grad: Option<&mut [f64]>,
+        grad: Option<&mut [f64]>,
     ) -> f64 {
-        let xe = self.gather(x, e);
-        let mut energy = 0.0;
-        for q in &self.qp {
-            let f = Self::def_grad(&xe, &q.g);
-            let r = match frozen {
-                Some(r) => *r,
-                None => rotation(&f),
-            };
-            let (psi, p) = corotated(&f, &r, self.mu, self.lambda);
-            energy += q.w * psi;
-            if let Some(gr) = grad.as_deref_mut() {
-                for (a, ga) in q.g.iter().enumerate() {
-                    let v = p * Vector3::new(ga[0], ga[1], ga[2]) * q.w;
-                    gr[3 * a] += v.x;
-                    gr[3 * a + 1] += v.y;
-                    gr[3 * a + 2] += v.z;
+        let nodes = &self.elements[e];
+        let k = nodes.len();
+        let n3 = 3 * k;
+        let (r, fc) = match frozen {
+            Some(r) => (*r, None),
+            None => {
+                let f = Self::def_grad(&self.gather(x, e), &self.center_g);
+                (rotation(&f), Some(f))
+            }
+        };
+        let rt = r.transpose();
+        // y_a = Rᵀ (x_a − x_0) (rotated, relative to node 0) and u = y − (X − X_0).
+        let n0 = nodes[0];
+        let x0 = Vector3::new(x[3 * n0], x[3 * n0 + 1], x[3 * n0 + 2]);
+        let mut y = [0.0; 81];
+        let mut u = [0.0; 81];
+        for (a, &n) in nodes.iter().enumerate() {
+            let ya = rt * (Vector3::new(x[3 * n], x[3 * n + 1], x[3 * n + 2]) - x0);
+            for i in 0..3 {
+                y[3 * a + i] = ya[i];
+                u[3 * a + i] = ya[i] - self.x_ref[3 * a + i];
+            }
+        }
+        // f = K₀ u as a sum of columns (K₀ is symmetric: column c = row c), which
+        // vectorises, unlike row dot products.
+        let mut f = [0.0; 81];
+        for c in 0..n3 {
+            let uc = u[c];
+            let kc = &self.k0[c * n3..(c + 1) * n3];
+            for (fr, kv) in f[..n3].iter_mut().zip(kc) {
+                *fr += kv * uc;
+            }
+        }
+        let energy = 0.5
+            * u[..n3]
+                .iter()
+                .zip(&f[..n3])
+                .map(|(a, b)| a * b)
+                .sum::<f64>();
+        if let Some(gr) = grad {
+            for a in 0..k {
+                let fa = r * Vector3::new(f[3 * a], f[3 * a + 1], f[3 * a + 2]);
+                for i in 0..3 {
+                    gr[3 * a + i] += fa[i];
+                }
+            }
+            if let Some(fc) = fc {
+                // Derivative of R_e: −R (c × ∇N_a(centre)), c = (tr S I − S)⁻¹ τ.
+                let mut tau = Vector3::zeros();
+                for a in 0..k {
+                    let ya = Vector3::new(y[3 * a], y[3 * a + 1], y[3 * a + 2]);
+                    let fa = Vector3::new(f[3 * a], f[3 * a + 1], f[3 * a + 2]);
+                    tau += ya.cross(&fa);
+                }
+                let s = rt * fc;
+                let s = (s + s.transpose()) * 0.5;
+                let gm = M3::identity() * s.trace() - s;
+                if let Some(c) = gm.try_inverse().map(|gi| gi * tau) {
+                    if c.iter().all(|v| v.is_finite()) {
+                        for (a, ga) in self.center_g.iter().enumerate() {
+                            let d = r * c.cross(&Vector3::new(ga[0], ga[1], ga[2]));
+                            for i in 0..3 {
+                                gr[3 * a + i] -= d[i];
+                            }
+                        }
+                    }
                 }
             }
         }
@@ -211,6 +295,49 @@ impl Interior {
         let want_g = grad.is_some();
         let want_h = hess.is_some();
         let k = self.nodes_per_element();
+        if !want_h {
+            // Energy (and gradient) only: per-thread accumulation, no per-element buffers.
+            let len = if want_g { 3 * self.nodes } else { 0 };
+            let (energy, g) = (0..self.elements.len())
+                .into_par_iter()
+                .with_min_len(32)
+                .fold(
+                    || (0.0, vec![0.0; len]),
+                    |(mut en, mut g), e| {
+                        let mut loc = [0.0; 81];
+                        let fr = frozen.map(|f| &f[e]);
+                        en += self.element_energy(
+                            x,
+                            e,
+                            fr,
+                            if want_g {
+                                Some(&mut loc[..3 * k])
+                            } else {
+                                None
+                            },
+                        );
+                        if want_g {
+                            for (a, &n) in self.elements[e].iter().enumerate() {
+                                for i in 0..3 {
+                                    g[3 * n + i] += loc[3 * a + i];
+                                }
+                            }
+                        }
+                        (en, g)
+                    },
+                )
+                .reduce(
+                    || (0.0, vec![0.0; len]),
+                    |(ea, mut ga), (eb, gb)| {
+                        ga.iter_mut().zip(&gb).for_each(|(p, q)| *p += q);
+                        (ea + eb, ga)
+                    },
+                );
+            if let Some(gr) = grad {
+                gr.iter_mut().zip(&g).for_each(|(p, q)| *p += q);
+            }
+            return energy;
+        }
         let per: Vec<(f64, Vec<f64>, Vec<f64>)> = (0..self.elements.len())
             .into_par_iter()
             .map(|e| {
