@@ -1,4 +1,5 @@
 //! Coupling of the skin to the interior: the critical wrinkle wavelength that sets the
 //! frequency limit of the constraints.
 
+pub mod clusters;
 pub mod wavelength;
