@@ -163,6 +163,9 @@ pub struct StaticSolver {
     multipliers: Vec<f64>,
     trip: Vec<(usize, usize, f64)>,
     last_shift: f64,
+    /// Final state of the previous solve and its pinned dofs (for the pinned-motion predictor).
+    last_x: Vec<f64>,
+    last_pinned: Vec<usize>,
 }
 
 struct Setup {
@@ -357,6 +360,92 @@ impl StaticSolver {
         }
     }
 
+    /// Pinned-motion predictor: when the pinned dofs moved since the previous solve (same
+    /// pinned set), take the linearised response of the free dofs to that motion about the
+    /// previous state, `[K γCᵀ; γC 0] [Δx; μ⁺] = [−(r_x(x_prev) + K_fp Δp); −γ(Cx − d)]`,
+    /// so Newton starts near the new equilibrium instead of from a state whose elements
+    /// at the boundary are suddenly compressed. Returns the predicted (x, μ, r, energy,
+    /// ‖r‖), or `None` when nothing moved or the Hessian there is not positive definite on
+    /// the constraint null space.
+    #[allow(clippy::too_many_arguments, clippy::type_complexity)]
+    fn pinned_predictor(
+        &mut self,
+        e: &dyn Energy,
+        p: &StaticProblem,
+        s: &Setup,
+        x: &[f64],
+        mu: &[f64],
+        gamma: f64,
+        rep: &mut SolveReport,
+    ) -> Result<Option<(Vec<f64>, Vec<f64>, Vec<f64>, f64, f64)>, SolverError> {
+        if self.last_x.len() != x.len() || self.last_pinned != p.pinned {
+            return Ok(None);
+        }
+        let mut dp = vec![0.0; x.len()];
+        let mut moved = false;
+        let mut x_prev = x.to_vec();
+        for &d in &p.pinned {
+            dp[d] = x[d] - self.last_x[d];
+            x_prev[d] = self.last_x[d];
+            moved |= dp[d] != 0.0;
+        }
+        if !moved {
+            return Ok(None);
+        }
+        let (nf, nc) = (s.free.len(), p.constraints.rows);
+        let t = Instant::now();
+        let (r_prev, _) = self.residual(e, p, s, &x_prev, mu, gamma);
+        self.hessian(e, &x_prev, false);
+        let mut rhs: Vec<f64> = r_prev[..nf].iter().map(|v| -v).collect();
+        for &(row, col, v) in &self.trip {
+            let fr = s.free_of[row];
+            if fr != PINNED && s.free_of[col] == PINNED {
+                rhs[fr] -= v * dp[col];
+            }
+        }
+        let cx = p.constraints.apply(x);
+        rhs.extend(
+            cx.iter()
+                .zip(&p.constraints.rhs)
+                .map(|(a, b)| -gamma * (a - b)),
+        );
+        let sym_s = self.kkt.assemble(
+            &s.free_of,
+            nf,
+            nc,
+            &self.trip,
+            &s.cfree,
+            gamma,
+            KKT_DELTA * gamma,
+        )?;
+        rep.symbolic_s += sym_s;
+        rep.factor_s += sym_s;
+        rep.assembly_s += t.elapsed().as_secs_f64() - sym_s;
+        let info = self.kkt.factor(0.0);
+        rep.factor_s += info.numeric_s;
+        rep.factorizations += 1;
+        if !info.inertia_ok {
+            return Ok(None);
+        }
+        let t = Instant::now();
+        self.kkt.solve(&mut rhs, self.settings.refinement_steps);
+        rep.solve_s += t.elapsed().as_secs_f64();
+        if rhs.iter().any(|v| !v.is_finite()) {
+            return Ok(None);
+        }
+        rep.iterations += 1;
+        let t = Instant::now();
+        let mut xn = x.to_vec();
+        for (k, &d) in s.free.iter().enumerate() {
+            xn[d] = x_prev[d] + rhs[k];
+        }
+        let mn: Vec<f64> = mu.iter().zip(&rhs[nf..]).map(|(m, d)| m + d).collect();
+        let (rn_vec, en) = self.residual(e, p, s, &xn, &mn, gamma);
+        let rnorm = rn_vec.iter().map(|a| a * a).sum::<f64>().sqrt();
+        rep.line_search_s += t.elapsed().as_secs_f64();
+        Ok(Some((xn, mn, rn_vec, en, rnorm)))
+    }
+
     /// Solve for equilibrium from the warm start `x` (updated in place; pinned dofs keep
     /// their values). Returns the report; check its status.
     pub fn solve(
@@ -404,6 +493,18 @@ impl StaticSolver {
         let norm = |v: &[f64]| v.iter().map(|a| a * a).sum::<f64>().sqrt();
         let mut rn = norm(&r);
         rep.initial_residual = rn;
+        if let Some((xp, mp, rp, ep, rnp)) =
+            self.pinned_predictor(e, p, &s, x, &mu, gamma, &mut rep)?
+        {
+            if rnp.is_finite() && rnp < rn {
+                x.copy_from_slice(&xp);
+                mu = mp;
+                r = rp;
+                energy = ep;
+                rn = rnp;
+            }
+            have_hessian = None;
+        }
         loop {
             if !rn.is_finite() {
                 rep.status = SolveStatus::NotFinite;
@@ -596,6 +697,8 @@ impl StaticSolver {
             .map(|(a, b)| (a - b).abs())
             .fold(0.0, f64::max);
         self.multipliers = mu;
+        self.last_x = x.to_vec();
+        self.last_pinned = p.pinned.clone();
         rep.total_s = t_start.elapsed().as_secs_f64();
         Ok(rep)
     }
