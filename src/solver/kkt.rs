@@ -299,13 +299,15 @@ impl KktSolver {
     }
 
     /// Solve the *unregularised* KKT system (τ kept, δ removed) for `rhs` in place, with
-    /// `refine` steps of iterative refinement.
+    /// up to `refine` steps of iterative refinement (stopping early once the residual is at
+    /// round-off, 1e-15 of ‖rhs‖).
     pub fn solve(&mut self, rhs: &mut [f64], refine: usize) {
         assert!(
             self.factored,
             "KktSolver::solve before a successful factorize"
         );
         let b = rhs.to_vec();
+        let b_norm = norm2(&b);
         self.raw_solve(rhs);
         for _ in 0..refine {
             // r = b − A x, A = A_reg + δ I on the constraint block.
@@ -313,6 +315,10 @@ impl KktSolver {
             let mut r: Vec<f64> = b.iter().zip(&ax).map(|(bi, ai)| bi - ai).collect();
             for i in self.n_free..self.n_free + self.n_cons {
                 r[i] -= self.delta * rhs[i];
+            }
+            // Already at round-off: a further correction cannot improve the solution.
+            if norm2(&r) <= 1e-15 * b_norm {
+                break;
             }
             self.raw_solve(&mut r);
             for (x, d) in rhs.iter_mut().zip(&r) {
@@ -338,6 +344,11 @@ impl KktSolver {
             ..Self::default()
         };
     }
+}
+
+/// Euclidean norm.
+fn norm2(v: &[f64]) -> f64 {
+    v.iter().map(|a| a * a).sum::<f64>().sqrt()
 }
 
 /// Count negative entries of D in an LDLᵀ factor (D is stored on the factor's diagonal).
