@@ -211,6 +211,21 @@ impl StaticSolver {
         self.multipliers.iter().map(|m| g * m).collect()
     }
 
+    /// Assemble the regularised KKT matrix from the current Hessian triplets (free dofs of
+    /// `s`, `nc` constraint rows, row scale γ); returns the symbolic-analysis time (s), zero
+    /// when the cached analysis was reused.
+    fn assemble_kkt(&mut self, s: &Setup, nc: usize, gamma: f64) -> Result<f64, SolverError> {
+        Ok(self.kkt.assemble(
+            &s.free_of,
+            s.free.len(),
+            nc,
+            &self.trip,
+            &s.cfree,
+            gamma,
+            KKT_DELTA * gamma,
+        )?)
+    }
+
     fn setup(&self, e: &dyn Energy, p: &StaticProblem, x: &[f64]) -> Result<Setup, SolverError> {
         let n = e.dofs();
         if x.len() != n {
@@ -338,16 +353,8 @@ impl StaticSolver {
         let s = self.setup(e, p, x)?;
         self.hessian(e, x, false);
         let gamma = self.gamma_for(&s);
-        let (nf, nc) = (s.free.len(), p.constraints.rows);
-        let sym_s = self.kkt.assemble(
-            &s.free_of,
-            nf,
-            nc,
-            &self.trip,
-            &s.cfree,
-            gamma,
-            KKT_DELTA * gamma,
-        )?;
+        let nc = p.constraints.rows;
+        let sym_s = self.assemble_kkt(&s, nc, gamma)?;
         let mut info = self.kkt.factor(0.0);
         info.symbolic_s = sym_s;
         Ok(info)
@@ -416,15 +423,7 @@ impl StaticSolver {
                 .zip(&p.constraints.rhs)
                 .map(|(a, b)| -gamma * (a - b)),
         );
-        let sym_s = self.kkt.assemble(
-            &s.free_of,
-            nf,
-            nc,
-            &self.trip,
-            &s.cfree,
-            gamma,
-            KKT_DELTA * gamma,
-        )?;
+        let sym_s = self.assemble_kkt(s, nc, gamma)?;
         rep.symbolic_s += sym_s;
         rep.factor_s += sym_s;
         rep.assembly_s += t.elapsed().as_secs_f64() - sym_s;
@@ -566,15 +565,7 @@ impl StaticSolver {
                         have_hessian = Some(project);
                     }
                     let t = Instant::now();
-                    let sym_s = self.kkt.assemble(
-                        &s.free_of,
-                        nf,
-                        nc,
-                        &self.trip,
-                        &s.cfree,
-                        gamma,
-                        KKT_DELTA * gamma,
-                    )?;
+                    let sym_s = self.assemble_kkt(&s, nc, gamma)?;
                     rep.symbolic_s += sym_s;
                     rep.factor_s += sym_s;
                     rep.assembly_s += t.elapsed().as_secs_f64() - sym_s;
