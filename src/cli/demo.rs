@@ -74,13 +74,7 @@ pub fn run(a: DemoArgs, out: &Output) -> anyhow::Result<()> {
     export::write_animated(&rig, &set, &animated, Overwrite::Replace)?;
     let dir = a.out.join("frames");
     let pb = out.progress(frames.len() as u64, "frames");
-    let mut paths = Vec::new();
-    for k in 0..frames.len() {
-        let p = dir.join(format!("frame_{k:05}.glb"));
-        crate::io::atomic::write(&p, &export::frame_glb(&rig, &set, k)?, Overwrite::Replace)?;
-        paths.push(p);
-        pb.inc(1);
-    }
+    let paths = export::write_frames_dir(&rig, &set, &dir, Overwrite::Replace, &|_| pb.inc(1))?;
     pb.finish_and_clear();
     let secs = t0.elapsed().as_secs_f64();
     out.json_result(&serde_json::json!({

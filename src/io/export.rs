@@ -590,12 +590,14 @@ pub fn write_animated(
     atomic::write(path, &bytes, overwrite)
 }
 
-/// Write one GLB per frame into `dir` as `frame_00000.glb`, … (each atomically); returns the paths.
+/// Write one GLB per frame into `dir` as `frame_00000.glb`, … (each atomically), calling
+/// `on_frame(k)` after frame k is written (for progress); returns the paths.
 pub fn write_frames_dir(
     rig: &Rig,
     set: &FrameSet,
     dir: &Path,
     overwrite: Overwrite,
+    on_frame: &dyn Fn(usize),
 ) -> anyhow::Result<Vec<PathBuf>> {
     let paths: Vec<PathBuf> = (0..set.frames.len())
         .map(|k| dir.join(format!("frame_{k:05}.glb")))
@@ -610,6 +612,7 @@ pub fn write_frames_dir(
     }
     for (k, p) in paths.iter().enumerate() {
         atomic::write(p, &frame_glb(rig, set, k)?, overwrite)?;
+        on_frame(k);
     }
     Ok(paths)
 }
