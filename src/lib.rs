@@ -13,6 +13,8 @@ pub mod io;
 pub mod lattice;
 pub mod math;
 pub mod mesh;
+pub mod pipeline;
 pub mod rig;
+pub mod scene;
 pub mod shell;
 pub mod solver;

@@ -1,14 +1,9 @@
-//! `furrow demo`: the main job on `rigs/face.glb`.
-//!
-//! Today it loads the rig, samples its blend-shape animation and exports the frames (the
-//! wrinkle stages land in later versions).
+//! `furrow demo`: the main job (`furrow animate`) on `rigs/face.glb`, with its report and
+//! previews, printing where the files went.
 
+use super::animate::{self, AnimateArgs};
 use super::Output;
-use crate::io::atomic::Overwrite;
-use crate::io::export::{self, FrameSet, VertexOrigin};
-use crate::io::{self as fio, LoadOptions};
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 /// Arguments of `furrow demo`.
 #[derive(Debug, clap::Args)]
@@ -17,12 +12,22 @@ pub struct DemoArgs {
     #[arg(long, default_value = "out/demo")]
     pub out: PathBuf,
     /// Frames per second at which the animation is sampled.
-    #[arg(long, default_value_t = 30.0)]
+    #[arg(long, default_value_t = DEMO_FPS)]
     pub fps: f64,
+    /// Frames to simulate, `A:B` (default: the whole clip).
+    #[arg(long)]
+    pub frames: Option<String>,
     /// The rig (default: rigs/face.glb of this checkout).
     #[arg(long)]
     pub rig: Option<PathBuf>,
+    /// Also write one glTF per frame into OUT/frames.
+    #[arg(long)]
+    pub frames_dir: bool,
 }
+
+/// The demo's frame rate (frames per second): the clip sampled at 15 fps keeps the demo under
+/// two minutes on two cores.
+pub const DEMO_FPS: f64 = 15.0;
 
 /// The project's face rig: `rigs/face.glb` here, else in the source checkout.
 pub fn default_rig() -> PathBuf {
@@ -35,74 +40,42 @@ pub fn default_rig() -> PathBuf {
 
 /// Run the demo.
 pub fn run(a: DemoArgs, out: &Output) -> anyhow::Result<()> {
-    anyhow::ensure!(
-        a.fps.is_finite() && a.fps > 0.0 && a.fps <= 1000.0,
-        "--fps must be in (0, 1000], got {}",
-        a.fps
-    );
-    let t0 = Instant::now();
-    let rig_path = a.rig.clone().unwrap_or_else(default_rig);
-    if a.rig.is_none() && !rig_path.exists() {
+    let rig = a.rig.clone().unwrap_or_else(default_rig);
+    if a.rig.is_none() && !rig.exists() {
         anyhow::bail!(
             "{}: the demo rig is missing; make it with `furrow rig generate -o {}`",
-            rig_path.display(),
-            rig_path.display()
+            rig.display(),
+            rig.display()
         );
     }
-    let rig = fio::load(&rig_path, &LoadOptions::default())?;
-    out.note(&rig.face_reason);
-    let weights = rig.frame_weights(a.fps);
-    let pb = out.progress(weights.len() as u64, "blending");
-    let frames: Vec<_> = weights
-        .iter()
-        .map(|w| {
-            pb.inc(1);
-            rig.blend(w)
-        })
-        .collect();
-    pb.finish_and_clear();
-    let face = rig.face();
-    let origin: Vec<VertexOrigin> = (0..face.positions.len()).map(VertexOrigin::same).collect();
-    let set = FrameSet {
-        triangles: &face.triangles,
-        frames: &frames,
-        origin: &origin,
+    let output = a.out.join("face_wrinkled.glb");
+    let replaced = output.exists();
+    let args = AnimateArgs {
+        rig: rig.clone(),
+        output: output.clone(),
+        scene: None,
+        frames: a.frames.clone(),
         fps: a.fps,
+        frames_dir: a.frames_dir.then(|| a.out.join("frames")),
+        report: Some(a.out.join("report.json")),
+        preview: Some(a.out.join("preview")),
+        mesh: None,
+        // The demo's folder is its own: an earlier demo's files are replaced (and said so).
+        force: true,
     };
-    let animated = a.out.join("face_frames.glb");
-    let replaced = animated.exists();
-    export::write_animated(&rig, &set, &animated, Overwrite::Replace)?;
-    let dir = a.out.join("frames");
-    let pb = out.progress(frames.len() as u64, "frames");
-    let paths = export::write_frames_dir(&rig, &set, &dir, Overwrite::Replace, &|_| pb.inc(1))?;
-    pb.finish_and_clear();
-    let secs = t0.elapsed().as_secs_f64();
-    out.json_result(&serde_json::json!({
-        "ok": true, "rig": rig_path, "face": face.name, "frames": frames.len(), "fps": a.fps,
-        "animated_glb": animated, "frames_dir": dir, "seconds": secs,
-    }));
+    let done = animate::animate_one(&args, out)?;
     if replaced {
         out.say(format!(
             "replaced the earlier demo outputs in {}",
             a.out.display()
         ));
     }
-    out.say(format!(
-        "{} frames at {} fps of '{}' ({} vertices) in {:.2} s",
-        frames.len(),
-        a.fps,
-        face.name,
-        face.positions.len(),
-        secs
-    ));
-    out.say(format!(
-        "  animated glTF (one morph target per frame): {}",
-        animated.display()
-    ));
-    out.say(format!(
-        "  one glTF per frame:                          {}/ ({} files)",
-        dir.display(),
-        paths.len()
-    ));
+    let rep = &done.run.report;
+    out.json_result(&serde_json::json!({
+        "ok": true, "rig": rig, "output": output, "files": done.files,
+        "frames": rep.totals.frames_written, "fps": a.fps, "seconds": rep.totals.wall_s,
+        "wavelength_m": rep.wavelength_m,
+    }));
+    animate::say_summary(out, &done);
     Ok(())
 }

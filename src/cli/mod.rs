@@ -1,5 +1,6 @@
 //! The command-line interface: argument parsing (clap) and one module per subcommand.
 
+mod animate;
 mod bench;
 mod demo;
 mod inspect;
@@ -55,6 +56,21 @@ pub enum Command {
         after_help = "Example:\n  furrow wavelength --thickness 0.0002 --skin-modulus 1e6 --interior-modulus 1e4"
     )]
     Wavelength(wavelength::WavelengthArgs),
+    /// Turn a blend-shape rig into wrinkled glTF frames (the main job).
+    #[command(
+        after_help = "Example:\n  furrow animate rigs/face.glb -o out/face_wrinkled.glb --report out/report.json --preview out/preview"
+    )]
+    Animate(animate::AnimateArgs),
+    /// Animate many rigs; failures are reported and the rest go on; finished ones are skipped.
+    #[command(
+        after_help = "Example:\n  furrow batch clips/*.glb -o out/batch --scene examples/face.toml"
+    )]
+    Batch(animate::BatchArgs),
+    /// Join chunk runs (`animate --frames A:B`) into one glTF identical to an unsplit run.
+    #[command(
+        after_help = "Example:\n  furrow merge out/part0.glb out/part1.glb --rig rigs/face.glb -o out/face_wrinkled.glb"
+    )]
+    Merge(animate::MergeArgs),
     /// Benchmarks that print or write their measurements.
     #[command(
         subcommand,
@@ -63,10 +79,19 @@ pub enum Command {
     Bench(bench::BenchCommand),
 }
 
+/// A failure whose details were already printed (in JSON mode, as the command's own result
+/// document); `main` prints only the one-line message to stderr.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct AlreadyReported(pub String);
+
 /// Parse the command line, run it, print errors; returns the process exit code
 /// (0 success, 2 failure with a message naming the file and the problem).
 pub fn main() -> i32 {
     let cli = Cli::parse();
+    // faer splits large factorisations by this task count (not the pool size), so outputs
+    // are byte-identical whatever RAYON_NUM_THREADS is.
+    faer::set_global_parallelism(faer::Par::rayon(2));
     let out = Output::new(cli.quiet, cli.json);
     let result = match cli.command {
         Command::Inspect(a) => inspect::run(a, &out),
@@ -74,11 +99,14 @@ pub fn main() -> i32 {
         Command::Demo(a) => demo::run(a, &out),
         Command::Wavelength(a) => wavelength::run(a, &out),
         Command::Bench(c) => bench::run(c, &out),
+        Command::Animate(a) => animate::run(a, &out),
+        Command::Batch(a) => animate::batch(a, &out),
+        Command::Merge(a) => animate::merge(a, &out),
     };
     match result {
         Ok(()) => 0,
         Err(e) => {
-            if cli.json {
+            if cli.json && e.downcast_ref::<AlreadyReported>().is_none() {
                 let msg = format!("{e:#}");
                 println!("{}", serde_json::json!({ "ok": false, "error": msg }));
             }

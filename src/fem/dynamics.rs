@@ -186,6 +186,8 @@ struct System {
     slot_ptr: Vec<usize>,
     /// Signature of the extra stiffness pattern this system was built for.
     extra_sig: Vec<(usize, usize)>,
+    /// FNV hash of the extra triplets' (row, column) layout last seen with this system.
+    extra_hash: u64,
     mat: SparseColMat<usize, f64>,
 }
 
@@ -279,6 +281,7 @@ impl System {
             slots,
             slot_ptr,
             extra_sig: extra.to_vec(),
+            extra_hash: 0,
             mat,
         })
     }
@@ -413,6 +416,21 @@ fn node_csr(n: usize, mut t: Vec<(usize, usize, f64)>) -> (Vec<usize>, Vec<usize
     (ptr, col, val)
 }
 
+/// FNV-1a hash of the (row, column) sequence of the extra stiffness triplets.
+fn extra_layout_hash(extra: Option<&ExtraTerms>) -> u64 {
+    let mut h: u64 = 0xcbf29ce484222325;
+    if let Some(x) = extra {
+        for &(r, c, _) in x.stiffness {
+            for v in [r as u64, c as u64] {
+                h ^= v;
+                h = h.wrapping_mul(0x100000001b3);
+            }
+        }
+        h ^= x.stiffness.len() as u64;
+    }
+    h
+}
+
 fn extra_signature(extra: Option<&ExtraTerms>) -> Vec<(usize, usize)> {
     let mut s: Vec<(usize, usize)> = match extra {
         Some(x) => x
@@ -518,6 +536,20 @@ impl BackwardEuler {
     }
 
     fn ensure_system(&mut self, extra: Option<&ExtraTerms>) -> Result<(), FemError> {
+        // The sorted pattern signature costs a sort of every extra triplet; a hash of the
+        // triplet layout (O(n), no allocation) tells first whether anything could differ.
+        let hash = extra_layout_hash(extra);
+        if let Some(s) = &self.system {
+            if s.extra_hash == hash
+                && s.free.len() == self.pinned.len()
+                && s.free
+                    .iter()
+                    .zip(&self.pinned)
+                    .all(|(&f, &p)| (f == NONE) == p)
+            {
+                return Ok(());
+            }
+        }
         let sig = extra_signature(extra);
         let rebuild = match &self.system {
             Some(s) => {
@@ -534,6 +566,9 @@ impl BackwardEuler {
             self.system = Some(System::new(&self.interior, &self.pinned, &sig)?);
             self.solver.reset();
             self.last_direction = None;
+        }
+        if let Some(s) = self.system.as_mut() {
+            s.extra_hash = hash;
         }
         Ok(())
     }
@@ -901,7 +936,8 @@ fn block_sym_mul(sys: &System, x: &[f64]) -> Vec<f64> {
     let nodes = sys.nfree;
     let v = sys.mat.val();
     let cp = &sys.colptr;
-    let chunk = nodes.div_ceil(rayon::current_num_threads().max(1)).max(16);
+    // A fixed split (not the thread count) and an in-order sum: the same bits on any pool.
+    let chunk = nodes.div_ceil(16).max(16);
     (0..nodes)
         .into_par_iter()
         .step_by(chunk)
@@ -947,13 +983,12 @@ fn block_sym_mul(sys: &System, x: &[f64]) -> Vec<f64> {
             }
             y
         })
-        .reduce(
-            || vec![0.0; n],
-            |mut a, b| {
-                a.iter_mut().zip(&b).for_each(|(p, q)| *p += q);
-                a
-            },
-        )
+        .collect::<Vec<Vec<f64>>>()
+        .into_iter()
+        .fold(vec![0.0; n], |mut a, b| {
+            a.iter_mut().zip(&b).for_each(|(p, q)| *p += q);
+            a
+        })
 }
 
 /// Preconditioned conjugate gradients with 3 × 3 block-Jacobi on a lower-stored SPD matrix

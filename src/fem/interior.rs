@@ -30,6 +30,8 @@ use rayon::prelude::*;
 
 /// Elements per matrix product K₀ U in the energy evaluation.
 const CHUNK: usize = 32;
+/// Fixed number of groups of chunks reduced in order (determinism across thread counts).
+const GROUPS: usize = 16;
 
 type M3 = Matrix3<f64>;
 
@@ -331,11 +333,15 @@ impl Interior {
             let n3 = 3 * k;
             let ne = self.elements.len();
             let k0 = nalgebra::DMatrixView::from_slice(&self.k0, n3, n3);
-            let (energy, g) = (0..ne.div_ceil(CHUNK))
+            // Chunks are grouped into at most GROUPS fixed groups whose partial sums are
+            // added in group order: the result does not depend on the thread count.
+            let chunks = ne.div_ceil(CHUNK);
+            let per_group = chunks.div_ceil(GROUPS).max(1);
+            let partial: Vec<(f64, Vec<f64>)> = (0..chunks.div_ceil(per_group))
                 .into_par_iter()
-                .fold(
-                    || (0.0, vec![0.0; len]),
-                    |(mut en, mut g), c| {
+                .map(|grp| {
+                    let (mut en, mut g) = (0.0, vec![0.0; len]);
+                    for c in grp * per_group..((grp + 1) * per_group).min(chunks) {
                         let e0 = c * CHUNK;
                         let m = CHUNK.min(ne - e0);
                         let mut ys = vec![0.0; n3 * m];
@@ -374,16 +380,16 @@ impl Interior {
                                 }
                             }
                         }
-                        (en, g)
-                    },
-                )
-                .reduce(
-                    || (0.0, vec![0.0; len]),
-                    |(ea, mut ga), (eb, gb)| {
-                        ga.iter_mut().zip(&gb).for_each(|(p, q)| *p += q);
-                        (ea + eb, ga)
-                    },
-                );
+                    }
+                    (en, g)
+                })
+                .collect();
+            let mut energy = 0.0;
+            let mut g = vec![0.0; len];
+            for (e, gp) in partial {
+                energy += e;
+                g.iter_mut().zip(&gp).for_each(|(p, q)| *p += q);
+            }
             if let Some(gr) = grad {
                 gr.iter_mut().zip(&g).for_each(|(p, q)| *p += q);
             }

@@ -341,17 +341,23 @@ impl Energy for BendingEnergy {
                     }
                     e
                 })
-                .sum()
+                .collect::<Vec<f64>>()
+                .iter()
+                .sum::<f64>()
         } else if want_g {
             gbuf.par_iter_mut()
                 .zip(self.hinges.par_iter())
                 .map(|(g, el)| hinge_element(el, gather4(x, el.v), Some(g), None))
-                .sum()
+                .collect::<Vec<f64>>()
+                .iter()
+                .sum::<f64>()
         } else {
             self.hinges
                 .par_iter()
                 .map(|el| hinge_element(el, gather4(x, el.v), None, None))
-                .sum()
+                .collect::<Vec<f64>>()
+                .iter()
+                .sum::<f64>()
         };
         if let Some(g) = grad {
             for (el, ge) in self.hinges.iter().zip(&gbuf) {

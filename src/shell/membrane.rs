@@ -259,7 +259,9 @@ impl Energy for MembraneEnergy {
                         }
                         e
                     })
-                    .sum()
+                    .collect::<Vec<f64>>()
+                    .iter()
+                    .sum::<f64>()
             }
             (None, true) => gbuf
                 .par_iter_mut()
@@ -274,14 +276,18 @@ impl Energy for MembraneEnergy {
                         None,
                     )
                 })
-                .sum(),
+                .collect::<Vec<f64>>()
+                .iter()
+                .sum::<f64>(),
             (None, false) => self
                 .elements
                 .par_iter()
                 .map(|el| {
                     membrane_element(el, gather3(x, el.v), self.mu_h, self.lambda_h, None, None)
                 })
-                .sum(),
+                .collect::<Vec<f64>>()
+                .iter()
+                .sum::<f64>(),
         };
         if let Some(g) = grad {
             for (el, ge) in self.elements.iter().zip(&gbuf) {

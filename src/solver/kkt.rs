@@ -22,6 +22,9 @@
 //! space of C (exactly m negative pivots), i.e. whether the equilibrium is stable; Newton
 //! uses that to decide between the exact and a projected Hessian.
 
+/// faer tasks for large factorisations (fixed, so results do not depend on the thread count).
+const FAER_TASKS: usize = 2;
+
 use crate::math::sparse::{mul_vec, Pattern, SparseError};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
@@ -289,7 +292,9 @@ impl KktSolver {
         if self.n_free + self.n_cons < 20_000 {
             faer::Par::Seq
         } else {
-            faer::get_global_parallelism()
+            // A fixed task count, not the pool size: faer splits its work by this number,
+            // so the factor (and every output) is the same whatever the thread count.
+            faer::Par::rayon(FAER_TASKS)
         }
     }
 

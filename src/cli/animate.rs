@@ -1,0 +1,404 @@
+//! `furrow animate`, `furrow batch` and `furrow merge`: rig in, wrinkled glTF out.
+
+use super::Output;
+use crate::io::atomic::{self, Overwrite};
+use crate::io::export::{self, FrameSet};
+use crate::io::{self as fio, LoadOptions};
+use crate::pipeline::chunk::{self, ChunkHeader};
+use crate::pipeline::frames::FrameRange;
+use crate::pipeline::{self, RunOptions, RunOutput};
+use crate::scene::Scene;
+use anyhow::{bail, Context};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Arguments of `furrow animate`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct AnimateArgs {
+    /// The rig: a glTF (.glb/.gltf) with a morph-target face and (optionally) an animation.
+    pub rig: PathBuf,
+    /// The wrinkled animated glTF to write (.glb).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Scene file (TOML): materials, lattice, solver, export; default: the defaults.
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
+    /// Frames to write, `A:B` (end exclusive); also writes OUTPUT's chunk file for `merge`.
+    #[arg(long)]
+    pub frames: Option<String>,
+    /// Frames per second at which the clip is sampled.
+    #[arg(long, default_value_t = 30.0)]
+    pub fps: f64,
+    /// Also write one glTF per frame into this folder.
+    #[arg(long)]
+    pub frames_dir: Option<PathBuf>,
+    /// Write the run report (JSON) here.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Write preview images into this folder.
+    #[arg(long)]
+    pub preview: Option<PathBuf>,
+    /// The face mesh by name or index (default: the mesh with the most morph targets).
+    #[arg(long)]
+    pub mesh: Option<String>,
+    /// Replace existing output files.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// The chunk file written next to an output limited to `--frames`.
+pub fn chunk_path(output: &Path) -> PathBuf {
+    output.with_extension("furrow-chunk")
+}
+
+fn overwrite(force: bool) -> Overwrite {
+    if force {
+        Overwrite::Replace
+    } else {
+        Overwrite::Refuse
+    }
+}
+
+/// Refuse early (before minutes of simulation) when an output exists and `--force` is absent.
+fn preflight(paths: &[&Path], force: bool) -> anyhow::Result<()> {
+    if force {
+        return Ok(());
+    }
+    for p in paths {
+        if p.exists() {
+            bail!(
+                "{}: already exists; furrow does not overwrite files unless told to (pass --force)",
+                p.display()
+            );
+        }
+    }
+    Ok(())
+}
+
+/// The settings that decide a run's result, hashed to tie chunks to one run.
+fn settings_hash(scene: &Scene, fps: f64, mesh: &Option<String>) -> String {
+    let v = serde_json::json!({ "scene": scene, "fps": fps, "mesh": mesh });
+    chunk::fnv64(v.to_string().as_bytes())
+}
+
+/// What `animate_one` produced.
+pub struct Animated {
+    /// The pipeline's output.
+    pub run: RunOutput,
+    /// Files written.
+    pub files: Vec<PathBuf>,
+}
+
+/// Load, run and write one rig (shared by `animate`, `batch` and `demo`).
+pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
+    let t0 = Instant::now();
+    let scene = match &a.scene {
+        Some(p) => Scene::load(p)?,
+        None => Scene::default(),
+    };
+    scene.validate()?;
+    if a.output.extension().and_then(|e| e.to_str()) != Some("glb") {
+        bail!("{}: the output must be a .glb file", a.output.display());
+    }
+    let chunk_file = chunk_path(&a.output);
+    let mut outputs: Vec<&Path> = vec![&a.output];
+    if a.frames.is_some() {
+        outputs.push(&chunk_file);
+    }
+    if let Some(r) = &a.report {
+        outputs.push(r);
+    }
+    preflight(&outputs, a.force)?;
+    let bytes = std::fs::read(&a.rig)
+        .with_context(|| format!("{}: cannot read the rig", a.rig.display()))?;
+    let rig = fio::load::load_bytes(
+        &a.rig,
+        &bytes,
+        &LoadOptions {
+            mesh: a.mesh.clone(),
+            animation: None,
+        },
+    )?;
+    out.note(&rig.face_reason);
+    let count = rig.frame_weights(a.fps).len();
+    let frames = match &a.frames {
+        Some(t) => Some(FrameRange::parse(t, count)?),
+        None => None,
+    };
+    let opts = RunOptions {
+        scene: scene.clone(),
+        scene_path: a.scene.as_ref().map(|p| p.display().to_string()),
+        fps: a.fps,
+        frames,
+    };
+    let pb = out.progress(count as u64, "simulating");
+    let run = pipeline::run(&rig, &opts, &|stage, done, _total| {
+        if stage == "frames" {
+            pb.set_position(done as u64);
+        }
+    })?;
+    pb.finish_and_clear();
+    for w in &run.report.warnings {
+        out.note(format!("warning: {w}"));
+    }
+    let mut files = Vec::new();
+    let set = FrameSet {
+        triangles: &run.triangles,
+        frames: &run.frames,
+        origin: &run.origin,
+        fps: a.fps,
+    };
+    let t = Instant::now();
+    export::write_animated(&rig, &set, &a.output, overwrite(a.force))?;
+    files.push(a.output.clone());
+    if let Some(range) = frames {
+        let header = ChunkHeader {
+            rig_hash: chunk::fnv64(&bytes),
+            settings_hash: settings_hash(&scene, a.fps, &a.mesh),
+            fps: a.fps,
+            range,
+            clip_frames: count,
+            vertices: run.origin.len(),
+            triangles: run.triangles.clone(),
+            origin: chunk::origin_to_plain(&run.origin),
+        };
+        chunk::write(&chunk_file, &header, &run.frames, overwrite(a.force))?;
+        files.push(chunk_file.clone());
+    }
+    if let Some(dir) = &a.frames_dir {
+        let pb = out.progress(run.frames.len() as u64, "frames");
+        files.extend(export::write_frames_dir(
+            &rig,
+            &set,
+            dir,
+            overwrite(a.force),
+            &|_| pb.inc(1),
+        )?);
+        pb.finish_and_clear();
+    }
+    let export_ms = t.elapsed().as_secs_f64() * 1e3;
+    let mut run = run;
+    run.report.totals.export_ms = export_ms;
+    run.report.totals.wall_s = t0.elapsed().as_secs_f64();
+    if let Some(dir) = &a.preview {
+        let _ = dir;
+        // PREVIEW-PENDING
+    }
+    if let Some(r) = &a.report {
+        let json = serde_json::to_vec_pretty(&run.report)?;
+        atomic::write(r, &json, overwrite(a.force))?;
+        files.push(r.clone());
+    }
+    Ok(Animated { run, files })
+}
+
+/// Run `furrow animate`.
+pub fn run(a: AnimateArgs, out: &Output) -> anyhow::Result<()> {
+    let done = animate_one(&a, out)?;
+    let rep = &done.run.report;
+    out.json_result(&serde_json::json!({
+        "ok": true, "output": a.output, "files": done.files, "frames": rep.frames,
+        "wavelength_m": rep.wavelength_m, "totals": rep.totals, "stages": rep.stages,
+    }));
+    say_summary(out, &done);
+    Ok(())
+}
+
+/// Print what a run did and where its files went.
+pub fn say_summary(out: &Output, done: &Animated) {
+    let rep = &done.run.report;
+    out.say(format!(
+        "{} frames of '{}' in {:.1} s (λ = {:.1} mm; shell {:.1} s, interior {:.1} s)",
+        rep.totals.frames_written,
+        rep.face,
+        rep.totals.wall_s,
+        rep.wavelength_m * 1e3,
+        rep.totals.shell_ms / 1e3,
+        rep.totals.interior_ms / 1e3
+    ));
+    for s in &rep.stages {
+        out.say(format!("  {:<10} {:<8} {}", s.stage, s.status, s.why));
+    }
+    for f in &done.files {
+        out.say(format!("  wrote {}", f.display()));
+    }
+}
+
+/// Arguments of `furrow batch`.
+#[derive(Debug, clap::Args)]
+pub struct BatchArgs {
+    /// Rigs to process.
+    #[arg(required = true)]
+    pub inputs: Vec<PathBuf>,
+    /// Output folder: NAME.glb and NAME.report.json per input (the report marks it finished).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Scene file for every input.
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
+    /// Frames to write, `A:B`.
+    #[arg(long)]
+    pub frames: Option<String>,
+    /// Frames per second.
+    #[arg(long, default_value_t = 30.0)]
+    pub fps: f64,
+    /// Redo inputs whose outputs are finished.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// Run `furrow batch`: every input in turn; a failure is reported and the rest go on; finished
+/// outputs (their report exists) are skipped on a rerun.
+pub fn batch(a: BatchArgs, out: &Output) -> anyhow::Result<()> {
+    let mut results = Vec::new();
+    let mut failed = 0;
+    let mut seen = std::collections::HashSet::new();
+    for input in &a.inputs {
+        let stem = input
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .unwrap_or("rig")
+            .to_string();
+        if !seen.insert(stem.clone()) {
+            failed += 1;
+            out.note(format!(
+                "{}: skipped: another input has the same name {stem}",
+                input.display()
+            ));
+            results.push(serde_json::json!({ "input": input, "status": "failed", "error": format!("duplicate output name {stem}") }));
+            continue;
+        }
+        let glb = a.output.join(format!("{stem}.glb"));
+        let report = a.output.join(format!("{stem}.report.json"));
+        if !a.force && report.exists() && glb.exists() {
+            out.say(format!("{}: finished earlier, skipped", input.display()));
+            results.push(serde_json::json!({ "input": input, "status": "skipped", "output": glb }));
+            continue;
+        }
+        let args = AnimateArgs {
+            rig: input.clone(),
+            output: glb.clone(),
+            scene: a.scene.clone(),
+            frames: a.frames.clone(),
+            fps: a.fps,
+            frames_dir: None,
+            report: Some(report.clone()),
+            preview: None,
+            mesh: None,
+            // An output without its report is an unfinished earlier attempt: redo it.
+            force: true,
+        };
+        match animate_one(&args, out) {
+            Ok(done) => {
+                out.say(format!(
+                    "{}: {} frames → {}",
+                    input.display(),
+                    done.run.report.totals.frames_written,
+                    glb.display()
+                ));
+                results
+                    .push(serde_json::json!({ "input": input, "status": "done", "output": glb }));
+            }
+            Err(e) => {
+                failed += 1;
+                out.note(format!("furrow: {}: failed: {e:#}", input.display()));
+                results.push(serde_json::json!({ "input": input, "status": "failed", "error": format!("{e:#}") }));
+            }
+        }
+    }
+    out.json_result(&serde_json::json!({ "ok": failed == 0, "results": results }));
+    if failed > 0 {
+        return Err(super::AlreadyReported(format!(
+            "{failed} of {} inputs failed (the others are done)",
+            a.inputs.len()
+        ))
+        .into());
+    }
+    Ok(())
+}
+
+/// Arguments of `furrow merge`.
+#[derive(Debug, clap::Args)]
+pub struct MergeArgs {
+    /// Chunk outputs of `furrow animate --frames A:B` (their .glb or .furrow-chunk files).
+    #[arg(required = true)]
+    pub chunks: Vec<PathBuf>,
+    /// The rig the chunks were made from.
+    #[arg(long)]
+    pub rig: PathBuf,
+    /// The merged glTF.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// The face mesh, as given to `animate --mesh`.
+    #[arg(long)]
+    pub mesh: Option<String>,
+    /// Replace an existing output.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// Run `furrow merge`.
+pub fn merge(a: MergeArgs, out: &Output) -> anyhow::Result<()> {
+    preflight(&[&a.output], a.force)?;
+    let mut chunks = Vec::new();
+    for p in &a.chunks {
+        let cp = if p.extension().and_then(|e| e.to_str()) == Some("furrow-chunk") {
+            p.clone()
+        } else {
+            chunk_path(p)
+        };
+        chunks.push((cp.display().to_string(), chunk::read(&cp)?));
+    }
+    let joined = chunk::join(chunks)?;
+    let bytes = std::fs::read(&a.rig)
+        .with_context(|| format!("{}: cannot read the rig", a.rig.display()))?;
+    if chunk::fnv64(&bytes) != joined.header.rig_hash {
+        bail!(
+            "{}: the chunks were made from another rig file",
+            a.rig.display()
+        );
+    }
+    let rig = fio::load::load_bytes(
+        &a.rig,
+        &bytes,
+        &LoadOptions {
+            mesh: a.mesh.clone(),
+            animation: None,
+        },
+    )?;
+    let origin = chunk::origin_from_plain(&joined.header.origin);
+    if origin
+        .iter()
+        .any(|o| o.vertices.iter().any(|&v| v >= rig.face().positions.len()))
+    {
+        bail!(
+            "{}: the chunks' face does not match this rig's face (pass the same --mesh)",
+            a.rig.display()
+        );
+    }
+    let set = FrameSet {
+        triangles: &joined.header.triangles,
+        frames: &joined.frames,
+        origin: &origin,
+        fps: joined.header.fps,
+    };
+    export::write_animated(&rig, &set, &a.output, overwrite(a.force))?;
+    let r = joined.header.range;
+    out.json_result(
+        &serde_json::json!({ "ok": true, "output": a.output, "frames": [r.start, r.end] }),
+    );
+    out.say(format!(
+        "merged frames {}:{} of {} chunks into {}",
+        r.start,
+        r.end,
+        a.chunks.len(),
+        a.output.display()
+    ));
+    if r.start != 0 || r.end != joined.header.clip_frames {
+        out.note(format!(
+            "note: the chunks cover frames {}:{} of a {}-frame clip",
+            r.start, r.end, joined.header.clip_frames
+        ));
+    }
+    Ok(())
+}

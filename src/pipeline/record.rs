@@ -1,0 +1,130 @@
+//! What a run did, frame by frame and stage by stage: the content of `REPORT.json`.
+
+use serde::Serialize;
+
+/// Whether a stage ran, and why (or why not).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct StagePlan {
+    /// Stage name: `load`, `weld`, `refine`, `lattice`, `muscles`, `fit`, `interior`, `shell`,
+    /// `export`, `frames_dir`, `preview`.
+    pub stage: String,
+    /// `ran` or `skipped`.
+    pub status: String,
+    /// The reason, for the user.
+    pub why: String,
+    /// Wall time of the stage's set-up or of the whole stage when it is not per frame (ms).
+    pub ms: f64,
+}
+
+impl StagePlan {
+    /// A stage that ran.
+    pub fn ran(stage: &str, why: impl Into<String>, ms: f64) -> Self {
+        Self {
+            stage: stage.into(),
+            status: "ran".into(),
+            why: why.into(),
+            ms,
+        }
+    }
+    /// A stage that was left out.
+    pub fn skipped(stage: &str, why: impl Into<String>) -> Self {
+        Self {
+            stage: stage.into(),
+            status: "skipped".into(),
+            why: why.into(),
+            ms: 0.0,
+        }
+    }
+    /// Whether the stage ran.
+    pub fn is_ran(&self) -> bool {
+        self.status == "ran"
+    }
+}
+
+/// One stage's numerical outcome in one frame.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct StageRecord {
+    /// `converged`, `iteration_limit`, `line_search_failed`, `stalled`, `not_finite`,
+    /// `failed` (for a QP: clarabel's status), or `ok` for stages without iterations.
+    pub status: String,
+    /// Newton (or interior-point) iterations.
+    pub iterations: usize,
+    /// Final residual: N for the shell and the interior, m (RMS surface distance) for the fit.
+    pub residual: f64,
+    /// Wall time (ms).
+    pub ms: f64,
+}
+
+/// One frame of the report.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FrameRecord {
+    /// Frame index in the clip.
+    pub frame: usize,
+    /// Clip time (s).
+    pub time_s: f64,
+    /// Activation fit, when it ran.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fit: Option<StageRecord>,
+    /// Interior step, when it ran.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub interior: Option<StageRecord>,
+    /// Skin statics, when it ran.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub shell: Option<StageRecord>,
+    /// Largest wrinkle depth: distance of the skin from the smooth embedded surface (m).
+    pub wrinkle_depth_max_m: f64,
+}
+
+/// Totals over the run.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct Totals {
+    /// Frames simulated (including a replayed prefix).
+    pub frames_simulated: usize,
+    /// Frames written.
+    pub frames_written: usize,
+    /// Frames whose shell or interior did not converge.
+    pub frames_not_converged: usize,
+    /// Milliseconds per stage summed over frames.
+    pub fit_ms: f64,
+    /// Interior milliseconds.
+    pub interior_ms: f64,
+    /// Shell milliseconds.
+    pub shell_ms: f64,
+    /// Export milliseconds.
+    pub export_ms: f64,
+    /// Wall time of the whole run (s).
+    pub wall_s: f64,
+}
+
+/// `REPORT.json`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RunReport {
+    /// furrow's version.
+    pub furrow: String,
+    /// Input rig.
+    pub rig: String,
+    /// Scene file, when one was given.
+    pub scene: Option<String>,
+    /// Face (skin) mesh name.
+    pub face: String,
+    /// Frames per second.
+    pub fps: f64,
+    /// Frames written [start, end).
+    pub frames: [usize; 2],
+    /// Materials used (SI).
+    pub materials: serde_json::Value,
+    /// Critical wavelength λ (m) and cluster width σ = λ/π (m).
+    pub wavelength_m: f64,
+    /// Cluster width σ (m).
+    pub sigma_m: f64,
+    /// Sizes: skin vertices/triangles, lattice elements/nodes, clusters, muscles.
+    pub sizes: serde_json::Value,
+    /// Every stage, ran or skipped, with the reason.
+    pub stages: Vec<StagePlan>,
+    /// Per frame.
+    pub per_frame: Vec<FrameRecord>,
+    /// Totals.
+    pub totals: Totals,
+    /// Warnings said to the user.
+    pub warnings: Vec<String>,
+}

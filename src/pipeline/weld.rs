@@ -1,0 +1,105 @@
+//! Welding a loaded face into one manifold skin: glTF splits vertices along texture seams and
+//! normal creases, but the skin must be one connected sheet to carry stress across them.
+
+use crate::mesh::TriMesh;
+use nalgebra::Vector3;
+use std::collections::HashMap;
+
+/// A welded mesh and the maps between it and the loaded vertices.
+#[derive(Debug, Clone)]
+pub struct Welded {
+    /// The welded skin mesh (positions in metres).
+    pub mesh: TriMesh,
+    /// For each loaded vertex, its welded vertex.
+    pub of_loaded: Vec<usize>,
+    /// For each welded vertex, one loaded vertex at the same place.
+    pub loaded_of: Vec<usize>,
+    /// Triangles dropped because welding collapsed them (zero area or repeated corners).
+    pub dropped_triangles: usize,
+}
+
+/// Weld vertices closer than `tol` (m): positions are snapped to a grid of `tol` and equal
+/// cells (including the 7 neighbours towards +) are merged, first come first served, so the
+/// result does not depend on thread count.
+pub fn weld(positions: &[Vector3<f64>], triangles: &[[usize; 3]], tol: f64) -> Welded {
+    let key = |p: &Vector3<f64>| {
+        [
+            (p.x / tol).floor() as i64,
+            (p.y / tol).floor() as i64,
+            (p.z / tol).floor() as i64,
+        ]
+    };
+    let mut cells: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
+    let mut of_loaded = vec![usize::MAX; positions.len()];
+    let mut loaded_of = Vec::new();
+    let mut welded_pos: Vec<Vector3<f64>> = Vec::new();
+    for (i, p) in positions.iter().enumerate() {
+        let k = key(p);
+        let mut found = None;
+        'search: for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    if let Some(list) = cells.get(&[k[0] + dx, k[1] + dy, k[2] + dz]) {
+                        for &w in list {
+                            if (welded_pos[w] - p).norm() <= tol {
+                                found = Some(w);
+                                break 'search;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        let w = match found {
+            Some(w) => w,
+            None => {
+                let w = welded_pos.len();
+                welded_pos.push(*p);
+                loaded_of.push(i);
+                cells.entry(k).or_default().push(w);
+                w
+            }
+        };
+        of_loaded[i] = w;
+    }
+    let mut tris = Vec::with_capacity(triangles.len());
+    let mut dropped = 0;
+    for t in triangles {
+        let w = [of_loaded[t[0]], of_loaded[t[1]], of_loaded[t[2]]];
+        if w[0] == w[1] || w[1] == w[2] || w[0] == w[2] {
+            dropped += 1;
+            continue;
+        }
+        tris.push(w);
+    }
+    Welded {
+        mesh: TriMesh::new(welded_pos, tris),
+        of_loaded,
+        loaded_of,
+        dropped_triangles: dropped,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn seam_vertices_merge_and_collapsed_triangles_drop() {
+        let p = vec![
+            Vector3::new(0.0, 0.0, 0.0),
+            Vector3::new(1.0, 0.0, 0.0),
+            Vector3::new(0.0, 1.0, 0.0),
+            Vector3::new(1.0, 0.0, 0.0), // seam copy of 1
+            Vector3::new(1.0, 1.0, 0.0),
+            Vector3::new(0.0, 1.0, 1e-12), // seam copy of 2 within tolerance
+        ];
+        let t = vec![[0, 1, 2], [3, 4, 5], [0, 1, 3]];
+        let w = weld(&p, &t, 1e-9);
+        assert_eq!(w.mesh.positions.len(), 4);
+        assert_eq!(w.of_loaded, vec![0, 1, 2, 1, 3, 2]);
+        assert_eq!(w.mesh.triangles, vec![[0, 1, 2], [1, 3, 2]]);
+        assert_eq!(w.dropped_triangles, 1);
+        assert_eq!(w.loaded_of, vec![0, 1, 2, 4]);
+    }
+}

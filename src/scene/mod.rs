@@ -1,0 +1,489 @@
+//! What a run needs: materials, lattice, skin, dynamics, muscles, solver and export settings,
+//! read from a TOML scene file (every key optional; a missing file means the defaults).
+//!
+//! Two kinds of scene share this schema: rig scenes (`furrow animate RIG --scene S.toml`, the face
+//! comes from the glTF) and synthetic scenes (`furrow scene S.toml`, with a `[geometry]` and a
+//! `[load]` section: slabs, cushions, cubes). Unknown keys are errors (a typo must not silently
+//! fall back to a default), and every value is checked with a message naming the key.
+
+pub mod materials;
+
+use crate::fem::Material;
+use crate::shell::ShellMaterial;
+use anyhow::{bail, Context};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// A whole scene file (see the README for every key and its unit).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Scene {
+    /// A name for reports.
+    pub name: Option<String>,
+    /// The skin (thin shell).
+    pub skin: SkinSection,
+    /// The interior (lattice solid).
+    pub interior: InteriorSection,
+    /// Time stepping.
+    pub dynamics: DynamicsSection,
+    /// Muscles and the activation fit.
+    pub muscles: MuscleSection,
+    /// Solver tolerances.
+    pub solver: SolverSection,
+    /// What the exported files carry.
+    pub export: ExportSection,
+    /// Synthetic geometry (`furrow scene` only).
+    pub geometry: Option<Geometry>,
+    /// The load applied to synthetic geometry (`furrow scene` only).
+    pub load: Option<Load>,
+}
+
+/// `[skin]`: the thin shell's material, thickness and resolution.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SkinSection {
+    /// Preset name (`skin`, `leather`, `rubber`, `latex`); default `skin`.
+    pub preset: Option<String>,
+    /// Young's modulus E_x (Pa), overrides the preset.
+    pub young: Option<f64>,
+    /// Poisson's ratio ν_x, overrides the preset.
+    pub poisson: Option<f64>,
+    /// Uniform thickness h (m), overrides the preset.
+    pub thickness: Option<f64>,
+    /// Thickness per region: axis-aligned boxes in the rig's world space (m); a vertex takes
+    /// the thickness of the first box that holds it, else the uniform one.
+    pub thickness_regions: Vec<ThicknessRegion>,
+    /// Most subdivision levels the skin may be refined by to hold enough vertices per
+    /// wavelength (default 2).
+    pub refine_limit: Option<usize>,
+    /// Shell vertices wanted per critical wavelength (default 6).
+    pub vertices_per_wavelength: Option<f64>,
+    /// Names of the meshes that are skin (default: the face furrow picks).
+    pub meshes: Vec<String>,
+    /// The part of the skin to simulate: boxes in world space (m); outside them the skin
+    /// follows the interior (the embedding). Empty: all of it.
+    pub mask: Vec<Aabb>,
+}
+
+/// An axis-aligned box in world space (m).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Aabb {
+    /// Lower corner (m).
+    pub min: [f64; 3],
+    /// Upper corner (m).
+    pub max: [f64; 3],
+}
+
+impl Aabb {
+    /// Whether `p` lies in the box (boundary included).
+    pub fn contains(&self, p: &nalgebra::Vector3<f64>) -> bool {
+        (0..3).all(|k| p[k] >= self.min[k] && p[k] <= self.max[k])
+    }
+}
+
+/// A region of its own skin thickness.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ThicknessRegion {
+    /// Lower corner (m).
+    pub min: [f64; 3],
+    /// Upper corner (m).
+    pub max: [f64; 3],
+    /// Thickness there (m).
+    pub thickness: f64,
+}
+
+/// `[interior]`: the lattice solid.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct InteriorSection {
+    /// Preset name (`flesh`, `foam`, `gel`); default `flesh`.
+    pub preset: Option<String>,
+    /// Young's modulus E_q (Pa), overrides the preset.
+    pub young: Option<f64>,
+    /// Poisson's ratio ν_q, overrides the preset.
+    pub poisson: Option<f64>,
+    /// Density (kg/m³), overrides the preset.
+    pub density: Option<f64>,
+    /// Lattice cell edge (m); default from `target_cells`.
+    pub cell_size: Option<f64>,
+    /// Approximate cell count over the bounding box when no cell size is given (default 500).
+    pub target_cells: Option<usize>,
+    /// Flesh depth behind an open surface (m); default 10 % of the bounding-box diagonal.
+    pub depth: Option<f64>,
+    /// `quadratic` (default) or `trilinear` elements.
+    pub elements: Option<String>,
+}
+
+/// `[dynamics]`: time stepping of the interior.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DynamicsSection {
+    /// Run backward Euler (default: yes when the rig is animated; a still pose is solved
+    /// quasi-statically).
+    pub enabled: Option<bool>,
+    /// Time step (s); default 0.02, or 1/fps when that is smaller.
+    pub dt: Option<f64>,
+    /// Apply gravity (default false for faces: the blend shapes were sculpted under gravity).
+    pub gravity: Option<bool>,
+}
+
+/// `[muscles]`: where activations come from.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MuscleSection {
+    /// `auto` (generate from the blend shapes; default), `none` (the interior tracks the
+    /// blended surface directly, no QP), or a path to a muscle TOML file.
+    pub source: Option<String>,
+    /// Size regularisation λ_s (m²).
+    pub size_weight: Option<f64>,
+    /// Temporal regularisation λ_t (m²).
+    pub smooth_weight: Option<f64>,
+    /// Gauss–Newton re-linearisations per frame (default 2).
+    pub gauss_newton: Option<usize>,
+}
+
+/// `[solver]`: tolerances.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SolverSection {
+    /// Shell Newton tolerance relative to the skin's stretch stiffness × typical edge (default 1e-6).
+    pub shell_tolerance: Option<f64>,
+    /// Shell Newton iteration limit (default 60).
+    pub shell_iterations: Option<usize>,
+    /// Interior Newton iterations per step (default 3).
+    pub interior_iterations: Option<usize>,
+    /// When the skin's stiffness Bᵀ K_x B seen by the interior is recomputed: `once` (at
+    /// rest; default, the force Bᵀ F_x is always current) or `every_frame` (the paper).
+    pub skin_stiffness: Option<String>,
+}
+
+/// `[export]`: what goes into the output files.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ExportSection {
+    /// Write per-frame normals (default true; viewers that recompute normals can do without).
+    pub normals: Option<bool>,
+    /// `wrinkles_on_blend` (default: the blend-shape surface plus the skin's wrinkles, so the
+    /// artist's shape is kept exactly) or `simulated` (the simulated skin itself).
+    pub surface: Option<String>,
+}
+
+/// `[geometry]` of a synthetic scene.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Geometry {
+    /// `slab`, `cushion` or `cube`.
+    pub kind: String,
+    /// Size along x, y, z (m); y is up.
+    pub size: [f64; 3],
+    /// Skin edge length (m).
+    pub skin_edge: f64,
+    /// How many copies side by side (each may take its own skin, see `skins`).
+    #[serde(default)]
+    pub copies: Option<usize>,
+    /// Skin presets or overrides per copy (default: the `[skin]` section for all).
+    #[serde(default)]
+    pub skins: Vec<SkinSection>,
+}
+
+/// `[load]` of a synthetic scene.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Load {
+    /// In-plane compression strain along x reached at the last frame (0.1 = 10 %).
+    #[serde(default)]
+    pub compression: Option<f64>,
+    /// A weight pressing on the top (kg), spread over the top face.
+    #[serde(default)]
+    pub weight: Option<f64>,
+    /// Frames to reach the full load.
+    pub frames: usize,
+}
+
+/// Concrete settings after presets, defaults and overrides.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Materials {
+    /// The skin.
+    pub skin: ShellMaterial,
+    /// The interior.
+    pub interior: Material,
+}
+
+fn positive(key: &str, v: Option<f64>) -> anyhow::Result<()> {
+    if let Some(x) = v {
+        if !(x.is_finite() && x > 0.0) {
+            bail!("`{key}` must be a positive finite number, got {x}");
+        }
+    }
+    Ok(())
+}
+
+impl SkinSection {
+    /// The skin material with overrides applied.
+    pub fn material(&self) -> anyhow::Result<ShellMaterial> {
+        let name = self.preset.as_deref().unwrap_or("skin");
+        let p = materials::skin_preset(name).with_context(|| {
+            format!(
+                "`skin.preset` = \"{name}\" is not a skin preset (known: {})",
+                materials::names(&materials::SKIN_PRESETS, |p| p.name)
+            )
+        })?;
+        let mut m = p.material;
+        if let Some(e) = self.young {
+            m.young = e;
+        }
+        if let Some(nu) = self.poisson {
+            m.poisson = nu;
+        }
+        if let Some(h) = self.thickness {
+            m.thickness = h;
+        }
+        m.validate().map_err(|e| anyhow::anyhow!("`skin`: {e}"))?;
+        Ok(m)
+    }
+}
+
+impl InteriorSection {
+    /// The interior material with overrides applied.
+    pub fn material(&self) -> anyhow::Result<Material> {
+        let name = self.preset.as_deref().unwrap_or("flesh");
+        let p = materials::interior_preset(name).with_context(|| {
+            format!(
+                "`interior.preset` = \"{name}\" is not an interior preset (known: {})",
+                materials::names(&materials::INTERIOR_PRESETS, |p| p.name)
+            )
+        })?;
+        let mut m = p.material;
+        if let Some(e) = self.young {
+            m.young = e;
+        }
+        if let Some(nu) = self.poisson {
+            m.poisson = nu;
+        }
+        if let Some(d) = self.density {
+            m.density = d;
+        }
+        m.validate()
+            .map_err(|e| anyhow::anyhow!("`interior`: {e}"))?;
+        Ok(m)
+    }
+}
+
+impl Scene {
+    /// Parse a scene from TOML text (`origin` names the file in messages).
+    pub fn parse(text: &str, origin: &str) -> anyhow::Result<Scene> {
+        let scene: Scene =
+            toml::from_str(text).with_context(|| format!("{origin}: not a valid scene file"))?;
+        scene
+            .validate()
+            .with_context(|| format!("{origin}: invalid scene"))?;
+        Ok(scene)
+    }
+
+    /// Read and check a scene file.
+    pub fn load(path: &Path) -> anyhow::Result<Scene> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("{}: cannot read the scene file", path.display()))?;
+        Self::parse(&text, &path.display().to_string())
+    }
+
+    /// The materials after presets and overrides.
+    pub fn materials(&self) -> anyhow::Result<Materials> {
+        Ok(Materials {
+            skin: self.skin.material()?,
+            interior: self.interior.material()?,
+        })
+    }
+
+    /// Check every value; the message names the key.
+    pub fn validate(&self) -> anyhow::Result<()> {
+        self.materials()?;
+        let s = &self.skin;
+        for (i, r) in s.thickness_regions.iter().enumerate() {
+            positive(
+                &format!("skin.thickness_regions[{i}].thickness"),
+                Some(r.thickness),
+            )?;
+            check_box(&format!("skin.thickness_regions[{i}]"), r.min, r.max)?;
+            let mut m = s.material()?;
+            m.thickness = r.thickness;
+            m.validate()
+                .map_err(|e| anyhow::anyhow!("`skin.thickness_regions[{i}]`: {e}"))?;
+        }
+        for (i, b) in s.mask.iter().enumerate() {
+            check_box(&format!("skin.mask[{i}]"), b.min, b.max)?;
+        }
+        if let Some(n) = s.refine_limit {
+            if n > 4 {
+                bail!("`skin.refine_limit` = {n}: at most 4 levels (each multiplies the triangles by 4)");
+            }
+        }
+        if let Some(v) = s.vertices_per_wavelength {
+            if !(v.is_finite() && (2.0..=64.0).contains(&v)) {
+                bail!("`skin.vertices_per_wavelength` must lie in [2, 64], got {v}");
+            }
+        }
+        let i = &self.interior;
+        positive("interior.cell_size", i.cell_size)?;
+        positive("interior.depth", i.depth)?;
+        if i.cell_size.is_some() && i.target_cells.is_some() {
+            bail!("give `interior.cell_size` or `interior.target_cells`, not both");
+        }
+        if let Some(n) = i.target_cells {
+            if n == 0 || n > crate::lattice::MAX_CELLS {
+                bail!(
+                    "`interior.target_cells` must lie in [1, {}], got {n}",
+                    crate::lattice::MAX_CELLS
+                );
+            }
+        }
+        if let Some(e) = &i.elements {
+            if e != "quadratic" && e != "trilinear" {
+                bail!("`interior.elements` must be \"quadratic\" or \"trilinear\", got \"{e}\"");
+            }
+        }
+        positive("dynamics.dt", self.dynamics.dt)?;
+        if let Some(dt) = self.dynamics.dt {
+            if dt > 1.0 {
+                bail!(
+                    "`dynamics.dt` = {dt} s is longer than a second; a frame step is 0.005–0.1 s"
+                );
+            }
+        }
+        let m = &self.muscles;
+        for (k, v) in [
+            ("muscles.size_weight", m.size_weight),
+            ("muscles.smooth_weight", m.smooth_weight),
+        ] {
+            if let Some(x) = v {
+                if !(x.is_finite() && x >= 0.0) {
+                    bail!("`{k}` must be a non-negative number, got {x}");
+                }
+            }
+        }
+        if let Some(n) = m.gauss_newton {
+            if n > 20 {
+                bail!("`muscles.gauss_newton` = {n}: at most 20 re-linearisations");
+            }
+        }
+        positive("solver.shell_tolerance", self.solver.shell_tolerance)?;
+        if let Some(m) = &self.solver.skin_stiffness {
+            if m != "once" && m != "every_frame" {
+                bail!("`solver.skin_stiffness` must be \"once\" or \"every_frame\", got \"{m}\"");
+            }
+        }
+        if let Some(m) = &self.export.surface {
+            if m != "wrinkles_on_blend" && m != "simulated" {
+                bail!(
+                    "`export.surface` must be \"wrinkles_on_blend\" or \"simulated\", got \"{m}\""
+                );
+            }
+        }
+        if let Some(m) = &self.muscles.source {
+            if m.is_empty() {
+                bail!("`muscles.source` is empty: use \"auto\", \"none\" or a file path");
+            }
+        }
+        if self.solver.shell_iterations == Some(0) || self.solver.interior_iterations == Some(0) {
+            bail!("`solver.*_iterations` must be at least 1");
+        }
+        if let Some(g) = &self.geometry {
+            if !["slab", "cushion", "cube"].contains(&g.kind.as_str()) {
+                bail!(
+                    "`geometry.kind` must be slab, cushion or cube, got \"{}\"",
+                    g.kind
+                );
+            }
+            for (k, v) in g.size.iter().enumerate() {
+                positive(&format!("geometry.size[{k}]"), Some(*v))?;
+            }
+            positive("geometry.skin_edge", Some(g.skin_edge))?;
+            let min = g.size.iter().copied().fold(f64::INFINITY, f64::min);
+            if g.skin_edge > min / 2.0 {
+                bail!(
+                    "`geometry.skin_edge` = {} m is more than half the smallest size {min} m",
+                    g.skin_edge
+                );
+            }
+            for (i, s) in g.skins.iter().enumerate() {
+                s.material()
+                    .with_context(|| format!("`geometry.skins[{i}]`"))?;
+            }
+            if let Some(c) = g.copies {
+                if c == 0 || c > 16 {
+                    bail!("`geometry.copies` must lie in [1, 16], got {c}");
+                }
+            }
+            match &self.load {
+                None => bail!("a scene with `[geometry]` needs a `[load]` section"),
+                Some(l) => {
+                    if l.frames == 0 || l.frames > 10_000 {
+                        bail!("`load.frames` must lie in [1, 10000], got {}", l.frames);
+                    }
+                    if let Some(c) = l.compression {
+                        if !(c.is_finite() && (0.0..0.6).contains(&c)) {
+                            bail!("`load.compression` is a strain in [0, 0.6), got {c}");
+                        }
+                    }
+                    positive("load.weight", l.weight)?;
+                }
+            }
+        } else if self.load.is_some() {
+            bail!("`[load]` needs a `[geometry]` section (rigs are driven by their animation)");
+        }
+        Ok(())
+    }
+}
+
+fn check_box(key: &str, min: [f64; 3], max: [f64; 3]) -> anyhow::Result<()> {
+    if min.iter().chain(&max).any(|v| !v.is_finite()) || (0..3).any(|k| min[k] > max[k]) {
+        bail!("`{key}`: min must be ≤ max on every axis and finite (m)");
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn empty_scene_is_the_defaults() {
+        let s = Scene::parse("", "t").unwrap();
+        let m = s.materials().unwrap();
+        assert_eq!(m.skin, materials::skin_preset("skin").unwrap().material);
+        assert_eq!(
+            m.interior,
+            materials::interior_preset("flesh").unwrap().material
+        );
+    }
+
+    #[test]
+    fn overrides_apply_and_bad_keys_are_named() {
+        let s = Scene::parse(
+            "[skin]\npreset = \"leather\"\nthickness = 0.003\n[interior]\npreset = \"foam\"\n",
+            "t",
+        )
+        .unwrap();
+        let m = s.materials().unwrap();
+        assert_eq!(m.skin.thickness, 0.003);
+        assert_eq!(m.skin.young, 40e6);
+        assert_eq!(m.interior.young, 0.5e6);
+        let err = |t: &str| format!("{:#}", Scene::parse(t, "bad.toml").unwrap_err());
+        let e = err("[skin]\nthicknes = 0.1\n");
+        assert!(e.contains("bad.toml") && e.contains("thicknes"), "{e}");
+        let e = err("[skin]\npreset = \"velvet\"\n");
+        assert!(e.contains("velvet") && e.contains("leather"), "{e}");
+        let e = err("[skin]\nthickness = -1.0\n");
+        assert!(e.contains("thickness"), "{e}");
+        let e = err("[interior]\npoisson = 0.5\n");
+        assert!(e.contains("poisson"), "{e}");
+        let e = err("[dynamics]\ndt = nan\n");
+        assert!(e.contains("dynamics.dt"), "{e}");
+        let e = err("[interior]\ncell_size = 0.01\ntarget_cells = 10\n");
+        assert!(e.contains("not both"), "{e}");
+        let e = err("[load]\nframes = 3\n");
+        assert!(e.contains("geometry"), "{e}");
+    }
+}

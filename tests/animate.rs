@@ -1,0 +1,249 @@
+//! End to end: `furrow animate` and the pipeline on small rigs, `merge`, `batch`, determinism.
+
+mod common;
+
+use furrow::io::load::{load_bytes, LoadOptions};
+use furrow::pipeline::{self, RunOptions};
+use furrow::scene::Scene;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn furrow() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_furrow"))
+}
+
+fn write_sheet(dir: &Path, name: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, common::sheet_rig(40, 0.1, 0.15, 0.3)).unwrap();
+    p
+}
+
+fn write_other_sheet(dir: &Path) -> PathBuf {
+    let p = dir.join("other.glb");
+    std::fs::write(&p, common::sheet_rig(20, 0.1, 0.1, 0.3)).unwrap();
+    p
+}
+
+fn run_ok(args: &[&str]) -> String {
+    let o = furrow().args(args).output().unwrap();
+    assert!(
+        o.status.success(),
+        "furrow {args:?} failed:\n{}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// RMS over the vertices in `pick` of the wrinkle detail (wrinkled − blend-shape surface).
+fn detail_rms(out: &pipeline::RunOutput, frame: usize, pick: impl Fn(f64) -> bool) -> f64 {
+    let (mut s, mut n) = (0.0, 0);
+    for (p, q) in out.frames[frame].iter().zip(&out.smooth[frame]) {
+        if pick(q.x) {
+            s += (p - q).norm_squared();
+            n += 1;
+        }
+    }
+    (s / n as f64).sqrt()
+}
+
+#[test]
+fn sheet_wrinkles_where_compressed_and_not_where_stretched() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_sheet(dir.path(), "sheet.glb");
+    let rig = load_bytes(
+        &path,
+        &std::fs::read(&path).unwrap(),
+        &LoadOptions::default(),
+    )
+    .unwrap();
+    let opts = RunOptions {
+        scene: Scene::default(),
+        scene_path: None,
+        fps: 30.0,
+        frames: None,
+    };
+    let out = pipeline::run(&rig, &opts, &|_, _, _| {}).unwrap();
+    let last = out.frames.len() - 1;
+    assert_eq!(out.frames.len(), out.report.per_frame.len());
+    assert!(out.frames.len() >= 10);
+    // Away from the middle line and the borders: compressed (x < 0.05) against stretched.
+    let left = detail_rms(&out, last, |x| (0.01..0.035).contains(&x));
+    let right = detail_rms(&out, last, |x| (0.065..0.09).contains(&x));
+    eprintln!("wrinkle RMS: compressed {left:.3e} m, stretched {right:.3e} m");
+    assert!(
+        left > 1e-4,
+        "no wrinkles where the skin is compressed: {left:.3e} m"
+    );
+    assert!(
+        left > 10.0 * right,
+        "compressed {left:.3e} vs stretched {right:.3e}"
+    );
+    for f in &out.report.per_frame {
+        let s = f.shell.as_ref().unwrap();
+        assert_eq!(s.status, "converged", "frame {}: {s:?}", f.frame);
+    }
+    let ran: Vec<_> = out
+        .report
+        .stages
+        .iter()
+        .filter(|s| s.is_ran())
+        .map(|s| s.stage.as_str())
+        .collect();
+    let skipped: Vec<_> = out
+        .report
+        .stages
+        .iter()
+        .filter(|s| !s.is_ran())
+        .map(|s| s.stage.as_str())
+        .collect();
+    for s in ["load", "weld", "lattice", "interior", "shell"] {
+        assert!(ran.contains(&s), "{s} should run: {ran:?}");
+    }
+    for s in ["muscles", "fit"] {
+        assert!(skipped.contains(&s), "{s} should be skipped: {skipped:?}");
+    }
+}
+
+#[test]
+fn animate_writes_valid_gltf_and_report_and_refuses_to_overwrite() {
+    let dir = tempfile::tempdir().unwrap();
+    let rig = write_sheet(dir.path(), "sheet.glb");
+    let out = dir.path().join("out.glb");
+    let report = dir.path().join("report.json");
+    let (r, o, rep) = (
+        rig.to_str().unwrap(),
+        out.to_str().unwrap(),
+        report.to_str().unwrap(),
+    );
+    run_ok(&["animate", r, "-o", o, "--report", rep, "--quiet"]);
+    let j: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    let frames = j["per_frame"].as_array().unwrap();
+    assert!(frames.len() >= 10);
+    for key in ["frame", "time_s", "interior", "shell"] {
+        assert!(frames[3].get(key).is_some(), "per_frame lacks {key}");
+    }
+    assert!(j["wavelength_m"].as_f64().unwrap() > 0.0);
+    if let Some(v) = common::validate(&[out.clone()]) {
+        common::assert_valid(&v);
+    }
+    // A second run without --force must refuse and leave the file as it was.
+    let before = std::fs::read(&out).unwrap();
+    let o2 = furrow()
+        .args(["animate", r, "-o", o, "--quiet"])
+        .output()
+        .unwrap();
+    assert!(!o2.status.success());
+    assert!(String::from_utf8_lossy(&o2.stderr).contains("--force"));
+    assert_eq!(std::fs::read(&out).unwrap(), before);
+}
+
+#[test]
+fn chunks_merge_into_the_unsplit_file_and_threads_do_not_change_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    let rig = write_sheet(dir.path(), "sheet.glb");
+    let r = rig.to_str().unwrap();
+    let p = |n: &str| dir.path().join(n).to_str().unwrap().to_string();
+    let whole = p("whole.glb");
+    let status = furrow()
+        .args(["animate", r, "-o", &whole, "--quiet"])
+        .env("RAYON_NUM_THREADS", "2")
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let one_thread = p("one.glb");
+    let status = furrow()
+        .args(["animate", r, "-o", &one_thread, "--quiet"])
+        .env("RAYON_NUM_THREADS", "1")
+        .status()
+        .unwrap();
+    assert!(status.success());
+    assert!(
+        std::fs::read(&whole).unwrap() == std::fs::read(&one_thread).unwrap(),
+        "1 and 2 threads gave different bytes"
+    );
+    let (a, b) = (p("part0.glb"), p("part1.glb"));
+    run_ok(&["animate", r, "-o", &a, "--frames", ":4", "--quiet"]);
+    run_ok(&["animate", r, "-o", &b, "--frames", "4:", "--quiet"]);
+    let merged = p("merged.glb");
+    run_ok(&["merge", &b, &a, "--rig", r, "-o", &merged, "--quiet"]);
+    assert!(
+        std::fs::read(&whole).unwrap() == std::fs::read(&merged).unwrap(),
+        "merged chunks differ from the unsplit run"
+    );
+    // A gap is refused, and so is another rig.
+    let c = p("part2.glb");
+    run_ok(&["animate", r, "-o", &c, "--frames", ":2", "--quiet"]);
+    let o = furrow()
+        .args(["merge", &c, &b, "--rig", r, "-o", &p("gap.glb")])
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("missing"));
+    assert!(!dir.path().join("gap.glb").exists());
+    let other = write_other_sheet(dir.path());
+    let o = furrow()
+        .args([
+            "merge",
+            &a,
+            &b,
+            "--rig",
+            other.to_str().unwrap(),
+            "-o",
+            &p("x.glb"),
+        ])
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("another rig"));
+}
+
+#[test]
+fn batch_reports_failures_goes_on_and_skips_finished_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = write_sheet(dir.path(), "good.glb");
+    let bad = dir.path().join("bad.glb");
+    std::fs::write(&bad, b"glTF not really").unwrap();
+    let outdir = dir.path().join("out");
+    let args = |extra: &[&str]| {
+        let mut v = vec![
+            "batch".to_string(),
+            bad.display().to_string(),
+            good.display().to_string(),
+            "-o".into(),
+            outdir.display().to_string(),
+            "--frames".into(),
+            ":3".into(),
+            "--json".into(),
+        ];
+        v.extend(extra.iter().map(|s| s.to_string()));
+        v
+    };
+    let o = furrow().args(args(&[])).output().unwrap();
+    assert!(!o.status.success(), "a failed input must fail the batch");
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let res = j["results"].as_array().unwrap();
+    assert_eq!(res[0]["status"], "failed");
+    assert!(res[0]["error"].as_str().unwrap().contains("bad.glb"));
+    assert_eq!(res[1]["status"], "done");
+    assert!(outdir.join("good.glb").exists() && outdir.join("good.report.json").exists());
+    assert!(
+        !outdir.join("bad.glb").exists(),
+        "no partial output for a failed input"
+    );
+    // Rerun: the finished one is skipped.
+    let o = furrow().args(args(&[])).output().unwrap();
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["results"][1]["status"], "skipped");
+    // A killed run leaves an output without its report: it is redone.
+    std::fs::remove_file(outdir.join("good.report.json")).unwrap();
+    let o = furrow().args(args(&[])).output().unwrap();
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["results"][1]["status"], "done");
+    let leftovers: Vec<_> = std::fs::read_dir(&outdir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .filter(|n| n.starts_with('.') || n.contains("tmp"))
+        .collect();
+    assert!(leftovers.is_empty(), "temporary files left: {leftovers:?}");
+}
