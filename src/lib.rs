@@ -18,3 +18,4 @@ pub mod rig;
 pub mod scene;
 pub mod shell;
 pub mod solver;
+pub mod validate;

@@ -2,4 +2,6 @@
 //! frequency limit of the constraints.
 
 pub mod clusters;
+pub mod embedded;
+pub mod refine;
 pub mod wavelength;

@@ -1,0 +1,440 @@
+//! The embedded thin shell: the skin as a thin shell tied to the lattice only at low spatial
+//! frequency, and the two-step solve of DESIGN.md ("The two-step solve").
+//!
+//! The skin state x (flat, 3n, m) is the equilibrium of the shell energy E_x under the
+//! frequency-limited constraints H x = H B q (one row per cluster and coordinate, H the
+//! truncated-Gaussian cluster weights of [`Clusters`], B the embedding of the skin vertices
+//! in the lattice, q the lattice node positions). The interior then feels the skin through
+//! Bᵀ F_x (F_x = −∇E_x at x, N) and Bᵀ K_x B (K_x the element-projected, positive
+//! semi-definite shell Hessian at x, N/m), which enter its backward Euler step
+//! ([`crate::fem::dynamics::ExtraTerms`]).
+//!
+//! Bᵀ K_x B is formed column by column over node dofs: for node m and axis a, the column
+//! K_x B e_{3m+a} = Σ_{v ∋ m} w_vm K_x e_{3v+a} is accumulated from the compressed K_x (its
+//! sparsity pattern built once), then multiplied by Bᵀ row by row; columns are independent
+//! and run in parallel. The emitted triplet layout depends only on the patterns of K_x and
+//! B, so the interior's sparse pattern and symbolic factorisation are reused frame to frame.
+
+use super::clusters::{ClusterStats, Clusters};
+use crate::fem::dynamics::{BackwardEuler, ExtraTerms, SolveReport as StepReport};
+use crate::math::sparse::Pattern;
+use crate::math::Energy;
+use crate::mesh::TriMesh;
+use crate::shell::{Shell, ShellMaterial};
+use crate::solver::statics::SolverError;
+use crate::solver::{
+    LinearConstraints, SolveReport, SolveStatus, StaticProblem, StaticSettings, StaticSolver,
+};
+use anyhow::{anyhow, bail};
+use nalgebra::Vector3;
+use rayon::prelude::*;
+use std::sync::Mutex;
+use std::time::Instant;
+
+/// Largest |Σ_n B_vn − 1| accepted for an embedding row (the rows of B are partitions of
+/// unity: interpolation weights of a point in its element).
+const ROW_SUM_TOLERANCE: f64 = 1e-6;
+
+/// The skin of an embedded-shell simulation: a thin shell tied to the lattice by
+/// H x = H B q, with its own quasi-static solver kept across frames.
+pub struct EmbeddedShell {
+    /// The shell energy (rest mesh, material, membrane and bending parts).
+    pub shell: Shell,
+    /// The frequency-limited constraint clusters (H).
+    pub clusters: Clusters,
+    /// Embedding rows: for each skin vertex, its (node, weight) pairs (weights sum to one).
+    rows: Vec<Vec<(usize, f64)>>,
+    /// Transposed embedding: for each node, its (vertex, weight) pairs.
+    cols: Vec<Vec<(usize, f64)>>,
+    nodes: usize,
+    /// Current skin state (flat, 3n, m).
+    x: Vec<f64>,
+    solver: StaticSolver,
+    problem: StaticProblem,
+    /// Pinned skin vertices (they follow B q exactly).
+    pinned_vertices: Vec<usize>,
+    /// Pattern of the shell Hessian triplets (built at the first `coupling_terms`).
+    hessian_pattern: Mutex<Option<Pattern>>,
+}
+
+/// What one two-step frame did: the shell statics report, the interior step report and the
+/// time (s) of each stage.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct TwoStepReport {
+    /// Shell statics (step 1): status, iterations, residual (N), constraint violation (m).
+    pub shell: SolveReport,
+    /// Interior backward Euler (or quasi-static) solve (step 2).
+    pub interior: StepReport,
+    /// Wall-clock seconds of the shell statics.
+    pub shell_s: f64,
+    /// Wall-clock seconds forming Bᵀ K_x B and Bᵀ F_x.
+    pub coupling_s: f64,
+    /// Wall-clock seconds of the interior solve.
+    pub interior_s: f64,
+}
+
+impl EmbeddedShell {
+    /// A skin at rest in `rest` made of `material`, embedded in a lattice of `nodes` nodes by
+    /// the triplets (vertex, node, weight) of B, with constraint clusters of Gaussian width
+    /// `sigma` (m; DESIGN.md: σ = λ/π) and quasi-static solver `settings`.
+    ///
+    /// Fails, naming the problem, on a bad material or mesh, an embedding index out of range,
+    /// a vertex without embedding or whose weights do not sum to one, a non-positive σ, or
+    /// bad solver settings.
+    pub fn new(
+        rest: TriMesh,
+        material: ShellMaterial,
+        embedding: Vec<(usize, usize, f64)>,
+        nodes: usize,
+        sigma: f64,
+        settings: StaticSettings,
+    ) -> anyhow::Result<Self> {
+        let n = rest.positions.len();
+        if n == 0 {
+            bail!("the skin mesh has no vertices");
+        }
+        if nodes == 0 {
+            bail!("the lattice has no nodes to embed the skin in");
+        }
+        let mut rows: Vec<Vec<(usize, f64)>> = vec![Vec::new(); n];
+        let mut cols: Vec<Vec<(usize, f64)>> = vec![Vec::new(); nodes];
+        for &(v, node, w) in &embedding {
+            if v >= n {
+                bail!("embedding entry names skin vertex {v}, but the skin has {n} vertices");
+            }
+            if node >= nodes {
+                bail!("embedding entry names lattice node {node}, but the lattice has {nodes} nodes");
+            }
+            if !w.is_finite() {
+                bail!("embedding weight of vertex {v} on node {node} is not finite ({w})");
+            }
+            rows[v].push((node, w));
+        }
+        for (v, r) in rows.iter_mut().enumerate() {
+            if r.is_empty() {
+                bail!(
+                    "skin vertex {v} is not embedded in the lattice (no embedding weights); \
+                     the lattice must cover the whole skin"
+                );
+            }
+            r.sort_by_key(|&(node, _)| node);
+            // Merge duplicate nodes.
+            let mut merged: Vec<(usize, f64)> = Vec::with_capacity(r.len());
+            for &(node, w) in r.iter() {
+                match merged.last_mut() {
+                    Some(last) if last.0 == node => last.1 += w,
+                    _ => merged.push((node, w)),
+                }
+            }
+            *r = merged;
+            let s: f64 = r.iter().map(|p| p.1).sum();
+            if (s - 1.0).abs() > ROW_SUM_TOLERANCE {
+                bail!(
+                    "embedding weights of skin vertex {v} sum to {s}, not 1 (interpolation \
+                     weights must be a partition of unity)"
+                );
+            }
+            for &(node, w) in r.iter() {
+                cols[node].push((v, w));
+            }
+        }
+        let solver = StaticSolver::new(settings).map_err(|e| anyhow!("{e}"))?;
+        let clusters = Clusters::build(&rest, sigma).map_err(|e| anyhow!("clusters: {e}"))?;
+        let x: Vec<f64> = rest.positions.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
+        let shell = Shell::new(rest, material)?;
+        let mut entries = Vec::with_capacity(3 * clusters.entries.len());
+        for &(c, v, w) in &clusters.entries {
+            for a in 0..3 {
+                entries.push((3 * c + a, 3 * v + a, w));
+            }
+        }
+        let problem = StaticProblem {
+            pinned: Vec::new(),
+            constraints: LinearConstraints {
+                rows: 3 * clusters.len(),
+                entries,
+                rhs: vec![0.0; 3 * clusters.len()],
+            },
+            forces: Vec::new(),
+        };
+        Ok(Self {
+            shell,
+            clusters,
+            rows,
+            cols,
+            nodes,
+            x,
+            solver,
+            problem,
+            pinned_vertices: Vec::new(),
+            hessian_pattern: Mutex::new(None),
+        })
+    }
+
+    /// Number of skin vertices.
+    pub fn vertex_count(&self) -> usize {
+        self.rows.len()
+    }
+
+    /// Number of lattice nodes the skin is embedded in.
+    pub fn node_count(&self) -> usize {
+        self.nodes
+    }
+
+    /// Cluster coverage statistics (clusters, vertices per cluster, clusters per vertex).
+    pub fn cluster_stats(&self) -> ClusterStats {
+        self.clusters.stats()
+    }
+
+    /// The current skin state x (flat, 3n, m).
+    pub fn x(&self) -> &[f64] {
+        &self.x
+    }
+
+    /// Replace the skin state (flat, 3n, m), e.g. to start from a perturbed state.
+    pub fn set_x(&mut self, x: &[f64]) -> anyhow::Result<()> {
+        if x.len() != self.x.len() {
+            bail!(
+                "skin state has {} values, expected {} (3 per vertex)",
+                x.len(),
+                self.x.len()
+            );
+        }
+        if x.iter().any(|v| !v.is_finite()) {
+            bail!("skin state contains NaN or infinity");
+        }
+        self.x.copy_from_slice(x);
+        Ok(())
+    }
+
+    /// Pin skin vertices: they then follow the embedded surface B q exactly (all three
+    /// coordinates), e.g. where the skin is glued to bone.
+    pub fn set_pinned(&mut self, vertices: &[usize]) -> anyhow::Result<()> {
+        if let Some(&v) = vertices.iter().find(|&&v| v >= self.vertex_count()) {
+            bail!(
+                "pinned skin vertex {v} out of range ({} vertices)",
+                self.vertex_count()
+            );
+        }
+        let mut p = vertices.to_vec();
+        p.sort_unstable();
+        p.dedup();
+        self.problem.pinned = p.iter().flat_map(|&v| [3 * v, 3 * v + 1, 3 * v + 2]).collect();
+        self.pinned_vertices = p;
+        Ok(())
+    }
+
+    /// The embedded surface B q (m) for node positions `q` (flat, 3 × nodes, m).
+    pub fn embedded_positions(&self, q: &[f64]) -> Vec<Vector3<f64>> {
+        self.rows
+            .iter()
+            .map(|r| {
+                r.iter().fold(Vector3::zeros(), |acc, &(node, w)| {
+                    acc + w * Vector3::new(q[3 * node], q[3 * node + 1], q[3 * node + 2])
+                })
+            })
+            .collect()
+    }
+
+    /// B q flat (3n, m).
+    fn embedded_flat(&self, q: &[f64]) -> Vec<f64> {
+        self.embedded_positions(q)
+            .iter()
+            .flat_map(|p| [p.x, p.y, p.z])
+            .collect()
+    }
+
+    /// Constraint residual max |H x − H B q| (m) of the current state against `q`.
+    pub fn constraint_violation(&self, q: &[f64]) -> f64 {
+        let bq = self.embedded_flat(q);
+        let hx = self.problem.constraints.apply(&self.x);
+        let hb = self.problem.constraints.apply(&bq);
+        hx.iter()
+            .zip(&hb)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max)
+    }
+
+    fn check_q(&self, q: &[f64]) -> Result<(), SolverError> {
+        if q.len() != 3 * self.nodes {
+            return Err(SolverError::Problem(format!(
+                "lattice state has {} values, expected {} (3 per node)",
+                q.len(),
+                3 * self.nodes
+            )));
+        }
+        if q.iter().any(|v| !v.is_finite()) {
+            return Err(SolverError::Problem(
+                "lattice state contains NaN or infinity".into(),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Shell statics (step 1): from the last x, find the equilibrium of E_x subject to
+    /// H x = H B q (3 rows per cluster, one per coordinate; pinned vertices sit at B q).
+    /// Returns the solver's report; the state is kept only if it stayed finite (otherwise
+    /// the previous state is restored and the report's status says `NotFinite`).
+    pub fn solve(&mut self, q: &[f64]) -> Result<SolveReport, SolverError> {
+        self.check_q(q)?;
+        let bq = self.embedded_flat(q);
+        self.problem.constraints.rhs = self.problem.constraints.apply(&bq);
+        for &v in &self.pinned_vertices {
+            self.x[3 * v..3 * v + 3].copy_from_slice(&bq[3 * v..3 * v + 3]);
+        }
+        let backup = self.x.clone();
+        let mut rep = self.solver.solve(&self.shell, &self.problem, &mut self.x)?;
+        if self.x.iter().any(|v| !v.is_finite()) {
+            self.x = backup;
+            rep.status = SolveStatus::NotFinite;
+        }
+        Ok(rep)
+    }
+
+    /// The skin's terms for the interior step: (Bᵀ K_x B as triplets over node dofs, both
+    /// triangles, N/m; Bᵀ F_x flat over node dofs, N), with K_x the element-projected PSD
+    /// shell Hessian and F_x = −∇E_x, both at the current x. The triplet layout is the same
+    /// on every call (entries that happen to vanish are kept).
+    pub fn coupling_terms(&self) -> (Vec<(usize, usize, f64)>, Vec<f64>) {
+        let nd = 3 * self.nodes;
+        // F_x projected: Bᵀ F_x.
+        let mut grad = vec![0.0; self.x.len()];
+        let mut trip = Vec::with_capacity(self.shell.triplet_count());
+        self.shell
+            .eval(&self.x, Some(&mut grad), Some(&mut trip), true);
+        let mut force = vec![0.0; nd];
+        for (v, r) in self.rows.iter().enumerate() {
+            for &(node, w) in r {
+                for a in 0..3 {
+                    force[3 * node + a] -= w * grad[3 * v + a];
+                }
+            }
+        }
+        // K_x compressed (pattern reused).
+        let k = {
+            let mut guard = self.hessian_pattern.lock().expect("pattern lock");
+            match guard.as_ref().map(|p| p.assemble(&trip)) {
+                Some(Ok(k)) => k,
+                _ => {
+                    let p = Pattern::new(self.x.len(), &trip).expect("shell Hessian pattern");
+                    let k = p.assemble(&trip).expect("shell Hessian assembly");
+                    *guard = Some(p);
+                    k
+                }
+            }
+        };
+        let kr = k.as_ref();
+        let nv = self.rows.len();
+        // Column (3m + a) of Bᵀ K B, for every node m and axis a, in parallel over m.
+        let columns: Vec<Vec<(usize, usize, f64)>> = (0..self.nodes)
+            .into_par_iter()
+            .map_init(
+                || (vec![0.0; 3 * nv], vec![false; 3 * nv], vec![0.0; nd], vec![false; nd]),
+                |(acc, seen, out, oseen), m| {
+                    let mut col_trip = Vec::new();
+                    for a in 0..3 {
+                        let mut touched = Vec::new();
+                        for &(v, w) in &self.cols[m] {
+                            let j = 3 * v + a;
+                            for (i, kv) in kr.row_idx_of_col(j).zip(kr.val_of_col(j)) {
+                                if !seen[i] {
+                                    seen[i] = true;
+                                    touched.push(i);
+                                }
+                                acc[i] += w * kv;
+                            }
+                        }
+                        let mut otouched = Vec::new();
+                        for &i in &touched {
+                            let (u, b) = (i / 3, i % 3);
+                            let val = acc[i];
+                            for &(node, w) in &self.rows[u] {
+                                let r = 3 * node + b;
+                                if !oseen[r] {
+                                    oseen[r] = true;
+                                    otouched.push(r);
+                                }
+                                out[r] += w * val;
+                            }
+                            acc[i] = 0.0;
+                            seen[i] = false;
+                        }
+                        otouched.sort_unstable();
+                        for &r in &otouched {
+                            col_trip.push((r, 3 * m + a, out[r]));
+                            out[r] = 0.0;
+                            oseen[r] = false;
+                        }
+                    }
+                    col_trip
+                },
+            )
+            .collect();
+        let stiffness = columns.into_iter().flatten().collect();
+        (stiffness, force)
+    }
+
+    /// Shell energy E_x (J) at the current state.
+    pub fn energy(&self) -> f64 {
+        self.shell.eval(&self.x, None, None, false)
+    }
+}
+
+/// How the interior solve of [`two_step_with`] treats time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum InteriorMode {
+    /// One backward Euler step of `interior.settings.dt`.
+    Dynamic,
+    /// Quasi-static equilibrium of the interior with the skin terms (velocities zeroed).
+    QuasiStatic,
+}
+
+/// One frame of the two-step scheme: shell statics at the interior's current q, then one
+/// backward Euler step of the interior with the external node forces `f_ext` (flat, N) and
+/// the skin's Bᵀ F_x and Bᵀ K_x B (held fixed within the step).
+pub fn two_step(
+    interior: &mut BackwardEuler,
+    skin: &mut EmbeddedShell,
+    f_ext: &[f64],
+) -> anyhow::Result<TwoStepReport> {
+    two_step_with(interior, skin, f_ext, InteriorMode::Dynamic)
+}
+
+/// [`two_step`] with the interior solve chosen by `mode` (quasi-static for validation scenes).
+pub fn two_step_with(
+    interior: &mut BackwardEuler,
+    skin: &mut EmbeddedShell,
+    f_ext: &[f64],
+    mode: InteriorMode,
+) -> anyhow::Result<TwoStepReport> {
+    if interior.interior.nodes != skin.nodes {
+        bail!(
+            "the skin is embedded in {} nodes but the interior has {}",
+            skin.nodes,
+            interior.interior.nodes
+        );
+    }
+    let t = Instant::now();
+    let shell = skin.solve(&interior.q)?;
+    let shell_s = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let (stiffness, force) = skin.coupling_terms();
+    let coupling_s = t.elapsed().as_secs_f64();
+    let extra = ExtraTerms {
+        stiffness: &stiffness,
+        force: &force,
+    };
+    let t = Instant::now();
+    let rep = match mode {
+        InteriorMode::Dynamic => interior.step(f_ext, Some(&extra))?,
+        InteriorMode::QuasiStatic => interior.quasi_static(f_ext, Some(&extra))?,
+    };
+    let interior_s = t.elapsed().as_secs_f64();
+    Ok(TwoStepReport {
+        shell,
+        interior: rep,
+        shell_s,
+        coupling_s,
+        interior_s,
+    })
+}

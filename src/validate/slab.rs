@@ -1,0 +1,411 @@
+//! The paper's validation scene: a slab of soft interior with a stiff skin on its top face,
+//! compressed along x until the skin wrinkles.
+//!
+//! Geometry (m): the slab spans [0, L] × [0, W_lattice] × [0, D], with z up; the skin is a
+//! flat sheet of (nearly) equilateral triangles on the top face z = D covering [0, L] ×
+//! [0, W]. The interior is a regular block lattice of cubic cells (quadratic B-spline or
+//! trilinear hexahedra, a few cells along the depth) built directly (no surface cutting is
+//! needed for a box). The sheet is embedded in it by the lattice's shape functions.
+//!
+//! Loading (prescribed strain): every lattice node starts at the affinely compressed position
+//! x ↦ x_c + (1 − ε)(x − x_c); the two node layers at each x end and the two bottom layers are
+//! pinned there (a slab glued to a compressed base, ends held), the others are free. The skin
+//! starts on the embedded surface B q with a tiny deterministic pseudo-random height noise
+//! (10⁻³ of an edge) that breaks the symmetry. Then `rounds` two-step rounds run: shell
+//! statics under H x = H B q, then the quasi-static interior with the skin's Bᵀ F_x and
+//! Bᵀ K_x B. The result is the skin's height above the embedded surface, w = z − (B q)_z,
+//! along the middle row of the sheet (the compression axis).
+//!
+//! All lengths scale with the predicted wavelength λ (slab length, sheet width, edge length,
+//! cell size, σ), so every (E_x/E_q, h) point costs the same and holds the same number of
+//! wavelengths: λ stays well below the slab size by construction.
+
+use crate::coupling::clusters::ClusterStats;
+use crate::coupling::embedded::{two_step_with, EmbeddedShell, InteriorMode, TwoStepReport};
+use crate::coupling::wavelength::Bilayer;
+use crate::fem::{BackwardEuler, Interior, LinearSolver, Material, StepSettings};
+use crate::lattice::{shape, Element, ElementKind, ElementOrder, Lattice, MaterialPoint};
+use crate::mesh::TriMesh;
+use crate::shell::sheet::equilateral_sheet;
+use crate::shell::ShellMaterial;
+use crate::solver::{HessianMode, SolveStatus, StaticSettings};
+use anyhow::{bail, Context};
+use nalgebra::Vector3;
+use std::time::Instant;
+
+/// Settings of the compressed-slab scene. Lengths are in wavelengths λ (the predicted
+/// critical wavelength of `bilayer`) unless stated.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SlabSettings {
+    /// Skin and interior materials and skin thickness (SI).
+    pub bilayer: Bilayer,
+    /// Interior mass density (kg/m³); irrelevant for the quasi-static solve, kept physical.
+    pub density: f64,
+    /// Slab length L along the compression axis, in λ.
+    pub length: f64,
+    /// Sheet width W across the compression axis, in λ.
+    pub width: f64,
+    /// Lattice cells along the length (the cell size is L / cells_along).
+    pub cells_along: usize,
+    /// Lattice cells along the depth (D = depth_cells × cell size).
+    pub depth_cells: usize,
+    /// Element order of the lattice.
+    pub order: ElementOrder,
+    /// Skin edge length as vertices per λ (λ / edge).
+    pub vertices_per_wavelength: f64,
+    /// Prescribed compressive strain ε along x (dimensionless, > 0).
+    pub compression: f64,
+    /// Cluster width σ as a multiple of λ/π (1 is DESIGN.md's σ = λ/π).
+    pub sigma_factor: f64,
+    /// Loading steps: the strain grows geometrically from `onset` × ε_b to `compression`
+    /// over this many steps, one two-step solve (shell statics, interior quasi-statics) each.
+    pub steps: usize,
+    /// First strain of the ramp as a multiple of ε_b = (2π h / λ)² / 12, the strain at which
+    /// a free sheet buckles into waves of length λ (bending against membrane compression).
+    pub onset: f64,
+    /// Amplitude of the symmetry-breaking height noise, in skin edge lengths.
+    pub noise: f64,
+    /// Seed of the symmetry-breaking noise.
+    pub seed: u64,
+}
+
+impl SlabSettings {
+    /// The default scene for a bilayer: 8 λ long, 1.2 λ wide, 4 cells along, 2 deep,
+    /// quadratic elements, 10 vertices per λ, 6 % compression, σ = λ/π, one round.
+    pub fn new(bilayer: Bilayer) -> Self {
+        Self {
+            bilayer,
+            density: 1000.0,
+            length: 8.0,
+            width: 1.2,
+            cells_along: 4,
+            depth_cells: 2,
+            order: ElementOrder::Quadratic,
+            vertices_per_wavelength: 10.0,
+            compression: 0.06,
+            sigma_factor: 1.0,
+            steps: 8,
+            onset: 1.5,
+            noise: 1e-3,
+            seed: 1,
+        }
+    }
+
+    /// Check the settings; the error names the field.
+    pub fn validate(&self) -> anyhow::Result<()> {
+        self.bilayer.validate().map_err(anyhow::Error::msg)?;
+        let pos = |v: f64, name: &str| -> anyhow::Result<()> {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                bail!("slab setting `{name}` must be positive, got {v}")
+            }
+        };
+        pos(self.density, "density")?;
+        pos(self.length, "length")?;
+        pos(self.width, "width")?;
+        pos(self.vertices_per_wavelength, "vertices_per_wavelength")?;
+        pos(self.compression, "compression")?;
+        pos(self.sigma_factor, "sigma_factor")?;
+        if !(self.noise.is_finite() && self.noise >= 0.0) {
+            bail!("slab setting `noise` must be ≥ 0 (edge lengths), got {}", self.noise);
+        }
+        if self.compression >= 0.5 {
+            bail!(
+                "slab setting `compression` = {} is a strain; use less than 0.5",
+                self.compression
+            );
+        }
+        pos(self.onset, "onset")?;
+        if self.cells_along == 0 || self.depth_cells == 0 || self.steps == 0 {
+            bail!("slab settings `cells_along`, `depth_cells` and `steps` must be at least 1");
+        }
+        if self.vertices_per_wavelength < 4.0 {
+            bail!(
+                "slab setting `vertices_per_wavelength` = {} cannot resolve a wrinkle; use ≥ 4",
+                self.vertices_per_wavelength
+            );
+        }
+        Ok(())
+    }
+}
+
+/// The outcome of one slab run.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct SlabResult {
+    /// Predicted critical wavelength λ (m).
+    pub predicted: f64,
+    /// Cluster width σ used (m).
+    pub sigma: f64,
+    /// Height profile along the compression axis: (x position, height w above the embedded
+    /// surface), both in m, ordered by x.
+    pub profile: Vec<(f64, f64)>,
+    /// Slab length L at rest (m).
+    pub length: f64,
+    /// Skin vertices.
+    pub skin_vertices: usize,
+    /// Lattice nodes.
+    pub nodes: usize,
+    /// Cluster statistics.
+    pub clusters: ClusterStats,
+    /// Compressive strain of each loading step.
+    pub strains: Vec<f64>,
+    /// Reports of each loading step's two-step solve.
+    pub rounds: Vec<TwoStepReport>,
+    /// True when every shell statics converged.
+    pub converged: bool,
+    /// Wall-clock seconds of the whole run.
+    pub seconds: f64,
+    /// Final skin positions (m), for export and inspection.
+    #[serde(skip)]
+    pub skin: Vec<Vector3<f64>>,
+    /// The skin's rest mesh.
+    #[serde(skip)]
+    pub mesh: TriMesh,
+}
+
+/// A regular block lattice of `dims` cubic cells of edge `cell` (m) from `origin`, one volume
+/// element per cell, neighbouring elements sharing their overlapping nodes; `vertex_points`
+/// is left empty.
+pub fn block_lattice(
+    origin: Vector3<f64>,
+    cell: f64,
+    dims: [usize; 3],
+    order: ElementOrder,
+) -> Lattice {
+    let k = order.per_axis();
+    let nn = [dims[0] + k - 1, dims[1] + k - 1, dims[2] + k - 1];
+    let id = |g: [usize; 3]| g[0] + nn[0] * (g[1] + nn[1] * g[2]);
+    let off = order.node_offset();
+    let mut rest = Vec::with_capacity(nn[0] * nn[1] * nn[2]);
+    let mut grid = Vec::with_capacity(rest.capacity());
+    for kz in 0..nn[2] {
+        for jy in 0..nn[1] {
+            for ix in 0..nn[0] {
+                grid.push([ix, jy, kz]);
+                rest.push(
+                    origin
+                        + Vector3::new(ix as f64 + off, jy as f64 + off, kz as f64 + off) * cell,
+                );
+            }
+        }
+    }
+    let mut elements = Vec::new();
+    for cz in 0..dims[2] {
+        for cy in 0..dims[1] {
+            for cx in 0..dims[0] {
+                let nodes = (0..k * k * k)
+                    .map(|a| {
+                        let o = crate::lattice::basis::local_offset(order, a);
+                        id([cx + o[0], cy + o[1], cz + o[2]])
+                    })
+                    .collect();
+                elements.push(Element {
+                    cell: [cx, cy, cz],
+                    nodes,
+                    kind: ElementKind::Volume,
+                });
+            }
+        }
+    }
+    let pinned = vec![false; rest.len()];
+    Lattice {
+        order,
+        origin,
+        cell_size: cell,
+        dims,
+        elements,
+        rest,
+        grid,
+        pinned,
+        vertex_points: Vec::new(),
+        closed: true,
+        depth: dims[2] as f64 * cell,
+        graph: Vec::new(),
+    }
+}
+
+/// The material point of rest position `p` in a block lattice (the cell containing it,
+/// points on the far faces going to the last cell).
+pub fn locate_in_block(lattice: &Lattice, p: &Vector3<f64>) -> MaterialPoint {
+    let r = (p - lattice.origin) / lattice.cell_size;
+    let c: [usize; 3] =
+        [0, 1, 2].map(|d| (r[d].floor().max(0.0) as usize).min(lattice.dims[d] - 1));
+    let e = c[0] + lattice.dims[0] * (c[1] + lattice.dims[1] * c[2]);
+    lattice.locate_in_element(e, p)
+}
+
+/// A small deterministic pseudo-random number in [−1, 1] (SplitMix64).
+fn noise(state: &mut u64) -> f64 {
+    *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    let mut z = *state;
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^= z >> 31;
+    (z >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+}
+
+/// Run the compressed slab and return the skin's height profile along x.
+pub fn run_slab(s: &SlabSettings) -> anyhow::Result<SlabResult> {
+    s.validate()?;
+    let t0 = Instant::now();
+    let b = s.bilayer;
+    let lambda = b.critical_wavelength();
+    let edge = lambda / s.vertices_per_wavelength;
+    let nx = (s.length * s.vertices_per_wavelength).round().max(2.0) as usize;
+    let length = nx as f64 * edge;
+    let ny = ((s.width * lambda) / (edge * 3f64.sqrt() / 2.0))
+        .round()
+        .max(2.0) as usize;
+    let cell = length / s.cells_along as f64;
+    let depth = s.depth_cells as f64 * cell;
+    let sheet = equilateral_sheet(nx, ny, edge);
+    let width = ny as f64 * edge * 3f64.sqrt() / 2.0;
+    let cells_y = ((width / cell).ceil() as usize).max(1);
+    let lattice = block_lattice(
+        Vector3::zeros(),
+        cell,
+        [s.cells_along, cells_y, s.depth_cells],
+        s.order,
+    );
+    // Skin on the top face, centred across the lattice's width.
+    let y0 = 0.5 * (cells_y as f64 * cell - width);
+    let mut mesh = sheet.mesh.clone();
+    for p in &mut mesh.positions {
+        *p = Vector3::new(p.x, p.y + y0, depth);
+    }
+    let points: Vec<MaterialPoint> = mesh
+        .positions
+        .iter()
+        .map(|p| locate_in_block(&lattice, p))
+        .collect();
+    let mut embedding = Vec::new();
+    for (v, mp) in points.iter().enumerate() {
+        let sh = shape(lattice.order, mp.xi);
+        for a in 0..sh.n {
+            if sh.val[a] != 0.0 {
+                embedding.push((v, lattice.elements[mp.element].nodes[a], sh.val[a]));
+            }
+        }
+    }
+    let material = ShellMaterial {
+        young: b.skin_modulus,
+        poisson: b.skin_poisson,
+        thickness: b.thickness,
+    };
+    let sigma = s.sigma_factor * lambda / std::f64::consts::PI;
+    let settings = StaticSettings {
+        tolerance: 1e-9 * b.skin_modulus * b.thickness * edge,
+        max_iterations: 200,
+        hessian: HessianMode::Auto,
+        energy_merit: true,
+        ..Default::default()
+    };
+    let mut skin = EmbeddedShell::new(
+        mesh.clone(),
+        material,
+        embedding,
+        lattice.node_count(),
+        sigma,
+        settings,
+    )
+    .context("building the slab's skin")?;
+    // Interior, affinely compressed; ends and bottom pinned.
+    let interior = Interior::new(
+        &lattice,
+        &Material {
+            young: b.interior_modulus,
+            poisson: b.interior_poisson.min(0.49),
+            density: s.density,
+        },
+    )?;
+    let k = lattice.order.per_axis();
+    let xc = 0.5 * length;
+    let mut q = lattice.rest_flat();
+    let mut pinned = vec![false; lattice.node_count()];
+    let nn = [
+        lattice.dims[0] + k - 1,
+        lattice.dims[1] + k - 1,
+        lattice.dims[2] + k - 1,
+    ];
+    for (n, g) in lattice.grid.iter().enumerate() {
+        let layers = k - 1; // nodes that shape the boundary face
+        if g[0] < layers || g[0] >= nn[0] - layers || g[2] < layers {
+            pinned[n] = true;
+        }
+    }
+    // Loading ramp (geometric), starting just past the buckling strain at λ.
+    let eps_b = (2.0 * std::f64::consts::PI * b.thickness / lambda).powi(2) / 12.0;
+    let start = (s.onset * eps_b).min(s.compression);
+    let strains: Vec<f64> = if s.steps == 1 {
+        vec![s.compression]
+    } else {
+        (0..s.steps)
+            .map(|i| start * (s.compression / start).powf(i as f64 / (s.steps - 1) as f64))
+            .collect()
+    };
+    let step = StepSettings {
+        gravity: [0.0; 3],
+        linear_solver: LinearSolver::Cholesky,
+        max_newton: 30,
+        ..Default::default()
+    };
+    let compress = |q: &mut [f64], factor: f64| {
+        for n in 0..q.len() / 3 {
+            q[3 * n] = xc + factor * (q[3 * n] - xc);
+        }
+    };
+    compress(&mut q, 1.0 - strains[0]);
+    let mut be = BackwardEuler::new(interior, q, pinned, step)?;
+    // Start the skin on the compressed embedded surface plus tiny height noise.
+    let mut seed = s.seed;
+    let x0: Vec<f64> = skin
+        .embedded_positions(&be.q)
+        .iter()
+        .flat_map(|p| [p.x, p.y, p.z + s.noise * edge * noise(&mut seed)])
+        .collect();
+    skin.set_x(&x0)?;
+    let f_ext = vec![0.0; be.q.len()];
+    let mut rounds = Vec::with_capacity(strains.len());
+    for (i, &eps) in strains.iter().enumerate() {
+        if i > 0 {
+            compress(&mut be.q, (1.0 - eps) / (1.0 - strains[i - 1]));
+        }
+        rounds.push(two_step_with(
+            &mut be,
+            &mut skin,
+            &f_ext,
+            InteriorMode::QuasiStatic,
+        )?);
+    }
+    // Final shell statics at the final interior state.
+    let last = skin.solve(&be.q)?;
+    let converged =
+        rounds.iter().all(|r| r.shell.status == SolveStatus::Converged) && last.status == SolveStatus::Converged;
+    let bq = skin.embedded_positions(&be.q);
+    let x = skin.x();
+    let mid = &sheet.rows[ny / 2];
+    let mut profile: Vec<(f64, f64)> = mid
+        .iter()
+        .map(|&v| (x[3 * v], x[3 * v + 2] - bq[v].z))
+        .collect();
+    profile.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let skin_pos = (0..mesh.positions.len())
+        .map(|v| Vector3::new(x[3 * v], x[3 * v + 1], x[3 * v + 2]))
+        .collect();
+    Ok(SlabResult {
+        predicted: lambda,
+        sigma,
+        profile,
+        length,
+        skin_vertices: mesh.positions.len(),
+        nodes: lattice.node_count(),
+        clusters: skin.cluster_stats(),
+        strains,
+        rounds,
+        converged,
+        seconds: t0.elapsed().as_secs_f64(),
+        skin: skin_pos,
+        mesh,
+    })
+}
