@@ -218,6 +218,7 @@ fn render_frame(frame: &Frame<'_>, size: (u32, u32), body: &impl Body) -> Result
         builder
             .caption(frame.title, (FAMILY, 26.0))
             .margin(16)
+            .margin_right(40)
             .x_label_area_size(56)
             .y_label_area_size(84);
         let (x0, x1) = frame.x;
@@ -375,6 +376,12 @@ pub fn render_line_chart(chart: &Chart, size: (u32, u32)) -> Result<RgbImage> {
             .flat_map(|s| s.points.iter().copied())
             .filter(|&p| drawable(p, chart.log_x, chart.log_y))
     };
+    if pts().next().is_none() {
+        anyhow::bail!(
+            "{}: no point to draw (every point is non-finite, or not positive on a logarithmic axis)",
+            chart.title
+        );
+    }
     let x = axis_range(pts().map(|p| p.0), chart.log_x, true, "x")
         .map_err(|e| anyhow!("{}: {e}", chart.title))?;
     let y = axis_range(pts().map(|p| p.1), chart.log_y, true, "y")
