@@ -128,17 +128,7 @@ pub fn format_number(v: f64) -> String {
     s.to_string()
 }
 
-/// Write `img` as a PNG file at `path`, atomically (temporary file in the same folder, then
-/// rename), replacing an existing file. Parent folders are created.
-pub fn write_png(path: &Path, img: &RgbImage) -> Result<()> {
-    let mut bytes = Vec::new();
-    img.write_to(
-        &mut std::io::Cursor::new(&mut bytes),
-        image::ImageFormat::Png,
-    )
-    .map_err(|e| anyhow!("{}: cannot encode PNG: {e}", path.display()))?;
-    crate::io::atomic::write(path, &bytes, crate::io::atomic::Overwrite::Replace)
-}
+pub use super::write_png;
 
 /// Axis range covering `values` (finite, and positive on a log axis), padded by 5% (a factor
 /// on a log axis). Errors name the axis when nothing can be drawn.
