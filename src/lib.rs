@@ -4,7 +4,8 @@
 //! 2013): a coarse quadratic B-spline hexahedral lattice simulates the soft interior, and a
 //! high-resolution thin shell (the skin) is tied to it only at low spatial frequency so that
 //! wrinkles form at the critical wavelength. Layers, bottom to top: [`math`], [`mesh`],
-//! [`solver`], [`io`], [`lattice`], [`fem`], [`shell`], [`rig`], [`cli`].
+//! [`solver`], [`io`], [`lattice`], [`fem`], [`shell`], [`coupling`], [`scene`],
+//! [`validate`], [`report`], [`pipeline`], [`rig`], [`cli`].
 
 pub mod cli;
 pub mod coupling;
@@ -14,6 +15,7 @@ pub mod lattice;
 pub mod math;
 pub mod mesh;
 pub mod pipeline;
+pub mod report;
 pub mod rig;
 pub mod scene;
 pub mod shell;

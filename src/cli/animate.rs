@@ -181,8 +181,11 @@ pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
     run.report.totals.export_ms = export_ms;
     run.report.totals.wall_s = t0.elapsed().as_secs_f64();
     if let Some(dir) = &a.preview {
-        let _ = dir;
-        // PREVIEW-PENDING
+        files.extend(crate::pipeline::preview::write_previews(
+            &run,
+            dir,
+            overwrite(a.force),
+        )?);
     }
     if let Some(r) = &a.report {
         let json = serde_json::to_vec_pretty(&run.report)?;

@@ -22,6 +22,7 @@
 
 pub mod chunk;
 pub mod frames;
+pub mod preview;
 pub mod record;
 pub mod weld;
 
