@@ -16,3 +16,4 @@ pub mod mesh;
 pub mod rig;
 pub mod shell;
 pub mod solver;
+pub mod validate;
