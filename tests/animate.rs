@@ -247,3 +247,156 @@ fn batch_reports_failures_goes_on_and_skips_finished_work() {
         .collect();
     assert!(leftovers.is_empty(), "temporary files left: {leftovers:?}");
 }
+
+#[test]
+fn masked_skin_simulates_only_the_mask_and_the_rest_keeps_the_blend_shapes() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_sheet(dir.path(), "sheet.glb");
+    let rig = load_bytes(
+        &path,
+        &std::fs::read(&path).unwrap(),
+        &LoadOptions::default(),
+    )
+    .unwrap();
+    let scene = Scene::parse(
+        "[skin]\nmask = [{ min = [-1.0, -1.0, -1.0], max = [0.045, 1.0, 1.0] }]\n",
+        "mask.toml",
+    )
+    .unwrap();
+    let opts = RunOptions {
+        scene,
+        scene_path: None,
+        fps: 30.0,
+        frames: None,
+    };
+    let out = pipeline::run(&rig, &opts, &|_, _, _| {}).unwrap();
+    let sizes = &out.report.sizes;
+    let sim = sizes["simulated_vertices"].as_u64().unwrap();
+    let all = sizes["skin_vertices"].as_u64().unwrap();
+    assert!(sim > 0 && sim < all * 6 / 10, "{sim} of {all} simulated");
+    let last = out.frames.len() - 1;
+    // Outside the mask: exactly the blend shapes.
+    for (p, q) in out.frames[last].iter().zip(&out.smooth[last]) {
+        if q.x > 0.06 {
+            assert_eq!(p, q);
+        }
+    }
+    assert!(detail_rms(&out, last, |x| (0.01..0.035).contains(&x)) > 1e-4);
+}
+
+#[test]
+fn a_rig_without_animation_is_solved_once_without_dynamics() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut json, bin) = common::tiny_rig();
+    json.as_object_mut().unwrap().remove("animations");
+    let p = dir.path().join("still.glb");
+    std::fs::write(&p, common::glb_bytes(&json, &bin)).unwrap();
+    let out = dir.path().join("still_out.glb");
+    let report = dir.path().join("r.json");
+    let o = furrow()
+        .args([
+            "animate",
+            p.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--report",
+        ])
+        .arg(&report)
+        .args(["--scene"])
+        .arg(write_scene(
+            dir.path(),
+            "big.toml",
+            "[skin]\nthickness = 0.1\n[interior]\ncell_size = 0.25\n",
+        ))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    assert_eq!(j["per_frame"].as_array().unwrap().len(), 1);
+    let interior = j["stages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|s| s["stage"] == "interior")
+        .unwrap();
+    assert!(
+        interior["why"].as_str().unwrap().contains("no dynamics"),
+        "{interior}"
+    );
+}
+
+fn write_scene(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+#[test]
+fn robot_expressive_head_is_animated_to_a_valid_file() {
+    let robot = common::shared_data("RobotExpressive.glb");
+    if !robot.exists() {
+        eprintln!("skipped: {} not found", robot.display());
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("robot.glb");
+    let report = dir.path().join("robot.json");
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/robot.toml");
+    let o = furrow()
+        .arg("animate")
+        .arg(&robot)
+        .args(["--scene"])
+        .arg(&scene)
+        .args(["--frames", ":12", "-o"])
+        .arg(&out)
+        .arg("--report")
+        .arg(&report)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    assert_eq!(j["face"], "Head_2");
+    assert_eq!(j["per_frame"].as_array().unwrap().len(), 12);
+    let refine = j["stages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|s| s["stage"] == "refine")
+        .unwrap();
+    assert_eq!(
+        refine["status"], "ran",
+        "the robot's coarse head needs refining: {refine}"
+    );
+    // The other 18 meshes, the skins and the 14 animations pass through.
+    let anim = furrow::io::load(&out, &Default::default()).unwrap();
+    assert_eq!(anim.instances.len(), 19);
+    assert!(anim.animations.len() >= 14);
+    assert_eq!(anim.face().targets.len(), 12);
+    if let Some(v) = common::validate(&[out]) {
+        common::assert_valid(&v);
+    }
+}
+
+#[test]
+fn a_too_coarse_skin_is_refused_with_the_numbers() {
+    let robot = common::shared_data("RobotExpressive.glb");
+    if !robot.exists() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("r.glb");
+    let o = furrow()
+        .arg("animate")
+        .arg(&robot)
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        e.contains("RobotExpressive.glb") && e.contains("too coarse") && e.contains("λ"),
+        "{e}"
+    );
+    assert!(!out.exists());
+}

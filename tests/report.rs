@@ -135,11 +135,20 @@ fn chart_errors_name_the_problem() {
     let chart = Chart {
         title: "empty".into(),
         log_y: true,
-        series: vec![Series::new("neg", vec![(1.0, -1.0), (2.0, 0.0)], Style::Line)],
+        series: vec![Series::new(
+            "neg",
+            vec![(1.0, -1.0), (2.0, 0.0)],
+            Style::Line,
+        )],
         ..Default::default()
     };
-    let e = line_chart(&dir.join("empty.png"), &chart).unwrap_err().to_string();
-    assert!(e.contains("no point to draw") && e.contains("logarithmic"), "{e}");
+    let e = line_chart(&dir.join("empty.png"), &chart)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("no point to draw") && e.contains("logarithmic"),
+        "{e}"
+    );
     assert!(!dir.join("empty.png").exists());
 }
 
@@ -148,7 +157,9 @@ fn wavelength_contours_measured_against_predicted() {
     let (dir, _keep) = out_dir();
     // x: E_x/E_q on a log axis, y: h (mm). Predicted on a fine grid, "measured" on the
     // validation grid with a 3% bias and one failed sample.
-    let fine_x: Vec<f64> = (0..=40).map(|k| 10f64.powf(2.0 + 2.0 * k as f64 / 40.0)).collect();
+    let fine_x: Vec<f64> = (0..=40)
+        .map(|k| 10f64.powf(2.0 + 2.0 * k as f64 / 40.0))
+        .collect();
     let fine_y: Vec<f64> = (0..=30).map(|k| 0.1 + 0.6 * k as f64 / 30.0).collect();
     let predicted = Grid::from_fn(fine_x, fine_y, |r, h| lambda_mm(h, r)).unwrap();
     let xs = vec![1e2, 3e2, 1e3, 3e3, 1e4];

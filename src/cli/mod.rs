@@ -6,6 +6,7 @@ mod demo;
 mod inspect;
 mod output;
 mod rig;
+mod scene;
 mod wavelength;
 
 use clap::{Parser, Subcommand};
@@ -71,6 +72,9 @@ pub enum Command {
         after_help = "Example:\n  furrow merge out/part0.glb out/part1.glb --rig rigs/face.glb -o out/face_wrinkled.glb"
     )]
     Merge(animate::MergeArgs),
+    /// Run a synthetic scene (slab, cushions, cubes) and write its frames and wavelengths.
+    #[command(after_help = "Example:\n  furrow scene examples/cushions.toml --out out/scenes")]
+    Scene(scene::SceneArgs),
     /// Benchmarks that print or write their measurements.
     #[command(
         subcommand,
@@ -102,6 +106,7 @@ pub fn main() -> i32 {
         Command::Animate(a) => animate::run(a, &out),
         Command::Batch(a) => animate::batch(a, &out),
         Command::Merge(a) => animate::merge(a, &out),
+        Command::Scene(a) => scene::run(a, &out),
     };
     match result {
         Ok(()) => 0,

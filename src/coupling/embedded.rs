@@ -103,7 +103,9 @@ impl EmbeddedShell {
                 bail!("embedding entry names skin vertex {v}, but the skin has {n} vertices");
             }
             if node >= nodes {
-                bail!("embedding entry names lattice node {node}, but the lattice has {nodes} nodes");
+                bail!(
+                    "embedding entry names lattice node {node}, but the lattice has {nodes} nodes"
+                );
             }
             if !w.is_finite() {
                 bail!("embedding weight of vertex {v} on node {node} is not finite ({w})");
@@ -140,7 +142,11 @@ impl EmbeddedShell {
         }
         let solver = StaticSolver::new(settings).map_err(|e| anyhow!("{e}"))?;
         let clusters = Clusters::build(&rest, sigma).map_err(|e| anyhow!("clusters: {e}"))?;
-        let x: Vec<f64> = rest.positions.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
+        let x: Vec<f64> = rest
+            .positions
+            .iter()
+            .flat_map(|p| [p.x, p.y, p.z])
+            .collect();
         let shell = Shell::new(rest, material)?;
         let mut entries = Vec::with_capacity(3 * clusters.entries.len());
         for &(c, v, w) in &clusters.entries {
@@ -219,7 +225,10 @@ impl EmbeddedShell {
         let mut p = vertices.to_vec();
         p.sort_unstable();
         p.dedup();
-        self.problem.pinned = p.iter().flat_map(|&v| [3 * v, 3 * v + 1, 3 * v + 2]).collect();
+        self.problem.pinned = p
+            .iter()
+            .flat_map(|&v| [3 * v, 3 * v + 1, 3 * v + 2])
+            .collect();
         self.pinned_vertices = p;
         Ok(())
     }
@@ -329,7 +338,14 @@ impl EmbeddedShell {
         let columns: Vec<Vec<(usize, usize, f64)>> = (0..self.nodes)
             .into_par_iter()
             .map_init(
-                || (vec![0.0; 3 * nv], vec![false; 3 * nv], vec![0.0; nd], vec![false; nd]),
+                || {
+                    (
+                        vec![0.0; 3 * nv],
+                        vec![false; 3 * nv],
+                        vec![0.0; nd],
+                        vec![false; nd],
+                    )
+                },
                 |(acc, seen, out, oseen), m| {
                     let mut col_trip = Vec::new();
                     for a in 0..3 {

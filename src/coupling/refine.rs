@@ -167,9 +167,8 @@ pub fn refine_for_wavelength(
         );
     }
     let mut cur = mesh.clone();
-    let mut origin: Vec<Vec<(usize, f64)>> = (0..mesh.positions.len())
-        .map(|v| vec![(v, 1.0)])
-        .collect();
+    let mut origin: Vec<Vec<(usize, f64)>> =
+        (0..mesh.positions.len()).map(|v| vec![(v, 1.0)]).collect();
     for _ in 0..need {
         let (next, parents) = subdivide(&cur);
         for [a, b] in parents {

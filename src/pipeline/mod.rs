@@ -24,6 +24,7 @@ pub mod chunk;
 pub mod frames;
 pub mod preview;
 pub mod record;
+pub mod synthetic;
 pub mod weld;
 
 use crate::coupling::embedded::EmbeddedShell;
@@ -143,7 +144,7 @@ pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<R
     .critical_wavelength();
     let sigma = lambda / std::f64::consts::PI;
     let face = rig.face();
-    if !scene.skin.meshes.is_empty() && !scene.skin.meshes.iter().any(|m| *m == face.name) {
+    if !scene.skin.meshes.is_empty() && !scene.skin.meshes.contains(&face.name) {
         bail!(
             "{}: the scene names skin meshes {:?} but the face furrow simulates is '{}' (pick it with --mesh)",
             rig.path.display(),

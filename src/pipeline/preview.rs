@@ -38,7 +38,11 @@ pub fn chosen_frames(out: &RunOutput) -> Vec<usize> {
 /// Write the previews into `dir`: `frame_NNNNN.png` (blend shapes | wrinkled | wrinkle depth)
 /// for [`chosen_frames`] and `contact_sheet.png`. Refuses to replace existing files unless
 /// `overwrite` says so. Returns the paths.
-pub fn write_previews(out: &RunOutput, dir: &Path, overwrite: Overwrite) -> anyhow::Result<Vec<PathBuf>> {
+pub fn write_previews(
+    out: &RunOutput,
+    dir: &Path,
+    overwrite: Overwrite,
+) -> anyhow::Result<Vec<PathBuf>> {
     let chosen = chosen_frames(out);
     let mut paths: Vec<PathBuf> = chosen
         .iter()
@@ -53,7 +57,8 @@ pub fn write_previews(out: &RunOutput, dir: &Path, overwrite: Overwrite) -> anyh
             );
         }
     }
-    let mesh_at = |pos: &Vec<nalgebra::Vector3<f64>>| TriMesh::new(pos.clone(), out.triangles.clone());
+    let mesh_at =
+        |pos: &Vec<nalgebra::Vector3<f64>>| TriMesh::new(pos.clone(), out.triangles.clone());
     let smooth: Vec<TriMesh> = chosen.iter().map(|&k| mesh_at(&out.smooth[k])).collect();
     let refs: Vec<&TriMesh> = smooth.iter().collect();
     let view = View {
@@ -86,7 +91,9 @@ pub fn write_previews(out: &RunOutput, dir: &Path, overwrite: Overwrite) -> anyh
     let tiles: Vec<usize> = if n <= CONTACT_TILES {
         (0..n).collect()
     } else {
-        (0..CONTACT_TILES).map(|i| i * (n - 1) / (CONTACT_TILES - 1)).collect()
+        (0..CONTACT_TILES)
+            .map(|i| i * (n - 1) / (CONTACT_TILES - 1))
+            .collect()
     };
     let images: Vec<_> = tiles
         .iter()

@@ -53,7 +53,10 @@ pub fn text_size(text: &str, height_px: f64) -> (u32, u32) {
     let font = (FAMILY, height_px).into_font();
     match font.box_size(text) {
         Ok((w, h)) => (w, h),
-        Err(_) => ((text.chars().count() as f64 * height_px * 0.6) as u32, height_px as u32),
+        Err(_) => (
+            (text.chars().count() as f64 * height_px * 0.6) as u32,
+            height_px as u32,
+        ),
     }
 }
 

@@ -50,9 +50,6 @@ pub struct SkinSection {
     pub poisson: Option<f64>,
     /// Uniform thickness h (m), overrides the preset.
     pub thickness: Option<f64>,
-    /// Thickness per region: axis-aligned boxes in the rig's world space (m); a vertex takes
-    /// the thickness of the first box that holds it, else the uniform one.
-    pub thickness_regions: Vec<ThicknessRegion>,
     /// Most subdivision levels the skin may be refined by to hold enough vertices per
     /// wavelength (default 2).
     pub refine_limit: Option<usize>,
@@ -80,18 +77,6 @@ impl Aabb {
     pub fn contains(&self, p: &nalgebra::Vector3<f64>) -> bool {
         (0..3).all(|k| p[k] >= self.min[k] && p[k] <= self.max[k])
     }
-}
-
-/// A region of its own skin thickness.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ThicknessRegion {
-    /// Lower corner (m).
-    pub min: [f64; 3],
-    /// Upper corner (m).
-    pub max: [f64; 3],
-    /// Thickness there (m).
-    pub thickness: f64,
 }
 
 /// `[interior]`: the lattice solid.
@@ -163,8 +148,6 @@ pub struct SolverSection {
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ExportSection {
-    /// Write per-frame normals (default true; viewers that recompute normals can do without).
-    pub normals: Option<bool>,
     /// `wrinkles_on_blend` (default: the blend-shape surface plus the skin's wrinkles, so the
     /// artist's shape is kept exactly) or `simulated` (the simulated skin itself).
     pub surface: Option<String>,
@@ -301,17 +284,6 @@ impl Scene {
     pub fn validate(&self) -> anyhow::Result<()> {
         self.materials()?;
         let s = &self.skin;
-        for (i, r) in s.thickness_regions.iter().enumerate() {
-            positive(
-                &format!("skin.thickness_regions[{i}].thickness"),
-                Some(r.thickness),
-            )?;
-            check_box(&format!("skin.thickness_regions[{i}]"), r.min, r.max)?;
-            let mut m = s.material()?;
-            m.thickness = r.thickness;
-            m.validate()
-                .map_err(|e| anyhow::anyhow!("`skin.thickness_regions[{i}]`: {e}"))?;
-        }
         for (i, b) in s.mask.iter().enumerate() {
             check_box(&format!("skin.mask[{i}]"), b.min, b.max)?;
         }

@@ -1,0 +1,351 @@
+//! Synthetic scenes (`furrow scene FILE`): slabs, cushions and cubes of interior material with
+//! a skin on their top face, under a prescribed compression or a weight, solved frame by frame
+//! with the two-step embedded-shell scheme.
+//!
+//! Geometry: each copy is a box [0, L] × [0, W] × [0, D] (the scene's `size`, z up inside this
+//! module; exported with y up), a regular block lattice of cubic cells (`interior.cell_size`,
+//! default D/2), and a flat sheet of equilateral triangles of edge `geometry.skin_edge` on the
+//! top face, embedded in the lattice. The two bottom node layers are glued to the ground.
+//! Loads ramp linearly over `load.frames` frames:
+//! - `compression` ε: the lattice is compressed affinely along x about its centre and the two
+//!   node layers at each x end are held there (the paper's validation slab);
+//! - `weight` m (kg): the force m g pushes down on the skin vertices of the middle third of
+//!   the top face (through Bᵀ), spread evenly.
+//!
+//! Copies sit side by side along x (1.5 L apart) and may each have their own skin
+//! (`geometry.skins`): the same foam with different covers, or the same interior with
+//! different skins. For each copy the report gives the predicted λ and the wavelength measured
+//! on the last frame along the middle row (height above the embedded surface).
+
+use crate::coupling::embedded::{two_step_with, EmbeddedShell, InteriorMode};
+use crate::coupling::wavelength::Bilayer;
+use crate::fem::{BackwardEuler, Interior, LinearSolver, StepSettings, GRAVITY};
+use crate::lattice::{shape, ElementOrder};
+use crate::mesh::TriMesh;
+use crate::scene::{Scene, SkinSection};
+use crate::shell::sheet::equilateral_sheet;
+use crate::solver::{HessianMode, StaticSettings};
+use crate::validate::measure;
+use crate::validate::slab::{block_lattice, locate_in_block};
+use anyhow::{bail, Context};
+use nalgebra::Vector3;
+use serde::Serialize;
+use std::time::Instant;
+
+/// What one copy did.
+#[derive(Debug, Clone, Serialize)]
+pub struct CopyReport {
+    /// Copy index.
+    pub copy: usize,
+    /// Skin used (SI).
+    pub skin: crate::shell::ShellMaterial,
+    /// Predicted critical wavelength (m).
+    pub predicted_wavelength_m: f64,
+    /// Wavelength measured on the last frame (m), when wrinkles formed.
+    pub measured_wavelength_m: Option<f64>,
+    /// Wrinkle amplitude on the last frame (m).
+    pub amplitude_m: Option<f64>,
+    /// Sag of the top centre below its rest height on the last frame (m).
+    pub sag_m: f64,
+    /// Frames whose shell statics did not converge.
+    pub frames_not_converged: usize,
+    /// Skin vertices, lattice nodes, clusters.
+    pub skin_vertices: usize,
+    /// Lattice nodes.
+    pub lattice_nodes: usize,
+    /// Wall time (s).
+    pub seconds: f64,
+}
+
+/// The result of a synthetic scene: one mesh of all copies, its frames, and the report.
+#[derive(Debug, Clone)]
+pub struct SceneOutput {
+    /// All copies' skins in one mesh (exported frame (y up), m).
+    pub mesh: TriMesh,
+    /// Positions per frame (y up, m).
+    pub frames: Vec<Vec<Vector3<f64>>>,
+    /// One report per copy.
+    pub copies: Vec<CopyReport>,
+}
+
+/// z-up (simulation) to y-up (glTF).
+fn to_y_up(p: &Vector3<f64>) -> Vector3<f64> {
+    Vector3::new(p.x, p.z, -p.y)
+}
+
+/// Run a synthetic scene, calling `progress(done, total)` per frame.
+pub fn run_scene(scene: &Scene, progress: &dyn Fn(usize, usize)) -> anyhow::Result<SceneOutput> {
+    scene.validate()?;
+    let g = scene
+        .geometry
+        .as_ref()
+        .context("the scene has no [geometry]: give a rig with `furrow animate` instead")?;
+    let load = scene.load.as_ref().context("the scene has no [load]")?;
+    if load.compression.is_none() && load.weight.is_none() {
+        bail!("`[load]` needs `compression` or `weight`");
+    }
+    let copies = g.copies.unwrap_or(g.skins.len().max(1));
+    let skins: Vec<SkinSection> = (0..copies)
+        .map(|c| {
+            g.skins
+                .get(c)
+                .cloned()
+                .unwrap_or_else(|| scene.skin.clone())
+        })
+        .collect();
+    let mut mesh = TriMesh::new(Vec::new(), Vec::new());
+    let mut per_copy_frames: Vec<Vec<Vec<Vector3<f64>>>> = Vec::new();
+    let mut reports = Vec::new();
+    let total = copies * load.frames;
+    for (c, skin_section) in skins.iter().enumerate() {
+        let offset = Vector3::new(1.5 * g.size[0] * c as f64, 0.0, 0.0);
+        let (m, frames, rep) = run_copy(scene, skin_section, c, &|k| {
+            progress(c * load.frames + k, total)
+        })?;
+        let base = mesh.positions.len();
+        mesh.positions
+            .extend(m.positions.iter().map(|p| to_y_up(&(p + offset))));
+        mesh.triangles
+            .extend(m.triangles.iter().map(|t| t.map(|v| v + base)));
+        per_copy_frames.push(
+            frames
+                .into_iter()
+                .map(|f| f.iter().map(|p| to_y_up(&(p + offset))).collect())
+                .collect(),
+        );
+        reports.push(rep);
+    }
+    progress(total, total);
+    let frames = (0..load.frames)
+        .map(|k| per_copy_frames.iter().flat_map(|f| f[k].clone()).collect())
+        .collect();
+    Ok(SceneOutput {
+        mesh,
+        frames,
+        copies: reports,
+    })
+}
+
+type CopyResult = (TriMesh, Vec<Vec<Vector3<f64>>>, CopyReport);
+
+fn run_copy(
+    scene: &Scene,
+    skin_section: &SkinSection,
+    copy: usize,
+    progress: &dyn Fn(usize),
+) -> anyhow::Result<CopyResult> {
+    let t0 = Instant::now();
+    let g = scene.geometry.as_ref().expect("checked");
+    let load = scene.load.as_ref().expect("checked");
+    let skin_mat = skin_section
+        .material()
+        .with_context(|| format!("copy {copy}: skin"))?;
+    let int_mat = scene.interior.material()?;
+    let lambda = Bilayer {
+        thickness: skin_mat.thickness,
+        skin_modulus: skin_mat.young,
+        skin_poisson: skin_mat.poisson,
+        interior_modulus: int_mat.young,
+        interior_poisson: int_mat.poisson,
+    }
+    .critical_wavelength();
+    let [l, w, d] = g.size;
+    let edge = g.skin_edge;
+    if lambda < 3.0 * edge {
+        bail!(
+            "copy {copy}: λ = {:.2} mm holds fewer than 3 skin edges of {:.2} mm: wrinkles cannot \
+             form; make `geometry.skin_edge` at most {:.2} mm",
+            lambda * 1e3,
+            edge * 1e3,
+            lambda / 6.0 * 1e3
+        );
+    }
+    let cell = scene.interior.cell_size.unwrap_or(d / 2.0);
+    let dims = [
+        (l / cell).round().max(1.0) as usize,
+        (w / cell).round().max(1.0) as usize,
+        (d / cell).round().max(1.0) as usize,
+    ];
+    let order = match scene.interior.elements.as_deref() {
+        Some("trilinear") => ElementOrder::Trilinear,
+        _ => ElementOrder::Quadratic,
+    };
+    let cells = dims[0] * dims[1] * dims[2];
+    if cells > 20_000 {
+        bail!("the lattice would have {cells} cells; increase `interior.cell_size`");
+    }
+    let lattice = block_lattice(Vector3::zeros(), cell, dims, order);
+    let (lx, ly, lz) = (
+        dims[0] as f64 * cell,
+        dims[1] as f64 * cell,
+        dims[2] as f64 * cell,
+    );
+    let nx = (lx / edge).round().max(2.0) as usize;
+    let ny = (ly / (edge * 3f64.sqrt() / 2.0)).round().max(2.0) as usize;
+    let sheet = equilateral_sheet(nx, ny, lx / nx as f64);
+    let sy = ly / (ny as f64 * sheet.edge * 3f64.sqrt() / 2.0);
+    let mut skin_mesh = sheet.mesh.clone();
+    for p in &mut skin_mesh.positions {
+        *p = Vector3::new(p.x, p.y * sy, lz);
+    }
+    let mut embedding = Vec::new();
+    for (v, p) in skin_mesh.positions.iter().enumerate() {
+        let mp = locate_in_block(&lattice, p);
+        let sh = shape(lattice.order, mp.xi);
+        for a in 0..sh.n {
+            if sh.val[a] != 0.0 {
+                embedding.push((v, lattice.elements[mp.element].nodes[a], sh.val[a]));
+            }
+        }
+    }
+    let mut skin = EmbeddedShell::new(
+        skin_mesh.clone(),
+        skin_mat,
+        embedding.clone(),
+        lattice.node_count(),
+        lambda / std::f64::consts::PI,
+        StaticSettings {
+            tolerance: scene.solver.shell_tolerance.unwrap_or(1e-6)
+                * skin_mat.stretch_stiffness()
+                * edge,
+            max_iterations: scene.solver.shell_iterations.unwrap_or(100),
+            hessian: HessianMode::Auto,
+            energy_merit: true,
+            ..Default::default()
+        },
+    )
+    .with_context(|| format!("copy {copy}: building the skin"))?;
+    let interior = Interior::new(&lattice, &int_mat)?;
+    let k = order.per_axis();
+    let nn = [dims[0] + k - 1, dims[1] + k - 1, dims[2] + k - 1];
+    let layers = k - 1;
+    let compression = load.compression.unwrap_or(0.0);
+    let pinned: Vec<bool> = lattice
+        .grid
+        .iter()
+        .map(|gp| {
+            gp[2] < layers || (compression > 0.0 && (gp[0] < layers || gp[0] >= nn[0] - layers))
+        })
+        .collect();
+    let dynamics = scene.dynamics.enabled.unwrap_or(false);
+    let gravity = if scene.dynamics.gravity.unwrap_or(false) {
+        [0.0, 0.0, -GRAVITY]
+    } else {
+        [0.0; 3]
+    };
+    let rest = lattice.rest_flat();
+    let mut be = BackwardEuler::new(
+        interior,
+        rest.clone(),
+        pinned.clone(),
+        StepSettings {
+            dt: scene.dynamics.dt.unwrap_or(0.02),
+            max_newton: scene.solver.interior_iterations.unwrap_or(20),
+            gravity,
+            linear_solver: LinearSolver::Auto,
+            ..Default::default()
+        },
+    )?;
+    // Weight: spread over the skin vertices of the middle third of the top face.
+    let loaded: Vec<usize> = skin_mesh
+        .positions
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| (p.x - lx / 2.0).abs() <= lx / 6.0 && (p.y - ly / 2.0).abs() <= ly / 6.0)
+        .map(|(v, _)| v)
+        .collect();
+    if load.weight.is_some() && loaded.is_empty() {
+        bail!("copy {copy}: no skin vertex under the weight; refine `geometry.skin_edge`");
+    }
+    let mut rows: Vec<Vec<(usize, f64)>> = vec![Vec::new(); skin_mesh.positions.len()];
+    for &(v, n, wgt) in &embedding {
+        rows[v].push((n, wgt));
+    }
+    let xc = lx / 2.0;
+    let mode = if dynamics {
+        InteriorMode::Dynamic
+    } else {
+        InteriorMode::QuasiStatic
+    };
+    let mut frames = Vec::with_capacity(load.frames);
+    let mut not_converged = 0;
+    for f in 0..load.frames {
+        progress(f);
+        let s = (f + 1) as f64 / load.frames as f64;
+        if compression > 0.0 {
+            let factor = 1.0 - compression * s;
+            for (n, &p) in pinned.iter().enumerate() {
+                if p {
+                    be.q[3 * n] = xc + factor * (rest[3 * n] - xc);
+                }
+            }
+        }
+        let mut f_ext = vec![0.0; be.q.len()];
+        if let Some(m) = load.weight {
+            let per = m * GRAVITY * s / loaded.len() as f64;
+            for &v in &loaded {
+                for &(n, wgt) in &rows[v] {
+                    f_ext[3 * n + 2] -= per * wgt;
+                }
+            }
+        }
+        if f == 0 && compression > 0.0 {
+            // Free nodes start on the affinely compressed state (a good first guess).
+            let factor = 1.0 - compression * s;
+            for (n, &p) in pinned.iter().enumerate() {
+                if !p {
+                    be.q[3 * n] = xc + factor * (rest[3 * n] - xc);
+                }
+            }
+        }
+        let rep = two_step_with(&mut be, &mut skin, &f_ext, mode)?;
+        // The interior moved after the shell solve: re-solve the skin on the final state.
+        let last = skin.solve(&be.q)?;
+        if rep.shell.status != crate::solver::SolveStatus::Converged
+            || last.status != crate::solver::SolveStatus::Converged
+        {
+            not_converged += 1;
+        }
+        let x = skin.x();
+        if x.iter().any(|v| !v.is_finite()) {
+            bail!("copy {copy}, frame {f}: the skin became non-finite");
+        }
+        frames.push(
+            (0..skin_mesh.positions.len())
+                .map(|v| Vector3::new(x[3 * v], x[3 * v + 1], x[3 * v + 2]))
+                .collect::<Vec<_>>(),
+        );
+    }
+    // Measure on the last frame along the middle row.
+    let last = frames.last().expect("at least one frame");
+    let bq = skin.embedded_positions(&be.q);
+    let row = &sheet.rows[ny / 2];
+    let profile: Vec<(f64, f64)> = row
+        .iter()
+        .map(|&v| (last[v].x, last[v].z - bq[v].z))
+        .collect();
+    let measured = measure::wavelength(&profile);
+    let centre = skin_mesh
+        .positions
+        .iter()
+        .enumerate()
+        .min_by(|a, b| {
+            let da = (a.1.x - lx / 2.0).powi(2) + (a.1.y - ly / 2.0).powi(2);
+            let db = (b.1.x - lx / 2.0).powi(2) + (b.1.y - ly / 2.0).powi(2);
+            da.total_cmp(&db)
+        })
+        .map_or(0, |(v, _)| v);
+    let report = CopyReport {
+        copy,
+        skin: skin_mat,
+        predicted_wavelength_m: lambda,
+        measured_wavelength_m: measured.as_ref().map(|m| m.wavelength),
+        amplitude_m: measured.as_ref().map(|m| m.amplitude),
+        sag_m: lz - last[centre].z,
+        frames_not_converged: not_converged,
+        skin_vertices: skin_mesh.positions.len(),
+        lattice_nodes: lattice.node_count(),
+        seconds: t0.elapsed().as_secs_f64(),
+    };
+    Ok((skin_mesh, frames, report))
+}
