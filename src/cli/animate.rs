@@ -44,6 +44,9 @@ pub struct AnimateArgs {
     /// Replace existing output files.
     #[arg(long)]
     pub force: bool,
+    /// With --frames, do not write the chunk file (`furrow merge` needs it).
+    #[arg(long)]
+    pub no_chunk: bool,
 }
 
 /// The chunk file written next to an output limited to `--frames`.
@@ -102,7 +105,8 @@ pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
     }
     let chunk_file = chunk_path(&a.output);
     let mut outputs: Vec<&Path> = vec![&a.output];
-    if a.frames.is_some() {
+    let write_chunk = a.frames.is_some() && !a.no_chunk;
+    if write_chunk {
         outputs.push(&chunk_file);
     }
     if let Some(r) = &a.report {
@@ -151,7 +155,7 @@ pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
     let t = Instant::now();
     export::write_animated(&rig, &set, &a.output, overwrite(a.force))?;
     files.push(a.output.clone());
-    if let Some(range) = frames {
+    if let Some(range) = frames.filter(|_| write_chunk) {
         let header = ChunkHeader {
             rig_hash: chunk::fnv64(&bytes),
             settings_hash: settings_hash(&scene, a.fps, &a.mesh),
@@ -290,6 +294,7 @@ pub fn batch(a: BatchArgs, out: &Output) -> anyhow::Result<()> {
             mesh: None,
             // An output without its report is an unfinished earlier attempt: redo it.
             force: true,
+            no_chunk: false,
         };
         match animate_one(&args, out) {
             Ok(done) => {

@@ -48,6 +48,12 @@ use std::time::Instant;
 /// offers, so the lattice follows the artist's shape to about 10 % of its own error.
 pub const TRACKING_STIFFNESS: f64 = 10.0;
 
+/// Interior Newton tolerance: ‖∇Φ‖ relative to the larger of the initial gradient and the
+/// applied force (the tracking and skin forces). 1e-4 leaves position errors far below the
+/// lattice's own discretisation error; the linearised corotational Hessian converges only
+/// linearly, so tighter tolerances cost many iterations for no visible change.
+pub const INTERIOR_TOLERANCE: f64 = 1e-4;
+
 /// Quality (2 r_in / r_circ) below which a skin triangle is left out of the shell (it still
 /// follows the interior): such triangles have no usable rest shape.
 pub const DEGENERATE_QUALITY: f64 = 1e-3;
@@ -307,8 +313,12 @@ pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<R
             };
             interior_rec.iterations += rep.iterations;
             interior_rec.residual = rep.residual;
-            if rep.status != crate::fem::SolveStatus::Converged {
-                interior_rec.status = format!("{:?}", rep.status).to_lowercase();
+            match rep.status {
+                crate::fem::SolveStatus::Converged => {}
+                crate::fem::SolveStatus::IterationLimit => {
+                    interior_rec.status = "iteration_limit".into()
+                }
+                crate::fem::SolveStatus::Stalled => interior_rec.status = "stalled".into(),
             }
         }
         if setup.stepper.q.iter().any(|v| !v.is_finite()) {
@@ -698,7 +708,6 @@ fn build(
             max_iterations: scene.solver.shell_iterations.unwrap_or(60),
             hessian: HessianMode::Auto,
             energy_merit: true,
-            reuse_factorization: true,
             ..StaticSettings::default()
         };
         let skin = EmbeddedShell::new(
@@ -739,8 +748,8 @@ fn build(
         lattice.pinned.clone(),
         StepSettings {
             dt: scene.dynamics.dt.unwrap_or(0.02),
-            max_newton: scene.solver.interior_iterations.unwrap_or(3),
-            tolerance: 1e-6,
+            max_newton: scene.solver.interior_iterations.unwrap_or(4),
+            tolerance: INTERIOR_TOLERANCE,
             lumped_mass: false,
             gravity,
             linear_solver: LinearSolver::Auto,

@@ -99,17 +99,7 @@ pub struct StaticSettings {
     /// rule alone (`false`); thin shells moving out of plane need `true` (see
     /// [`super::linesearch`]).
     pub energy_merit: bool,
-    /// Chord (modified) Newton: keep using the last factorisation, across iterations and
-    /// across solves of the same structure, while each step still shrinks the residual to at
-    /// most [`CHORD_CONTRACTION`] of its value at a full step; refactor as soon as it does
-    /// not. Near a warm start the Hessian changes little and one factorisation (the dominant
-    /// cost of a skin solve) serves many cheap steps.
-    pub reuse_factorization: bool,
 }
-
-/// Largest residual ratio ‖r⁺‖/‖r‖ at which a chord step counts as good enough to keep the
-/// factorisation.
-pub const CHORD_CONTRACTION: f64 = 0.5;
 
 impl Default for StaticSettings {
     fn default() -> Self {
@@ -121,7 +111,6 @@ impl Default for StaticSettings {
             refinement_steps: 3,
             max_line_search: 30,
             energy_merit: false,
-            reuse_factorization: false,
         }
     }
 }
@@ -181,8 +170,6 @@ pub struct StaticSolver {
     multipliers: Vec<f64>,
     trip: Vec<(usize, usize, f64)>,
     last_shift: f64,
-    /// The factor in `kkt` may serve a chord step: (free dofs, constraint rows) it was made for.
-    chord: Option<(usize, usize)>,
     /// Final state of the previous solve and its pinned dofs (for the pinned-motion predictor).
     last_x: Vec<f64>,
     last_pinned: Vec<usize>,
@@ -486,7 +473,6 @@ impl StaticSolver {
             constraint_violation: 0.0,
             energy: f64::NAN,
             modified_hessian_steps: 0,
-            chord_steps: 0,
             factorizations: 0,
             assembly_s: 0.0,
             symbolic_s: 0.0,
@@ -538,11 +524,6 @@ impl StaticSolver {
                 rep.status = SolveStatus::IterationLimit;
                 break;
             }
-            let chord_step =
-                st.reuse_factorization && self.chord == Some((nf, nc)) && self.kkt.is_factored();
-            if !chord_step {
-                self.chord = None;
-            }
             // Newton direction with the inertia-controlled Hessian choice.
             // Attempts (project, shift/γ): exact Hessian; if it is not positive definite on
             // the constraint null space, the exact Hessian shifted by τ I (τ grown ×30 from a
@@ -572,12 +553,8 @@ impl StaticSolver {
                     modes.push((true, 1.0));
                 }
             }
-            let mut used = chord_step;
+            let mut used = false;
             let mut assembled: Option<bool> = None;
-            if chord_step {
-                modes.clear();
-                rep.chord_steps += 1;
-            }
             for (k, &(project, shift)) in modes.iter().enumerate() {
                 let shift: f64 = shift;
                 if have_hessian != Some(project) || assembled != Some(project) {
@@ -691,35 +668,17 @@ impl StaticSolver {
                         best = Some((rt, et));
                         Trial { residual: n, merit }
                     },
-                    if chord_step { 1 } else { st.max_line_search },
+                    st.max_line_search,
                 )
             };
             rep.line_search_s += t.elapsed().as_secs_f64();
             match ls {
-                LineSearch::Accepted { residual, .. }
-                    if chord_step && residual > CHORD_CONTRACTION * rn =>
-                {
-                    // A chord step that does not contract well: refactor instead.
-                    trial(0.0, x, &mut mu);
-                    self.chord = None;
-                    rep.iterations -= 1;
-                }
                 LineSearch::Accepted { step: a, residual } => {
                     trial(a, x, &mut mu);
                     let (rt, et) = best.expect("evaluated");
                     r = rt;
-                    // Keep the factor only while full steps contract the residual well.
-                    self.chord =
-                        (st.reuse_factorization && a == 1.0 && residual <= CHORD_CONTRACTION * rn)
-                            .then_some((nf, nc));
                     energy = et;
                     rn = residual;
-                }
-                LineSearch::Failed if chord_step => {
-                    // The old factor no longer gives a usable direction: refactor.
-                    trial(0.0, x, &mut mu);
-                    self.chord = None;
-                    rep.iterations -= 1;
                 }
                 LineSearch::Failed => {
                     rep.status = SolveStatus::LineSearchFailed;

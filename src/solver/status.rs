@@ -44,9 +44,6 @@ pub struct SolveReport {
     /// Iterations whose step used a projected or shifted Hessian because the exact one was
     /// not positive definite on the constraint null space.
     pub modified_hessian_steps: usize,
-    /// Iterations that reused an earlier factorisation (chord Newton steps).
-    #[serde(default)]
-    pub chord_steps: usize,
     /// Numeric factorisations done (more than `iterations` when inertia correction retried).
     pub factorizations: usize,
     /// Seconds evaluating Hessians and assembling the KKT matrix.
