@@ -54,7 +54,11 @@ pub fn normalise(value: f64, range: (f64, f64)) -> f64 {
 /// the finite values (so a few spikes do not wash out the rest), or `fallback` when that is
 /// zero or there is no finite value.
 pub fn symmetric_range(values: &[f64], fallback: f64) -> (f64, f64) {
-    let mut a: Vec<f64> = values.iter().filter(|v| v.is_finite()).map(|v| v.abs()).collect();
+    let mut a: Vec<f64> = values
+        .iter()
+        .filter(|v| v.is_finite())
+        .map(|v| v.abs())
+        .collect();
     if a.is_empty() {
         return (-fallback, fallback);
     }

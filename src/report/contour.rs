@@ -36,7 +36,9 @@ impl Grid {
         }
         for (name, axis) in [("x", &xs), ("y", &ys)] {
             if axis.iter().any(|v| !v.is_finite()) || axis.windows(2).any(|w| w[1] <= w[0]) {
-                anyhow::bail!("contour grid: the {name} samples must be finite and strictly increasing");
+                anyhow::bail!(
+                    "contour grid: the {name} samples must be finite and strictly increasing"
+                );
             }
         }
         Ok(Self { xs, ys, values })
@@ -215,11 +217,19 @@ mod tests {
         let (ylo, yhi) = (ya.min(yb), ya.max(yb));
         if ylo < y0 {
             let x = xs_at(y0);
-            if ya < yb { lo = lo.max(x) } else { hi = hi.min(x) }
+            if ya < yb {
+                lo = lo.max(x)
+            } else {
+                hi = hi.min(x)
+            }
         }
         if yhi > y1 {
             let x = xs_at(y1);
-            if ya < yb { hi = hi.min(x) } else { lo = lo.max(x) }
+            if ya < yb {
+                hi = hi.min(x)
+            } else {
+                lo = lo.max(x)
+            }
         }
         if hi <= lo {
             return 0.0;
@@ -243,13 +253,19 @@ mod tests {
             let mut total = 0.0;
             for s in &segs {
                 for &(x, y) in s {
-                    assert!((a * x + b * y - level).abs() < 1e-12, "off the line: {x} {y}");
+                    assert!(
+                        (a * x + b * y - level).abs() < 1e-12,
+                        "off the line: {x} {y}"
+                    );
                     assert!((0.0..=3.0).contains(&x) && (-1.0..=2.0).contains(&y));
                 }
                 total += (s[1].0 - s[0].0).hypot(s[1].1 - s[0].1);
             }
             let want = clipped_length(a, b, level, 0.0, 3.0, -1.0, 2.0);
-            assert!((total - want).abs() < 1e-9, "level {level}: {total} vs {want}");
+            assert!(
+                (total - want).abs() < 1e-9,
+                "level {level}: {total} vs {want}"
+            );
         }
         // One open polyline from boundary to boundary.
         let lines = polylines(&contour_segments(&g, 0.55, false, false));
@@ -296,7 +312,10 @@ mod tests {
         v[8] = f64::NAN;
         let part = marching_squares(3, 3, &v, 0.5).len();
         assert_eq!(full, 2);
-        assert_eq!(part, 2, "the NaN is in the cell that the 0.5 line does not cross");
+        assert_eq!(
+            part, 2,
+            "the NaN is in the cell that the 0.5 line does not cross"
+        );
         assert!(Grid::new(vec![0.0, 1.0], vec![0.0, 1.0], vec![0.0; 3]).is_err());
         assert!(Grid::new(vec![1.0, 0.0], vec![0.0, 1.0], vec![0.0; 4]).is_err());
     }

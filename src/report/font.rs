@@ -53,7 +53,10 @@ pub fn text_size(text: &str, height_px: f64) -> (u32, u32) {
     let font = (FAMILY, height_px).into_font();
     match font.box_size(text) {
         Ok((w, h)) => (w, h),
-        Err(_) => ((text.chars().count() as f64 * height_px * 0.6) as u32, height_px as u32),
+        Err(_) => (
+            (text.chars().count() as f64 * height_px * 0.6) as u32,
+            height_px as u32,
+        ),
     }
 }
 
@@ -69,6 +72,6 @@ mod tests {
         // Nine glyphs of ~20 px: dozens to hundreds of dark pixels, never none nor all.
         assert!(dark > 50 && dark < 120 * 40 / 2, "dark pixels {dark}");
         let (tw, th) = text_size("λ = 4.04 mm", 20.0);
-        assert!(tw > 60 && tw < 160 && th >= 10 && th <= 30, "{tw}×{th}");
+        assert!(tw > 60 && tw < 160 && (10..=30).contains(&th), "{tw}×{th}");
     }
 }

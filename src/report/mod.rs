@@ -19,7 +19,10 @@ use std::path::Path;
 /// rename; see [`crate::io::atomic`]), replacing an existing file. Parent folders are created.
 pub fn write_png(path: &Path, img: &RgbImage) -> Result<()> {
     let mut bytes = Vec::new();
-    img.write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Png)
-        .map_err(|e| anyhow!("{}: cannot encode PNG: {e}", path.display()))?;
+    img.write_to(
+        &mut std::io::Cursor::new(&mut bytes),
+        image::ImageFormat::Png,
+    )
+    .map_err(|e| anyhow!("{}: cannot encode PNG: {e}", path.display()))?;
     crate::io::atomic::write(path, &bytes, crate::io::atomic::Overwrite::Replace)
 }

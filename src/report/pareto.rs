@@ -32,7 +32,10 @@ pub fn pareto_front(points: &[(f64, f64)]) -> Vec<usize> {
 
 /// The front's points themselves, in the order of [`pareto_front`].
 pub fn pareto_points(points: &[(f64, f64)]) -> Vec<(f64, f64)> {
-    pareto_front(points).into_iter().map(|i| points[i]).collect()
+    pareto_front(points)
+        .into_iter()
+        .map(|i| points[i])
+        .collect()
 }
 
 #[cfg(test)]
@@ -54,13 +57,13 @@ mod tests {
     fn known_front() {
         // (time s, error mm)
         let p = [
-            (1.0, 10.0), // 0: fastest, worst: on the front
-            (2.0, 5.0),  // 1: on the front
-            (2.5, 6.0),  // 2: dominated by 1
-            (4.0, 1.0),  // 3: on the front
-            (3.0, 5.0),  // 4: dominated by 1 (same error, slower)
-            (8.0, 0.5),  // 5: on the front
-            (9.0, 0.5),  // 6: dominated by 5
+            (1.0, 10.0),     // 0: fastest, worst: on the front
+            (2.0, 5.0),      // 1: on the front
+            (2.5, 6.0),      // 2: dominated by 1
+            (4.0, 1.0),      // 3: on the front
+            (3.0, 5.0),      // 4: dominated by 1 (same error, slower)
+            (8.0, 0.5),      // 5: on the front
+            (9.0, 0.5),      // 6: dominated by 5
             (f64::NAN, 0.1), // 7: not a measurement
         ];
         assert_eq!(pareto_front(&p), vec![0, 1, 3, 5]);
@@ -72,7 +75,9 @@ mod tests {
         // A deterministic pseudo-random cloud with ties: the sweep agrees with brute force.
         let mut s = 12345u64;
         let mut next = || {
-            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             ((s >> 33) % 20) as f64
         };
         let p: Vec<(f64, f64)> = (0..200).map(|_| (next(), next())).collect();

@@ -132,7 +132,12 @@ pub use super::write_png;
 
 /// Axis range covering `values` (finite, and positive on a log axis), padded by 5% (a factor
 /// on a log axis). Errors name the axis when nothing can be drawn.
-fn axis_range(values: impl Iterator<Item = f64>, log: bool, pad: bool, axis: &str) -> Result<(f64, f64)> {
+fn axis_range(
+    values: impl Iterator<Item = f64>,
+    log: bool,
+    pad: bool,
+    axis: &str,
+) -> Result<(f64, f64)> {
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     for v in values.filter(|v| v.is_finite() && (!log || *v > 0.0)) {
         lo = lo.min(v);
@@ -451,7 +456,12 @@ impl Body for ContourBody<'_> {
             let color = RGBColor(c[0], c[1], c[2]);
             let style = color.stroke_width(2);
             for (li, &level) in chart.levels.iter().enumerate() {
-                let lines = polylines(&contour_segments(&set.grid, level, chart.log_x, chart.log_y));
+                let lines = polylines(&contour_segments(
+                    &set.grid,
+                    level,
+                    chart.log_x,
+                    chart.log_y,
+                ));
                 for line in &lines {
                     if set.dashed {
                         ctx.draw_series(DashedLineSeries::new(line.iter().copied(), 10, 6, style))
@@ -489,8 +499,12 @@ impl Body for ContourBody<'_> {
                     .map(|(i, j)| (g.xs[i], g.ys[j]))
                     .filter(|&p| drawable(p, chart.log_x, chart.log_y))
                     .collect();
-                ctx.draw_series(nodes.into_iter().map(|p| Cross::new(p, 4, color.stroke_width(1))))
-                    .map_err(err)?;
+                ctx.draw_series(
+                    nodes
+                        .into_iter()
+                        .map(|p| Cross::new(p, 4, color.stroke_width(1))),
+                )
+                .map_err(err)?;
             }
             // Legend entry (an empty series carries it).
             let dashed = set.dashed;
@@ -498,7 +512,11 @@ impl Body for ContourBody<'_> {
                 .map_err(err)?
                 .label(set.name.clone())
                 .legend(move |(x, y)| {
-                    let gap = if dashed { TRANSPARENT.stroke_width(2) } else { style };
+                    let gap = if dashed {
+                        TRANSPARENT.stroke_width(2)
+                    } else {
+                        style
+                    };
                     EmptyElement::at((x, y))
                         + PathElement::new(vec![(0, 0), (9, 0)], style)
                         + PathElement::new(vec![(9, 0), (15, 0)], gap)
@@ -527,10 +545,22 @@ pub fn render_contour_chart(chart: &ContourChart, size: (u32, u32)) -> Result<Rg
     if chart.sets.is_empty() {
         anyhow::bail!("{}: a contour chart needs at least one field", chart.title);
     }
-    let xs = || chart.sets.iter().flat_map(|s| [s.grid.xs[0], *s.grid.xs.last().unwrap()]);
-    let ys = || chart.sets.iter().flat_map(|s| [s.grid.ys[0], *s.grid.ys.last().unwrap()]);
-    let x = axis_range(xs(), chart.log_x, false, "x").map_err(|e| anyhow!("{}: {e}", chart.title))?;
-    let y = axis_range(ys(), chart.log_y, false, "y").map_err(|e| anyhow!("{}: {e}", chart.title))?;
+    let xs = || {
+        chart
+            .sets
+            .iter()
+            .flat_map(|s| [s.grid.xs[0], *s.grid.xs.last().unwrap()])
+    };
+    let ys = || {
+        chart
+            .sets
+            .iter()
+            .flat_map(|s| [s.grid.ys[0], *s.grid.ys.last().unwrap()])
+    };
+    let x =
+        axis_range(xs(), chart.log_x, false, "x").map_err(|e| anyhow!("{}: {e}", chart.title))?;
+    let y =
+        axis_range(ys(), chart.log_y, false, "y").map_err(|e| anyhow!("{}: {e}", chart.title))?;
     let frame = Frame {
         title: &chart.title,
         x_label: &chart.x_label,

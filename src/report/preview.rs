@@ -238,9 +238,14 @@ fn render_with(
                         let w = frags.bary[k];
                         let [a, b, c] = mesh.triangles[t];
                         let (side, face_n) = faces[t];
-                        let mut n = (normals[a] * w[0] + normals[b] * w[1] + normals[c] * w[2]) * side;
+                        let mut n =
+                            (normals[a] * w[0] + normals[b] * w[1] + normals[c] * w[2]) * side;
                         let l = n.norm();
-                        n = if l > 1e-12 && l.is_finite() { n / l } else { face_n * side };
+                        n = if l > 1e-12 && l.is_finite() {
+                            n / l
+                        } else {
+                            face_n * side
+                        };
                         let shade = ambient + (1.0 - ambient) * n.dot(&light).max(0.0);
                         albedo(t, w).map(|v| v * shade)
                     };
@@ -289,7 +294,11 @@ pub fn render_scalar(
         );
     }
     let (width, height) = size;
-    let legend_w = if width >= 240 { (width / 6).clamp(80, 170) } else { 0 };
+    let legend_w = if width >= 240 {
+        (width / 6).clamp(80, 170)
+    } else {
+        0
+    };
     let albedo = |t: usize, w: [f64; 3]| {
         let [a, b, c] = mesh.triangles[t];
         let (va, vb, vc) = (values[a], values[b], values[c]);
@@ -302,7 +311,13 @@ pub fn render_scalar(
     let mut img = RgbImage::from_pixel(width, height, Rgb(view.background));
     image::imageops::replace(&mut img, &body, 0, 0);
     if legend_w > 0 {
-        draw_legend(&mut img, width - legend_w, legend_w, range, &view.scalar_label);
+        draw_legend(
+            &mut img,
+            width - legend_w,
+            legend_w,
+            range,
+            &view.scalar_label,
+        );
     }
     Ok(img)
 }
@@ -311,14 +326,31 @@ pub fn render_scalar(
 /// `x0`, `w` pixels wide.
 fn draw_legend(img: &mut RgbImage, x0: u32, w: u32, range: (f64, f64), label: &str) {
     let h = img.height();
-    let mut fs = (h as f64 / 30.0).clamp(10.0, 20.0);
-    // Shrink the title until it fits the strip.
-    while fs > 8.0 && text_size(label, fs).0 + 8 > w {
-        fs -= 1.0;
-    }
+    let fs = (h as f64 / 24.0).clamp(11.0, 20.0);
     let ink = [20, 20, 20];
-    draw_text(img, label, x0 as i32 + 4, 6, fs, ink);
-    let top = (2.0 * fs) as u32 + 14;
+    // The title, wrapped at spaces to fit the strip (a word longer than the strip is clipped).
+    let mut lines: Vec<String> = Vec::new();
+    for word in label.split_whitespace() {
+        match lines.last_mut() {
+            Some(line) if text_size(&format!("{line} {word}"), fs).0 + 8 <= w => {
+                line.push(' ');
+                line.push_str(word);
+            }
+            _ => lines.push(word.to_string()),
+        }
+    }
+    let line_h = (fs * 1.2).ceil() as u32;
+    for (k, line) in lines.iter().enumerate() {
+        draw_text(
+            img,
+            line,
+            x0 as i32 + 4,
+            6 + (k as u32 * line_h) as i32,
+            fs,
+            ink,
+        );
+    }
+    let top = 6 + lines.len() as u32 * line_h + (fs * 0.8) as u32;
     let bottom = h.saturating_sub(fs as u32 + 12);
     if bottom <= top + 10 {
         return;
@@ -332,7 +364,11 @@ fn draw_legend(img: &mut RgbImage, x0: u32, w: u32, range: (f64, f64), label: &s
             img.put_pixel(x, y, Rgb(c));
         }
     }
-    for (t, v) in [(1.0, range.1), (0.5, 0.5 * (range.0 + range.1)), (0.0, range.0)] {
+    for (t, v) in [
+        (1.0, range.1),
+        (0.5, 0.5 * (range.0 + range.1)),
+        (0.0, range.0),
+    ] {
         let y = top as f64 + (1.0 - t) * (bottom - top) as f64;
         for x in bar_x + bar_w..bar_x + bar_w + 5 {
             img.put_pixel(x, y.round() as u32, Rgb(ink));
@@ -398,10 +434,22 @@ pub fn contact_sheet(frames: &[RgbImage], labels: &[&str], columns: usize) -> Rg
         let (c, r) = (k as u32 % cols, k as u32 / cols);
         let x = gap + c * (cw + gap);
         let y = gap + r * (ch + lh + gap);
-        image::imageops::replace(&mut img, f, (x + (cw - f.width()) / 2) as i64, (y + lh) as i64);
+        image::imageops::replace(
+            &mut img,
+            f,
+            (x + (cw - f.width()) / 2) as i64,
+            (y + lh) as i64,
+        );
         if let Some(label) = labels.get(k).filter(|l| !l.is_empty()) {
             let tw = text_size(label, fs).0.min(cw);
-            draw_text(&mut img, label, (x + (cw - tw) / 2) as i32, y as i32 + 3, fs, [0, 0, 0]);
+            draw_text(
+                &mut img,
+                label,
+                (x + (cw - tw) / 2) as i32,
+                y as i32 + 3,
+                fs,
+                [0, 0, 0],
+            );
         }
     }
     img

@@ -59,7 +59,9 @@ impl Fragments {
     /// skipped. On equal depth the earlier triangle stays, so the result does not depend on
     /// anything but the input order.
     pub fn draw_triangle(&mut self, id: u32, v: [ScreenVertex; 3]) {
-        if v.iter().any(|p| !(p.x.is_finite() && p.y.is_finite() && p.depth.is_finite())) {
+        if v.iter()
+            .any(|p| !(p.x.is_finite() && p.y.is_finite() && p.depth.is_finite()))
+        {
             return;
         }
         let [a, b, c] = v;
@@ -141,7 +143,12 @@ mod tests {
         // A square from (2, 3) to (12, 9) in pixels: pixel centres inside are i = 2..=11,
         // j = 3..=8, i.e. 10 × 6 = 60 pixels, each covered once and none outside (the
         // shared diagonal leaves no crack).
-        let v = [sv(2.0, 3.0, 0.0), sv(12.0, 3.0, 0.0), sv(12.0, 9.0, 0.0), sv(2.0, 9.0, 0.0)];
+        let v = [
+            sv(2.0, 3.0, 0.0),
+            sv(12.0, 3.0, 0.0),
+            sv(12.0, 9.0, 0.0),
+            sv(2.0, 9.0, 0.0),
+        ];
         let f = rasterize(16, 12, &v, &[[0, 1, 2], [0, 2, 3]]);
         assert_eq!(f.covered(), 60);
         for j in 0..12 {
@@ -190,7 +197,12 @@ mod tests {
 
     #[test]
     fn degenerate_and_non_finite_triangles_are_skipped() {
-        let v = [sv(0.0, 0.0, 0.0), sv(10.0, 10.0, 0.0), sv(20.0, 20.0, 0.0), sv(f64::NAN, 3.0, 0.0)];
+        let v = [
+            sv(0.0, 0.0, 0.0),
+            sv(10.0, 10.0, 0.0),
+            sv(20.0, 20.0, 0.0),
+            sv(f64::NAN, 3.0, 0.0),
+        ];
         let f = rasterize(32, 32, &v, &[[0, 1, 2], [0, 1, 3], [0, 1, 9]]);
         assert_eq!(f.covered(), 0);
     }
