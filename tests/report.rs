@@ -2,12 +2,20 @@
 //! rasteriser covers, shades and hides what geometry says it should.
 //! `REPORT_OUT=/tmp/report cargo test --test report` keeps the images for a person to look at.
 
+use furrow::mesh::TriMesh;
+use furrow::report::colormap::{diverging, symmetric_range};
 use furrow::report::contour::Grid;
 use furrow::report::plot::{
-    contour_chart, line_chart, series_color, Chart, ContourChart, ContourSet, LegendAt, Series,
-    Style, DEFAULT_SIZE,
+    contour_chart, line_chart, series_color, tradeoff_chart, Chart, ContourChart, ContourSet,
+    LegendAt, Series, Style, DEFAULT_SIZE,
 };
+use furrow::report::preview::{
+    contact_sheet, render, render_scalar, side_by_side, union_bounds, wrinkle_depth_mm, Camera,
+    View,
+};
+use furrow::report::write_png;
 use image::RgbImage;
+use nalgebra::Vector3;
 use std::path::PathBuf;
 
 /// Output folder: `$REPORT_OUT` when set (kept), else a temporary folder (removed).
@@ -63,21 +71,25 @@ fn tradeoff_chart_log_log_with_front_and_default() {
         (20.0, 0.03),
         (40.0, 0.05),
     ];
-    let mut default = Series::new("default settings", vec![(2.0, 0.4)], Style::Points);
-    default.highlight = true;
-    let chart = Chart {
-        title: "Error against run time".into(),
-        x_label: "run time (s)".into(),
-        y_label: "surface distance RMS (mm)".into(),
-        log_x: true,
-        log_y: true,
-        series: vec![
-            Series::new("runs", runs.clone(), Style::Points),
-            Series::pareto_front("Pareto front", &runs),
-            default,
-        ],
-        legend: LegendAt::UpperRight,
-    };
+    let chart = tradeoff_chart(
+        "Error against run time",
+        "surface distance RMS (mm)",
+        &runs,
+        Some(3),
+    );
+    assert_eq!(chart.series[2].points, vec![(2.0, 0.4)]);
+    assert!(chart.series[2].highlight);
+    // The front: fastest run, then each run more accurate than every faster one.
+    assert_eq!(
+        chart.series[1].points,
+        vec![
+            (0.5, 2.0),
+            (0.8, 1.1),
+            (2.0, 0.4),
+            (6.0, 0.12),
+            (20.0, 0.03)
+        ]
+    );
     let path = dir.join("tradeoff.png");
     line_chart(&path, &chart).unwrap();
     let img = load(&path);
@@ -200,15 +212,6 @@ fn wavelength_contours_measured_against_predicted() {
 
 // ---------------------------------------------------------------------------------------------
 // Preview images
-
-use furrow::mesh::TriMesh;
-use furrow::report::colormap::{diverging, symmetric_range};
-use furrow::report::preview::{
-    contact_sheet, render, render_scalar, side_by_side, union_bounds, wrinkle_depth_mm, Camera,
-    View,
-};
-use furrow::report::write_png;
-use nalgebra::Vector3;
 
 /// A view with one sample per pixel, no margin, fitted to `mesh`'s box.
 fn exact_view(mesh: &TriMesh) -> View {

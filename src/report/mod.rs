@@ -5,6 +5,7 @@
 
 pub mod colormap;
 pub mod contour;
+pub mod fit;
 pub mod font;
 pub mod pareto;
 pub mod plot;
