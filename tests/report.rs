@@ -257,6 +257,7 @@ fn triangle_covers_its_area_with_the_lambert_shade() {
     let view = exact_view(&mesh);
     let img = render(&mesh, &view, (200, 100));
     let n = covered(&img, view.background) as f64;
+    eprintln!("triangle: covered {n} px, area 10 000 px");
     assert!(
         (n - 10_000.0).abs() <= 100.0,
         "covered {n} px, area 10 000 px"
@@ -321,6 +322,7 @@ fn the_normal_facing_the_light_is_brightest() {
         assert!(close(got, want, 1), "triangle {k}: {got:?} vs {want:?}");
         shades.push(got[0]);
     }
+    eprintln!("shades (red channel) per triangle: {shades:?}");
     let brightest = (0..normals.len()).max_by_key(|&k| shades[k]).unwrap();
     assert_eq!(brightest, 1, "shades {shades:?}");
     let ambient_only = (view.color[0] as f64 * view.ambient).round() as u8;
@@ -495,6 +497,7 @@ fn large_mesh_renders_at_512() {
     let img = render(&mesh, &view, (512, 512));
     let frac = covered(&img, view.background) as f64 / (512.0 * 512.0);
     // A square patch seen from the front with a 4% margin fills ≈ 0.92² ≈ 85% of the image.
+    eprintln!("20k patch: coverage {frac:.4}, expected {:.4}", 0.92 * 0.92);
     assert!((frac - 0.92 * 0.92).abs() < 0.02, "coverage {frac}");
     write_png(&dir.join("patch_20k.png"), &img).unwrap();
 }
@@ -577,6 +580,7 @@ fn oblique_view_of_a_sphere_is_a_disc_lit_where_the_normal_meets_the_light() {
     let rpx = cam.scale;
     let want = std::f64::consts::PI * rpx * rpx;
     let got = covered(&img, view.background) as f64;
+    eprintln!("sphere: covered {got} px, disc π (scale r)² = {want:.0} px");
     assert!(
         got < want + 2.0 * std::f64::consts::PI * rpx
             && got > 0.99 * want - 2.0 * std::f64::consts::PI * rpx,
