@@ -601,3 +601,29 @@ fn oblique_view_of_a_sphere_is_a_disc_lit_where_the_normal_meets_the_light() {
     assert_eq!(peak, view.color[0], "full light: albedo · 1");
     write_png(&dir.join("sphere_oblique.png"), &img).unwrap();
 }
+
+#[test]
+fn bad_geometry_is_skipped_and_missing_values_are_grey() {
+    // A good square, a triangle with an out-of-range index and one with a NaN corner: the
+    // square is drawn, the others are left out, nothing panics. A NaN scalar on a vertex of
+    // the square makes the pixels of its triangles the "missing" grey, never a map colour.
+    let (mut p, mut t) = square(0.0, 0.0, 1.0, 1.0, 0.0, 0);
+    p.push(Vector3::new(f64::NAN, 0.5, 0.0));
+    t.push([0, 1, 99]);
+    t.push([0, 1, 4]);
+    let mesh = TriMesh::new(p, t);
+    let view = View {
+        light: Vector3::z(),
+        supersample: 1,
+        margin: 0.0,
+        bounds: Some((Vector3::zeros(), Vector3::new(1.0, 1.0, 0.0))),
+        ..View::default()
+    };
+    let img = render(&mesh, &view, (50, 50));
+    assert_eq!(covered(&img, view.background), 2500);
+    let values = vec![0.0, 0.0, 0.0, f64::NAN, 0.0];
+    let img = render_scalar(&mesh, &values, (-1.0, 1.0), &view, (50, 50)).unwrap();
+    // Triangle [0, 2, 3] (upper left in the image) touches the NaN vertex; [0, 1, 2] does not.
+    assert_eq!(img.get_pixel(5, 25).0, furrow::report::colormap::MISSING);
+    assert_eq!(img.get_pixel(45, 25).0, diverging(0.5));
+}

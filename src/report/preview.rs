@@ -177,12 +177,13 @@ impl Camera {
 }
 
 /// Render `mesh` into a `width × height` image (supersampled), each visible pixel coloured by
-/// `albedo(triangle, barycentric weights)` (channels in 0..=1) times the Lambert shade.
+/// `albedo(corner vertex indices, barycentric weights)` (channels in 0..=1) times the Lambert
+/// shade. Triangles with an out-of-range vertex index are left out.
 fn render_with(
     mesh: &TriMesh,
     view: &View,
     (width, height): (u32, u32),
-    albedo: &dyn Fn(usize, [f64; 3]) -> [f64; 3],
+    albedo: &dyn Fn([usize; 3], [f64; 3]) -> [f64; 3],
 ) -> RgbImage {
     let mut img = RgbImage::from_pixel(width, height, Rgb(view.background));
     if width == 0 || height == 0 {
@@ -190,6 +191,21 @@ fn render_with(
     }
     let Some(bounds) = view.bounds.or_else(|| union_bounds(&[mesh])) else {
         return img;
+    };
+    let nv = mesh.vertex_count();
+    let valid_mesh;
+    let mesh = if mesh.triangles.iter().flatten().all(|&v| v < nv) {
+        mesh
+    } else {
+        valid_mesh = TriMesh::new(
+            mesh.positions.clone(),
+            mesh.triangles
+                .iter()
+                .copied()
+                .filter(|t| t.iter().all(|&v| v < nv))
+                .collect(),
+        );
+        &valid_mesh
     };
     let ss = view.supersample.clamp(1, 8);
     let (sw, sh) = (width * ss, height * ss);
@@ -247,7 +263,7 @@ fn render_with(
                             face_n * side
                         };
                         let shade = ambient + (1.0 - ambient) * n.dot(&light).max(0.0);
-                        albedo(t, w).map(|v| v * shade)
+                        albedo([a, b, c], w).map(|v| v * shade)
                     };
                     for i in 0..3 {
                         acc[i] += c[i];
@@ -299,8 +315,7 @@ pub fn render_scalar(
     } else {
         0
     };
-    let albedo = |t: usize, w: [f64; 3]| {
-        let [a, b, c] = mesh.triangles[t];
+    let albedo = |[a, b, c]: [usize; 3], w: [f64; 3]| {
         let (va, vb, vc) = (values[a], values[b], values[c]);
         if !(va.is_finite() && vb.is_finite() && vc.is_finite()) {
             return diverging_f(f64::NAN);
