@@ -72,6 +72,6 @@ mod tests {
         // Nine glyphs of ~20 px: dozens to hundreds of dark pixels, never none nor all.
         assert!(dark > 50 && dark < 120 * 40 / 2, "dark pixels {dark}");
         let (tw, th) = text_size("λ = 4.04 mm", 20.0);
-        assert!(tw > 60 && tw < 160 && th >= 10 && th <= 30, "{tw}×{th}");
+        assert!(tw > 60 && tw < 160 && (10..=30).contains(&th), "{tw}×{th}");
     }
 }

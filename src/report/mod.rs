@@ -3,8 +3,11 @@
 //! composed side by side or as a contact sheet. No GPU and no system fonts: text uses the
 //! shipped DejaVu Sans ([`font`]). All output is deterministic and written atomically.
 
+#![warn(missing_docs)]
+
 pub mod colormap;
 pub mod contour;
+pub mod fit;
 pub mod font;
 pub mod pareto;
 pub mod plot;

@@ -92,6 +92,38 @@ impl Series {
     }
 }
 
+/// An error-against-run-time chart on log–log axes: every run as a point, the Pareto front of
+/// `runs = [(time s, error), …]` as a line, and the run `default` (an index into `runs`, if
+/// any) highlighted as the default settings. Write it with [`line_chart`].
+pub fn tradeoff_chart(
+    title: impl Into<String>,
+    error_label: impl Into<String>,
+    runs: &[(f64, f64)],
+    default: Option<usize>,
+) -> Chart {
+    let mut series = vec![
+        Series::new("runs", runs.to_vec(), Style::Points),
+        Series::pareto_front("Pareto front", runs),
+    ];
+    if let Some(&p) = default.and_then(|d| runs.get(d)) {
+        series.push(Series {
+            name: "default settings".into(),
+            points: vec![p],
+            style: Style::Points,
+            highlight: true,
+        });
+    }
+    Chart {
+        title: title.into(),
+        x_label: "run time (s)".into(),
+        y_label: error_label.into(),
+        log_x: true,
+        log_y: true,
+        series,
+        legend: LegendAt::UpperRight,
+    }
+}
+
 /// Tableau 10: distinct colours for successive series.
 const PALETTE: [RGBColor; 10] = [
     RGBColor(31, 119, 180),

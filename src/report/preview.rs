@@ -177,12 +177,13 @@ impl Camera {
 }
 
 /// Render `mesh` into a `width × height` image (supersampled), each visible pixel coloured by
-/// `albedo(triangle, barycentric weights)` (channels in 0..=1) times the Lambert shade.
+/// `albedo(corner vertex indices, barycentric weights)` (channels in 0..=1) times the Lambert
+/// shade. Triangles with an out-of-range vertex index are left out.
 fn render_with(
     mesh: &TriMesh,
     view: &View,
     (width, height): (u32, u32),
-    albedo: &dyn Fn(usize, [f64; 3]) -> [f64; 3],
+    albedo: &dyn Fn([usize; 3], [f64; 3]) -> [f64; 3],
 ) -> RgbImage {
     let mut img = RgbImage::from_pixel(width, height, Rgb(view.background));
     if width == 0 || height == 0 {
@@ -190,6 +191,21 @@ fn render_with(
     }
     let Some(bounds) = view.bounds.or_else(|| union_bounds(&[mesh])) else {
         return img;
+    };
+    let nv = mesh.vertex_count();
+    let valid_mesh;
+    let mesh = if mesh.triangles.iter().flatten().all(|&v| v < nv) {
+        mesh
+    } else {
+        valid_mesh = TriMesh::new(
+            mesh.positions.clone(),
+            mesh.triangles
+                .iter()
+                .copied()
+                .filter(|t| t.iter().all(|&v| v < nv))
+                .collect(),
+        );
+        &valid_mesh
     };
     let ss = view.supersample.clamp(1, 8);
     let (sw, sh) = (width * ss, height * ss);
@@ -247,7 +263,7 @@ fn render_with(
                             face_n * side
                         };
                         let shade = ambient + (1.0 - ambient) * n.dot(&light).max(0.0);
-                        albedo(t, w).map(|v| v * shade)
+                        albedo([a, b, c], w).map(|v| v * shade)
                     };
                     for i in 0..3 {
                         acc[i] += c[i];
@@ -299,8 +315,7 @@ pub fn render_scalar(
     } else {
         0
     };
-    let albedo = |t: usize, w: [f64; 3]| {
-        let [a, b, c] = mesh.triangles[t];
+    let albedo = |[a, b, c]: [usize; 3], w: [f64; 3]| {
         let (va, vb, vc) = (values[a], values[b], values[c]);
         if !(va.is_finite() && vb.is_finite() && vc.is_finite()) {
             return diverging_f(f64::NAN);
@@ -326,14 +341,31 @@ pub fn render_scalar(
 /// `x0`, `w` pixels wide.
 fn draw_legend(img: &mut RgbImage, x0: u32, w: u32, range: (f64, f64), label: &str) {
     let h = img.height();
-    let mut fs = (h as f64 / 30.0).clamp(10.0, 20.0);
-    // Shrink the title until it fits the strip.
-    while fs > 8.0 && text_size(label, fs).0 + 8 > w {
-        fs -= 1.0;
-    }
+    let fs = (h as f64 / 24.0).clamp(11.0, 20.0);
     let ink = [20, 20, 20];
-    draw_text(img, label, x0 as i32 + 4, 6, fs, ink);
-    let top = (2.0 * fs) as u32 + 14;
+    // The title, wrapped at spaces to fit the strip (a word longer than the strip is clipped).
+    let mut lines: Vec<String> = Vec::new();
+    for word in label.split_whitespace() {
+        match lines.last_mut() {
+            Some(line) if text_size(&format!("{line} {word}"), fs).0 + 8 <= w => {
+                line.push(' ');
+                line.push_str(word);
+            }
+            _ => lines.push(word.to_string()),
+        }
+    }
+    let line_h = (fs * 1.2).ceil() as u32;
+    for (k, line) in lines.iter().enumerate() {
+        draw_text(
+            img,
+            line,
+            x0 as i32 + 4,
+            6 + (k as u32 * line_h) as i32,
+            fs,
+            ink,
+        );
+    }
+    let top = 6 + lines.len() as u32 * line_h + (fs * 0.8) as u32;
     let bottom = h.saturating_sub(fs as u32 + 12);
     if bottom <= top + 10 {
         return;
