@@ -19,12 +19,18 @@
 //!   u_y free) and a sliding bottom (u_y = 0, u_x free) so the pre-buckling state is a uniform
 //!   plane-strain compression, as in the classical analysis. With sliding sides the strip
 //!   admits wavelengths 2L/m (m an integer), so the measurement resolution is about λ/(4 ×
-//!   periods); `periods` defaults to a non-integer (6.3) so that the selected mode is never
+//!   periods); `periods` defaults to a non-integer (10.3) so that the selected mode is never
 //!   exactly λ_pred by construction.
-//! - Imperfection: the reference geometry of each node column is shifted vertically by a
-//!   deterministic pseudo-random amount (uniform in ±`imperfection` × h at the top, tapering
-//!   linearly to zero at the bottom); it breaks the symmetry of the flat state, so the strip
-//!   wrinkles in the mode that goes unstable first instead of staying on the flat branch.
+//! - Imperfection: the reference geometry is shifted vertically by η(X) = a Σ_m s_m
+//!   cos(mπX/L), every mode the sliding sides admit down to λ/4 with the same amplitude and a
+//!   pseudo-random sign s_m (RMS ≈ `imperfection` × h / √2 at the top, tapering linearly to
+//!   zero at the bottom). It does not depend on the mesh, so every resolution sees the same
+//!   imperfection; it breaks the symmetry of the flat state, so the strip wrinkles in a mode
+//!   that goes unstable first instead of staying on the flat branch. Near ε_c the critical
+//!   strain of neighbouring modes differs by a fraction of a percent, so which mode wins also
+//!   depends on the imperfection: measured wavelengths land about 5% from the formula
+//!   whatever the resolution (see the resolution study), which is the precision of this
+//!   experiment, not a discretisation error.
 //! - Loading: compressive strain ε in `load_steps` steps from 0.5 ε_c to `strain_factor` × ε_c,
 //!   with ε_c = ¼ (3 Ē_q / Ē_x)^{2/3} (Ē = E / (1 − ν²)); each step is solved to equilibrium
 //!   by [`crate::solver::statics::StaticSolver`] (Newton, KKT, line search) from the previous one.
@@ -367,14 +373,14 @@ pub struct DenseCase {
 
 impl DenseCase {
     /// A case for `bilayer` with the default discretisation: 8 elements per wavelength, 2
-    /// skin layers, 6.3 periods, depth 2 λ, compressed to 1.3 ε_c in 9 steps, imperfection
+    /// skin layers, 10.3 periods, depth 2 λ, compressed to 1.3 ε_c in 9 steps, imperfection
     /// 1% of h.
     pub fn new(bilayer: Bilayer) -> Self {
         Self {
             bilayer,
             elements_per_wavelength: 8,
             skin_layers: 2,
-            periods: 6.3,
+            periods: 10.3,
             depth: 2.0,
             strain_factor: 1.3,
             load_steps: 9,
@@ -452,6 +458,10 @@ pub struct DenseResult {
     pub amplitude: Option<f64>,
     /// The full measurement (reference positions).
     pub measurement: Option<Measured>,
+    /// The wavelength 2L/m (m an integer) the sliding-sided strip admits that is nearest to
+    /// the prediction (m): the best the strip can do; |nearest − predicted| is the
+    /// quantisation floor of `error`.
+    pub nearest_admissible: f64,
     /// Predicted critical strain ε_c (dimensionless).
     pub critical_strain: f64,
     /// Final applied compressive strain (dimensionless).
@@ -471,6 +481,27 @@ pub struct DenseResult {
     pub status: SolveStatus,
     /// Final residual norm (N/m) of the last step.
     pub residual: f64,
+    /// One entry per load step.
+    pub steps: Vec<StepRecord>,
+}
+
+/// What one load step of a dense run did.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct StepRecord {
+    /// Applied compressive strain (dimensionless).
+    pub strain: f64,
+    /// Newton iterations.
+    pub iterations: usize,
+    /// Iterations that used a projected or shifted Hessian (the state was unstable).
+    pub modified_hessian_steps: usize,
+    /// Final residual norm (N/m).
+    pub residual: f64,
+    /// Outcome of the step.
+    pub status: SolveStatus,
+    /// Wall-clock seconds of the step.
+    pub seconds: f64,
+    /// Seconds of that spent assembling Hessians / factorising / in line searches.
+    pub assembly_factor_search_s: [f64; 3],
 }
 
 /// Deterministic uniform numbers in [−1, 1) (64-bit LCG).
@@ -534,22 +565,30 @@ pub fn run(case: &DenseCase) -> anyhow::Result<DenseResult> {
     let eps_c = case.critical_strain();
     let (mut mesh, mats, depth) = build(case, lambda);
     let top_y = depth + case.bilayer.thickness;
-    // Geometric imperfection per node column, tapering to zero at the bottom.
+    // Geometric imperfection, independent of the mesh: every sliding-compatible mode
+    // cos(mπX/L) with wavelength down to λ/4 gets the same amplitude and a random sign, so
+    // the mode that grows is chosen by the mechanics, not by the imperfection; it tapers
+    // linearly to zero at the bottom.
+    let length = case.periods * lambda;
+    let modes = (8.0 * case.periods).ceil() as usize;
     let mut state = case
         .seed
         .wrapping_mul(0x9E37_79B9_7F4A_7C15)
         .wrapping_add(17);
-    let amp = case.imperfection * case.bilayer.thickness;
-    let offsets: Vec<f64> = (0..mesh.columns).map(|_| amp * lcg(&mut state)).collect();
-    for r in 0..mesh.rows {
-        for c in 0..mesh.columns {
-            let n = mesh.node(c, r);
-            let y = mesh.nodes[n][1];
-            mesh.nodes[n][1] += offsets[c] * (y / top_y);
-        }
+    let signs: Vec<f64> = (0..modes).map(|_| lcg(&mut state).signum()).collect();
+    let amp = case.imperfection * case.bilayer.thickness / (modes as f64).sqrt();
+    let eta = |x: f64| -> f64 {
+        signs
+            .iter()
+            .enumerate()
+            .map(|(m, s)| s * ((m + 1) as f64 * std::f64::consts::PI * x / length).cos())
+            .sum::<f64>()
+            * amp
+    };
+    for p in mesh.nodes.iter_mut() {
+        p[1] += eta(p[0]) * (p[1] / top_y);
     }
     let energy = PlaneStrainSvk::new(&mesh, &mats).context("building the dense strip")?;
-    let length = case.periods * lambda;
 
     // Sliding sides (x pinned) and sliding bottom (y pinned).
     let mut pinned = Vec::new();
@@ -581,14 +620,32 @@ pub fn run(case: &DenseCase) -> anyhow::Result<DenseResult> {
     let mut iterations = 0;
     let mut residual = 0.0;
     let mut strain = 0.0;
+    let mut steps = Vec::with_capacity(case.load_steps);
     for step in 0..case.load_steps {
         let f = step as f64 / (case.load_steps - 1) as f64;
         strain = eps_c * (0.5 + f * (case.strain_factor - 0.5));
+        if step == 0 {
+            // Start from the uniform compression (the pre-buckling state up to the Poisson
+            // bulge): moving only the right side would crush its elements and send Newton
+            // through unstable states.
+            for (n, p) in mesh.nodes.iter().enumerate() {
+                x[2 * n] = p[0] * (1.0 - strain);
+            }
+        }
         for r in 0..mesh.rows {
             let n = mesh.node(mesh.columns - 1, r);
             x[2 * n] = length * (1.0 - strain);
         }
         let rep = solver.solve(&energy, &problem, &mut x)?;
+        steps.push(StepRecord {
+            strain,
+            iterations: rep.iterations,
+            modified_hessian_steps: rep.modified_hessian_steps,
+            residual: rep.residual,
+            status: rep.status,
+            seconds: rep.total_s,
+            assembly_factor_search_s: [rep.assembly_s, rep.factor_s, rep.line_search_s],
+        });
         iterations += rep.iterations;
         residual = rep.residual;
         if rep.status != SolveStatus::Converged && status == SolveStatus::Converged {
@@ -628,6 +685,7 @@ pub fn run(case: &DenseCase) -> anyhow::Result<DenseResult> {
             .map(|m| (m.wavelength - lambda).abs() / lambda),
         amplitude: m_ref.as_ref().map(|m| m.amplitude),
         measurement: m_ref,
+        nearest_admissible: 2.0 * length / (2.0 * length / lambda).round().max(1.0),
         critical_strain: eps_c,
         strain,
         length,
@@ -637,6 +695,7 @@ pub fn run(case: &DenseCase) -> anyhow::Result<DenseResult> {
         seconds: t0.elapsed().as_secs_f64(),
         status,
         residual,
+        steps,
     })
 }
 
@@ -653,6 +712,8 @@ pub struct SweepRow {
     pub measured: Option<f64>,
     /// Relative error against the formula.
     pub error: Option<f64>,
+    /// Admissible wavelength 2L/m nearest to the prediction (m), see [`DenseResult`].
+    pub nearest_admissible: f64,
     /// Q2 elements.
     pub elements: usize,
     /// Degrees of freedom.
@@ -684,6 +745,7 @@ pub fn sweep(
                 predicted: r.predicted,
                 measured: r.measured,
                 error: r.error,
+                nearest_admissible: r.nearest_admissible,
                 elements: r.elements,
                 dofs: r.dofs,
                 seconds: r.seconds,
