@@ -87,6 +87,17 @@ fn sweep_and_resolution_study() {
     for r in &res {
         println!("RES {}", serde_json::to_string(r).unwrap());
     }
+    for seed in 2..6 {
+        let mut c = base;
+        c.seed = seed;
+        let r = run(&c).unwrap();
+        println!(
+            "SEED {seed} measured/predicted {:.4} nearest admissible/predicted {:.4} {:?}",
+            r.measured.unwrap_or(f64::NAN) / r.predicted,
+            r.nearest_admissible / r.predicted,
+            r.status
+        );
+    }
     for r in &rows {
         assert_eq!(r.status, SolveStatus::Converged, "{r:?}");
         assert!(r.error.expect("wrinkle") < 0.10, "{r:?}");
