@@ -465,6 +465,12 @@ pub struct DenseResult {
     pub nearest_admissible: f64,
     /// Predicted critical strain ε_c (dimensionless).
     pub critical_strain: f64,
+    /// Onset strain ε₀ (dimensionless) of the fitted post-buckling law A² = c (ε − ε₀) over
+    /// the steps with amplitude above h/10; theory: ε₀ = ε_c. `None` with fewer than two
+    /// such steps.
+    pub onset_strain: Option<f64>,
+    /// Slope c of that law (m²); theory: h² / ε_c.
+    pub onset_slope: Option<f64>,
     /// Final applied compressive strain (dimensionless).
     pub strain: f64,
     /// Strip length L (m).
@@ -503,6 +509,50 @@ pub struct StepRecord {
     pub seconds: f64,
     /// Seconds of that spent assembling Hessians / factorising / in line searches.
     pub assembly_factor_search_s: [f64; 3],
+    /// Wrinkle amplitude after the step (m): √2 × RMS of the top surface's vertical
+    /// displacement about its mean over the central 80% of the strip (no wavelength needed,
+    /// so it also measures the growth of the imperfection below ε_c).
+    pub amplitude: f64,
+}
+
+/// √2 × RMS about the mean of the vertical displacement of the top row over the central 80%
+/// of the strip (m).
+fn top_amplitude(mesh: &QuadMesh, x: &[f64], length: f64) -> f64 {
+    let top = mesh.rows - 1;
+    let u: Vec<f64> = (0..mesh.columns)
+        .map(|c| mesh.node(c, top))
+        .filter(|&n| (mesh.nodes[n][0] - 0.5 * length).abs() <= 0.4 * length)
+        .map(|n| x[2 * n + 1] - mesh.nodes[n][1])
+        .collect();
+    let mean = u.iter().sum::<f64>() / u.len() as f64;
+    (2.0 * u.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / u.len() as f64).sqrt()
+}
+
+/// Onset strain ε₀ and slope c of the post-buckling law A² = c (ε − ε₀), fitted by least
+/// squares over the steps whose amplitude exceeds `min_amp` (m); `None` with fewer than two.
+/// Theory (Huang, Hong and Suo 2005, film on substrate): ε₀ = ε_c, c = h² / ε_c.
+fn onset_fit(steps: &[StepRecord], min_amp: f64) -> Option<(f64, f64)> {
+    let pts: Vec<(f64, f64)> = steps
+        .iter()
+        .filter(|s| s.amplitude > min_amp && s.status == SolveStatus::Converged)
+        .map(|s| (s.strain, s.amplitude * s.amplitude))
+        .collect();
+    if pts.len() < 2 {
+        return None;
+    }
+    let n = pts.len() as f64;
+    let me = pts.iter().map(|p| p.0).sum::<f64>() / n;
+    let ma = pts.iter().map(|p| p.1).sum::<f64>() / n;
+    let sxy: f64 = pts.iter().map(|p| (p.0 - me) * (p.1 - ma)).sum();
+    let sxx: f64 = pts.iter().map(|p| (p.0 - me).powi(2)).sum();
+    if sxx <= 0.0 {
+        return None;
+    }
+    let c = sxy / sxx;
+    if !(c > 0.0 && c.is_finite()) {
+        return None;
+    }
+    Some((me - ma / c, c))
 }
 
 /// Deterministic uniform numbers in [−1, 1) (64-bit LCG).
@@ -646,6 +696,7 @@ pub fn run(case: &DenseCase) -> anyhow::Result<DenseResult> {
             status: rep.status,
             seconds: rep.total_s,
             assembly_factor_search_s: [rep.assembly_s, rep.factor_s, rep.line_search_s],
+            amplitude: top_amplitude(&mesh, &x, length),
         });
         iterations += rep.iterations;
         residual = rep.residual;
@@ -657,6 +708,7 @@ pub fn run(case: &DenseCase) -> anyhow::Result<DenseResult> {
         }
     }
 
+    let onset = onset_fit(&steps, 0.1 * case.bilayer.thickness);
     let top = mesh.rows - 1;
     let mut reference = Vec::with_capacity(mesh.columns);
     let mut current = Vec::with_capacity(mesh.columns);
@@ -688,6 +740,8 @@ pub fn run(case: &DenseCase) -> anyhow::Result<DenseResult> {
         measurement: m_ref,
         nearest_admissible: 2.0 * length / (2.0 * length / lambda).round().max(1.0),
         critical_strain: eps_c,
+        onset_strain: onset.map(|o| o.0),
+        onset_slope: onset.map(|o| o.1),
         strain,
         length,
         elements: mesh.elements.len(),
@@ -715,6 +769,10 @@ pub struct SweepRow {
     pub error: Option<f64>,
     /// Admissible wavelength 2L/m nearest to the prediction (m), see [`DenseResult`].
     pub nearest_admissible: f64,
+    /// Predicted critical strain ε_c (dimensionless).
+    pub critical_strain: f64,
+    /// Fitted onset strain ε₀ of the post-buckling law, see [`DenseResult`].
+    pub onset_strain: Option<f64>,
     /// Q2 elements.
     pub elements: usize,
     /// Degrees of freedom.
@@ -747,6 +805,8 @@ pub fn sweep(
                 measured: r.measured,
                 error: r.error,
                 nearest_admissible: r.nearest_admissible,
+                critical_strain: r.critical_strain,
+                onset_strain: r.onset_strain,
                 elements: r.elements,
                 dofs: r.dofs,
                 seconds: r.seconds,
@@ -755,6 +815,59 @@ pub fn sweep(
         }
     }
     Ok(rows)
+}
+
+/// The same case run with several imperfection seeds (the mode a finite strip selects
+/// scatters by a few percent with the imperfection; the mean is the sharper estimate).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Ensemble {
+    /// Predicted λ (m).
+    pub predicted: f64,
+    /// Mean measured λ (m) over the runs that formed a wrinkle; `None` if none did.
+    pub mean: Option<f64>,
+    /// Smallest and largest measured λ (m).
+    pub range: Option<(f64, f64)>,
+    /// Relative error of the mean against the formula.
+    pub error: Option<f64>,
+    /// Runs that converged at every step and formed a wrinkle.
+    pub valid_runs: usize,
+    /// Total wall-clock seconds.
+    pub seconds: f64,
+    /// The individual runs.
+    pub runs: Vec<DenseResult>,
+}
+
+/// Run `base` once per seed in `seeds` and average the measured wavelengths of the runs that
+/// converged and formed a wrinkle.
+pub fn ensemble(base: &DenseCase, seeds: &[u64]) -> anyhow::Result<Ensemble> {
+    let mut runs = Vec::with_capacity(seeds.len());
+    for &seed in seeds {
+        let mut c = *base;
+        c.seed = seed;
+        runs.push(run(&c).with_context(|| format!("dense run with seed {seed}"))?);
+    }
+    let ok: Vec<f64> = runs
+        .iter()
+        .filter(|r| r.status == SolveStatus::Converged)
+        .filter_map(|r| r.measured)
+        .collect();
+    let predicted = base.bilayer.critical_wavelength();
+    let mean = (!ok.is_empty()).then(|| ok.iter().sum::<f64>() / ok.len() as f64);
+    let range = (!ok.is_empty()).then(|| {
+        ok.iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                (a.min(v), b.max(v))
+            })
+    });
+    Ok(Ensemble {
+        predicted,
+        mean,
+        range,
+        error: mean.map(|m| (m - predicted).abs() / predicted),
+        valid_runs: ok.len(),
+        seconds: runs.iter().map(|r| r.seconds).sum(),
+        runs,
+    })
 }
 
 /// One row of [`resolution_study`].
