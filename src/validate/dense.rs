@@ -1033,6 +1033,56 @@ mod tests {
         assert!(min_exact < 0.0, "the test state should be indefinite");
     }
 
+    /// The structured mesh: node and element counts, corner positions, element orientation.
+    #[test]
+    fn rectangle_mesh_layout() {
+        let m = QuadMesh::rectangle(3.0, 3, &[0.0, 1.0, 1.5]);
+        assert_eq!((m.columns, m.rows), (7, 5));
+        assert_eq!(m.nodes.len(), 35);
+        assert_eq!(m.elements.len(), 6);
+        assert_eq!(m.nodes[m.node(6, 4)], [3.0, 1.5]);
+        assert_eq!(m.nodes[m.node(3, 3)], [1.5, 1.25]);
+        // Element 4 (second layer, middle column): node 0 bottom-left, node 8 top-right.
+        let e = m.elements[4];
+        assert_eq!(m.nodes[e[0]], [1.0, 1.0]);
+        assert_eq!(m.nodes[e[8]], [2.0, 1.5]);
+        assert_eq!(m.element_row[4], 1);
+        // Total area from the quadrature weights equals the rectangle's (4.5 m²).
+        let svk = PlaneStrainSvk::new(&m, &vec![(1.0, 0.3); 6]).unwrap();
+        let area: f64 = svk.quad.iter().flatten().map(|q| q.1).sum();
+        assert!((area - 4.5).abs() < 1e-12, "{area}");
+    }
+
+    /// The onset fit recovers ε₀ and c from exact post-buckling data and ignores the
+    /// pre-buckling steps below the amplitude threshold.
+    #[test]
+    fn onset_fit_recovers_known_law() {
+        let (e0, c) = (0.02, 3e-6);
+        let steps: Vec<StepRecord> = [0.01, 0.015, 0.022, 0.025, 0.03]
+            .iter()
+            .map(|&eps: &f64| StepRecord {
+                strain: eps,
+                iterations: 1,
+                modified_hessian_steps: 0,
+                residual: 0.0,
+                status: SolveStatus::Converged,
+                seconds: 0.0,
+                assembly_factor_search_s: [0.0; 3],
+                amplitude: if eps > e0 {
+                    (c * (eps - e0)).sqrt()
+                } else {
+                    1e-7
+                },
+            })
+            .collect();
+        let (fe0, fc) = onset_fit(&steps, 1e-5).unwrap();
+        assert!(
+            (fe0 - e0).abs() < 1e-12 && (fc - c).abs() < 1e-15,
+            "{fe0} {fc}"
+        );
+        assert!(onset_fit(&steps[..3], 1e-5).is_none());
+    }
+
     /// Bending without shear locking: a clamped cantilever of thickness t and length 20 t,
     /// 2 Q2 layers through the thickness, under a small tip load P (per metre of depth).
     /// Timoshenko beam theory in plane strain: δ = P ℓ³ / (3 Ē I) + P ℓ / (κ G t),
