@@ -1048,7 +1048,7 @@ mod tests {
         assert_eq!(m.nodes[e[8]], [2.0, 1.5]);
         assert_eq!(m.element_row[4], 1);
         // Total area from the quadrature weights equals the rectangle's (4.5 m²).
-        let svk = PlaneStrainSvk::new(&m, &vec![(1.0, 0.3); 6]).unwrap();
+        let svk = PlaneStrainSvk::new(&m, &[(1.0, 0.3); 6]).unwrap();
         let area: f64 = svk.quad.iter().flatten().map(|q| q.1).sum();
         assert!((area - 4.5).abs() < 1e-12, "{area}");
     }
