@@ -13,6 +13,7 @@ pub mod io;
 pub mod lattice;
 pub mod math;
 pub mod mesh;
+pub mod muscle;
 pub mod rig;
 pub mod shell;
 pub mod solver;

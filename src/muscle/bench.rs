@@ -1,0 +1,1 @@
+//! `furrow bench fit` (filled in below).
