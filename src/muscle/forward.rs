@@ -52,9 +52,11 @@ pub struct Forward {
     pub pinned: Vec<bool>,
     /// Rest node positions (flat, m).
     pub rest: Vec<f64>,
-    /// Newton iterations at most per equilibrium solve.
+    /// Newton iterations at most per equilibrium solve (default 40).
     pub max_newton: usize,
-    /// Relative force tolerance of an equilibrium solve.
+    /// Relative force tolerance of an equilibrium solve (default 10⁻⁷). Under stress the
+    /// interior's Hessian omits the derivative of its element rotations, so Newton converges
+    /// linearly there (about 0.6 per iteration at 18 % strain).
     pub tolerance: f64,
     free: Vec<usize>,
     nfree: usize,
@@ -104,8 +106,8 @@ impl Forward {
             muscles,
             pinned,
             rest,
-            max_newton: 30,
-            tolerance: 1e-9,
+            max_newton: 40,
+            tolerance: 1e-7,
             free,
             nfree,
             pattern: None,
