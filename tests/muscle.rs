@@ -309,3 +309,99 @@ fn gauss_newton_recovers_activations_of_the_nonlinear_model() {
     assert!(el > 0.02, "the test needs a nonlinear target: {el}");
     assert!(eg < 0.02, "{eg}");
 }
+
+/// Activations outside the bounds make the target: the fit lies within the bounds exactly
+/// (no tolerance), the clipped ones sit exactly on their bound, and a per-muscle override
+/// ([0.2, 0.5]) is honoured.
+#[test]
+fn bounds_hold_exactly() {
+    let (_, lat, mut muscles) = muscle_block(0.2);
+    muscles[5].bounds = [0.2, 0.5];
+    let mut f = Fitter::new(&lat, &Material::default(), muscles, exact_settings(0)).unwrap();
+    let truth = [1.7, -0.8, 0.5, 0.3, 2.5, 0.9];
+    let target = f.predict_linear(&truth);
+    let fit = f.fit_frame(&target).unwrap();
+    println!("activations {:?}", fit.activations);
+    for (i, a) in fit.activations.iter().enumerate() {
+        let [lo, hi] = f.muscles()[i].bounds;
+        assert!(*a >= lo && *a <= hi, "{i}: {a} outside [{lo}, {hi}]");
+    }
+    // (Muscle 0 need not reach its bound: its column is coupled to the clipped ones.)
+    assert_eq!(fit.activations[1], 0.0);
+    assert_eq!(fit.activations[4], 1.0);
+    assert_eq!(fit.activations[5], 0.5);
+    assert!(fit.rms_residual > 0.0);
+}
+
+/// A target no activations can reach (the whole block, bone included, moved 5 mm along z):
+/// the best fit is returned with its residual, not an error. The answer is optimal: the
+/// residual grows when any activation moves by ±0.01 within its bounds.
+#[test]
+fn unreachable_target_gives_the_best_fit_and_its_residual() {
+    let (mesh, lat, muscles) = muscle_block(0.2);
+    let mut f = Fitter::new(&lat, &Material::default(), muscles, exact_settings(0)).unwrap();
+    let target: Vec<V3> = mesh
+        .positions
+        .iter()
+        .map(|p| p + V3::new(0.0, 0.0, 0.005) + V3::new(0.002 * (p.x / 0.04), 0.0, 0.0))
+        .collect();
+    let fit = f.fit_frame(&target).unwrap();
+    assert_eq!(fit.status, FrameStatus::Fitted);
+    let rms = |a: &[f64]| {
+        let x = f.predict_linear(a);
+        (x.iter()
+            .zip(&target)
+            .map(|(p, t)| (p - t).norm_squared())
+            .sum::<f64>()
+            / x.len() as f64)
+            .sqrt()
+    };
+    let r0 = rms(&fit.activations);
+    println!(
+        "residual {:.4e} m (recomputed {r0:.4e}), activations {:?}",
+        fit.rms_residual, fit.activations
+    );
+    assert!((r0 - fit.rms_residual).abs() < 1e-12);
+    assert!(r0 > 1e-3, "the target is not reachable: {r0}");
+    for i in 0..6 {
+        for d in [-0.01, 0.01] {
+            let mut a = fit.activations.clone();
+            a[i] = (a[i] + d).clamp(0.0, 1.0);
+            if a[i] != fit.activations[i] {
+                assert!(rms(&a) >= r0 - 1e-15, "muscle {i} step {d}");
+            }
+        }
+    }
+}
+
+/// Degenerate input: two identical muscles (rank-deficient J) get equal, finite
+/// activations with the size regulariser and finite ones without; a non-finite target
+/// keeps the previous activations and says so.
+#[test]
+fn degenerate_inputs_have_defined_answers() {
+    let (mesh, lat, mut muscles) = muscle_block(0.2);
+    muscles[1] = muscles[0].clone();
+    muscles[1].name = "m0 copy".into();
+    let truth = [0.6, 0.0, 0.3, 0.2, 0.5, 0.4];
+    for (settings, equal) in [(FitSettings::default(), true), (exact_settings(0), false)] {
+        let mut f = Fitter::new(&lat, &Material::default(), muscles.clone(), settings).unwrap();
+        let target = f.predict_linear(&truth);
+        let fit = f.fit_frame(&target).unwrap();
+        println!("{settings:?}: {:?} {}", fit.activations, fit.clarabel_status);
+        assert_eq!(fit.status, FrameStatus::Fitted);
+        assert!(fit.activations.iter().all(|a| a.is_finite()));
+        assert!(fit.rms_residual.is_finite() && fit.rms_residual < 1e-4);
+        // The pair together carries the truth's 0.6.
+        assert!((fit.activations[0] + fit.activations[1] - 0.6).abs() < 0.01);
+        if equal {
+            assert!((fit.activations[0] - fit.activations[1]).abs() < 1e-9);
+        }
+        let mut bad = target.clone();
+        bad[3].y = f64::NAN;
+        let before = fit.activations.clone();
+        let fb = f.fit_frame(&bad).unwrap();
+        assert_eq!(fb.status, FrameStatus::InvalidTarget);
+        assert_eq!(fb.activations, before);
+        assert!(f.fit_frame(&mesh.positions[1..]).is_err());
+    }
+}
