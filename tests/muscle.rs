@@ -405,3 +405,28 @@ fn degenerate_inputs_have_defined_answers() {
         assert!(f.fit_frame(&mesh.positions[1..]).is_err());
     }
 }
+
+#[test]
+fn face_experiment() {
+    use furrow::muscle::generate::{generate_muscles, GenerateSettings};
+    let rig = furrow::rig::face::generate();
+    let lat = Lattice::build(&rig.mesh, &LatticeSettings::default()).unwrap();
+    let mat = Material::default();
+    let interior = Interior::new(&lat, &mat).unwrap();
+    let g = generate_muscles(&lat, &interior, &rig.targets, &GenerateSettings::default()).unwrap();
+    for m in &g.muscles {
+        let cx: f64 = m.elements.iter().map(|&e| lat.cell_origin(e).x).sum::<f64>() / m.elements.len() as f64;
+        println!("  {} {} elements c={:.3} cx {:.4}", m.name, m.elements.len(), m.max_contraction, cx);
+    }
+    let mut f = Fitter::new(&lat, &mat, g.muscles.clone(), FitSettings::default()).unwrap();
+    let mut tot = (0.0, 0.0);
+    for t in rig.targets.iter() {
+        let target: Vec<_> = rig.mesh.positions.iter().zip(&t.positions).map(|(p, d)| p + d).collect();
+        let rms_t = (t.positions.iter().map(|d| d.norm_squared()).sum::<f64>() / t.positions.len() as f64).sqrt();
+        f.reset();
+        let fit = f.fit_frame(&target).unwrap();
+        tot.0 += rms_t; tot.1 += fit.rms_residual;
+        println!("shape {} target rms {:.4} fit rms {:.4} a={:?}", t.name, rms_t, fit.rms_residual, fit.activations.iter().map(|v| (v*100.0).round()/100.0).collect::<Vec<_>>());
+    }
+    println!("total {:?}", tot);
+}

@@ -2,6 +2,7 @@
 
 mod bench;
 mod demo;
+mod fit;
 mod inspect;
 mod output;
 mod rig;
@@ -55,6 +56,11 @@ pub enum Command {
         after_help = "Example:\n  furrow wavelength --thickness 0.0002 --skin-modulus 1e6 --interior-modulus 1e4"
     )]
     Wavelength(wavelength::WavelengthArgs),
+    /// Muscle activations per frame fitted to the blend-shape animation (CSV).
+    #[command(
+        after_help = "Example:\n  furrow fit rigs/face.glb -o activations.csv\n  furrow fit rigs/face.glb --frames 0:60 --gauss-newton 2 --json"
+    )]
+    Fit(fit::FitArgs),
     /// Benchmarks that print or write their measurements.
     #[command(
         subcommand,
@@ -73,6 +79,7 @@ pub fn main() -> i32 {
         Command::Rig(c) => rig::run(c, &out),
         Command::Demo(a) => demo::run(a, &out),
         Command::Wavelength(a) => wavelength::run(a, &out),
+        Command::Fit(a) => fit::run(a, &out),
         Command::Bench(c) => bench::run(c, &out),
     };
     match result {

@@ -177,7 +177,8 @@ pub fn fit_node_displacements(
 }
 
 /// Principal compression (positive strain, dimensionless) and its unit direction of each
-/// element for node displacements `u` (Gauss-point average of ε = sym(F) − I).
+/// element for node displacements `u`: the most negative eigenvalue (negated) and its
+/// eigenvector of the deviatoric part of the Gauss-point average of ε = sym(F) − I.
 pub fn element_compression(interior: &Interior, rest: &[f64], u: &[f64]) -> Vec<(f64, V3)> {
     let x: Vec<f64> = rest.iter().zip(u).map(|(a, b)| a + b).collect();
     (0..interior.elements.len())
@@ -191,6 +192,9 @@ pub fn element_compression(interior: &Interior, rest: &[f64], u: &[f64]) -> Vec<
                 wsum += q.w;
             }
             let eps = eps / wsum;
+            // Deviatoric part: the active stress is deviatoric, so it can only produce the
+            // shape-changing part of the strain.
+            let eps = eps - Matrix3::identity() * (eps.trace() / 3.0);
             let eig = SymmetricEigen::new(eps);
             let (i, &l) = eig
                 .eigenvalues

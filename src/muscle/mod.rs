@@ -22,9 +22,10 @@
 //!    stiffness; α = β · tr(BᵀB)/tr(K) (β = [`generate::GenerateSettings::regulariser`],
 //!    default 10⁻³) makes the elastic term a light smoothness regulariser. One sparse
 //!    Cholesky factorisation serves all shapes (one solve per shape).
-//! 2. In each element, average the small-strain tensor ε = sym(∇u) over its Gauss points and
-//!    take its most negative eigenvalue (the principal compression) and that eigenvector (the
-//!    fibre direction).
+//! 2. In each element, average the small-strain tensor ε = sym(∇u) over its Gauss points,
+//!    take its deviatoric part ε − tr(ε) I/3 (the active stress is deviatoric, so muscles can
+//!    only make the shape-changing part of a strain) and its most negative eigenvalue (the
+//!    principal compression) with that eigenvector (the fibre direction).
 //! 3. The shape's muscle is the set of elements whose principal compression is at least
 //!    [`generate::GenerateSettings::threshold`] (default 0.25) of the largest compression of
 //!    that shape, each with its own fibre. Its maximum contraction is twice the mean
