@@ -430,3 +430,54 @@ fn face_experiment() {
     }
     println!("total {:?}", tot);
 }
+
+#[test]
+fn face_timing_experiment() {
+    use furrow::muscle::generate::{generate_muscles, GenerateSettings};
+    use std::time::Instant;
+    let rig = furrow::rig::face::generate();
+    let lat = Lattice::build(&rig.mesh, &LatticeSettings::default()).unwrap();
+    let mat = Material::default();
+    let interior = Interior::new(&lat, &mat).unwrap();
+    let g = generate_muscles(&lat, &interior, &rig.targets, &GenerateSettings::default()).unwrap();
+    let a = vec![0.5; g.muscles.len()];
+    let x = lat.rest_flat();
+    let act = ActiveEnergy::new(&interior, &g.muscles, &a);
+    println!("active elements {}", act.element_count());
+    let t = Instant::now();
+    let mut trip = Vec::new();
+    interior.eval(&x, None, Some(&mut trip), false);
+    println!("interior hess {:.3}s {} triplets", t.elapsed().as_secs_f64(), trip.len());
+    let t = Instant::now();
+    act.eval(&x, None, Some(&mut trip), false);
+    println!("active hess {:.3}s", t.elapsed().as_secs_f64());
+    let t = Instant::now();
+    let mut gr = vec![0.0; x.len()];
+    interior.eval(&x, Some(&mut gr), None, false);
+    println!("interior grad {:.4}s", t.elapsed().as_secs_f64());
+    let t = Instant::now();
+    act.eval(&x, Some(&mut gr), None, false);
+    println!("active grad {:.4}s", t.elapsed().as_secs_f64());
+    let mut f = Forward::new(interior.clone(), g.muscles.clone(), x.clone(), lat.pinned.clone()).unwrap();
+    let t = Instant::now();
+    let (q, rep) = f.equilibrium(&a, &x).unwrap();
+    println!("equilibrium {:.3}s {rep:?}", t.elapsed().as_secs_f64());
+    let t = Instant::now();
+    f.response(&q, &a).unwrap();
+    println!("response {:.3}s", t.elapsed().as_secs_f64());
+    let t = Instant::now();
+    f.response(&q, &a).unwrap();
+    println!("response again {:.3}s", t.elapsed().as_secs_f64());
+    let a2 = vec![0.6; g.muscles.len()];
+    let t = Instant::now();
+    let (_q, rep) = f.equilibrium(&a2, &q).unwrap();
+    println!("equilibrium again {:.3}s {rep:?}", t.elapsed().as_secs_f64());
+}
+
+#[test]
+fn bench_experiment() {
+    for cells in [2000, 4000] {
+        let v = furrow::muscle::bench::bench_fit(cells, 1).unwrap();
+        println!("{}", serde_json::to_string_pretty(&v).unwrap());
+    }
+}

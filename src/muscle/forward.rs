@@ -3,8 +3,9 @@
 //! displacements from the neutral face, which is the rest state), and its linearised
 //! response to activations.
 //!
-//! Equilibrium q(a) minimises E_int(q) + Σ_m E_m(q, a_m) over the free nodes (Newton with a
-//! sparse Cholesky on the free DOFs, backtracking on the energy). The linear response is
+//! Equilibrium q(a) minimises E_int(q) + Σ_m E_m(q, a_m) over the free nodes (modified
+//! Newton with a sparse Cholesky on the free DOFs, refactorised when the force residual falls
+//! by less than half in an iteration; backtracking on the energy). The linear response is
 //! ∂q/∂a_m = K⁻¹ f_m with K the Hessian at (q, a) (interior: frozen-rotation stiffness, exact
 //! at rest) and f_m the unit force of muscle m ([`super::model::unit_forces`]): one
 //! factorisation and one solve per muscle.
@@ -34,8 +35,10 @@ pub enum ForwardStatus {
 pub struct ForwardReport {
     /// Outcome.
     pub status: ForwardStatus,
-    /// Newton iterations (factorisations).
+    /// Newton iterations.
     pub iterations: usize,
+    /// Hessian factorisations (modified Newton reuses one while it converges fast).
+    pub factorisations: usize,
     /// Final ‖∇E‖ on free DOFs (N).
     pub residual: f64,
     /// `residual` over the reference force (the muscle forces, or a cell-scale floor).
@@ -249,15 +252,22 @@ impl Forward {
         let mut report = ForwardReport {
             status: ForwardStatus::IterationLimit,
             iterations: 0,
+            factorisations: 0,
             residual: res,
             relative_residual: res / reference,
         };
+        // Modified Newton: the Hessian (approximate anyway, see `tolerance`) is refactorised
+        // only when the residual fell by less than half over the last iteration.
+        let mut refactor = true;
         for _ in 0..self.max_newton {
             if res <= self.tolerance * reference {
                 report.status = ForwardStatus::Converged;
                 break;
             }
-            self.factorise_robust(&q, a)?;
+            if refactor {
+                self.factorise_robust(&q, a)?;
+                report.factorisations += 1;
+            }
             report.iterations += 1;
             let mut dir = self.solve_full(&g);
             dir.iter_mut().for_each(|v| *v = -*v);
@@ -282,13 +292,20 @@ impl Forward {
                 alpha *= 0.5;
             }
             let Some(et) = accepted else {
+                if !refactor {
+                    // A stale Hessian gave no descent: refactorise and try again.
+                    refactor = true;
+                    continue;
+                }
                 report.status = ForwardStatus::Stalled;
                 break;
             };
             q.copy_from_slice(&trial);
             g.copy_from_slice(&gt);
             e = et;
+            let previous = res;
             res = self.free_norm(&g);
+            refactor = res > 0.5 * previous;
             report.residual = res;
             report.relative_residual = res / reference;
         }

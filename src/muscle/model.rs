@@ -227,6 +227,11 @@ impl ActiveEnergy<'_> {
         project_psd: bool,
     ) -> f64 {
         let (e, terms) = &self.terms[t];
+        if terms.iter().all(|(_, s)| *s == 0.0) {
+            // Inactive element: zero energy, gradient and Hessian (the Hessian buffer keeps
+            // its zeros so the triplet layout does not depend on the activations).
+            return 0.0;
+        }
         let fs = self.interior.deformation_gradients(x, *e);
         let k = self.interior.nodes_per_element();
         let n3 = 3 * k;
