@@ -9,7 +9,9 @@ use furrow::lattice::{Lattice, LatticeSettings};
 use furrow::math::fd::{check_gradient, check_hessian};
 use furrow::math::Energy;
 use furrow::mesh::TriMesh;
-use furrow::muscle::generate::Lcg;
+use furrow::muscle::generate::{
+    generate_muscles, synthetic_arkit_targets, GenerateSettings, Lcg, ARKIT_NAMES,
+};
 use furrow::muscle::{ActiveEnergy, FitSettings, Fitter, Forward, ForwardStatus, FrameStatus, Muscle};
 use nalgebra::{Rotation3, Vector3};
 
@@ -406,78 +408,144 @@ fn degenerate_inputs_have_defined_answers() {
     }
 }
 
+/// Mean cell centre (m) of a muscle's elements.
+fn centroid(lat: &Lattice, m: &Muscle) -> V3 {
+    m.elements
+        .iter()
+        .map(|&e| lat.cell_origin(e) + V3::repeat(0.5 * lat.cell_size))
+        .sum::<V3>()
+        / m.elements.len() as f64
+}
+
+fn rms_of(d: &[V3]) -> f64 {
+    (d.iter().map(|v| v.norm_squared()).sum::<f64>() / d.len().max(1) as f64).sqrt()
+}
+
+/// The face rig with no muscle file: one muscle per blend shape, named after it; the
+/// left/right pairs are separate muscles on their own sides, mirror images of each other;
+/// fitting each shape alone lowers its RMS error, and the shapes made by one localised
+/// muscle (smiles, squints, jaw, pucker) activate their own muscle most. An all-zero shape
+/// makes no muscle (and says why), a duplicated shape makes an identical muscle that
+/// shares the activation, and weights outside [0, 1] give finite activations within bounds.
 #[test]
-fn face_experiment() {
-    use furrow::muscle::generate::{generate_muscles, GenerateSettings};
+fn face_rig_gets_sensible_muscles_without_a_file() {
     let rig = furrow::rig::face::generate();
     let lat = Lattice::build(&rig.mesh, &LatticeSettings::default()).unwrap();
     let mat = Material::default();
     let interior = Interior::new(&lat, &mat).unwrap();
     let g = generate_muscles(&lat, &interior, &rig.targets, &GenerateSettings::default()).unwrap();
-    for m in &g.muscles {
-        let cx: f64 = m.elements.iter().map(|&e| lat.cell_origin(e).x).sum::<f64>() / m.elements.len() as f64;
-        println!("  {} {} elements c={:.3} cx {:.4}", m.name, m.elements.len(), m.max_contraction, cx);
+    let names: Vec<&str> = g.muscles.iter().map(|m| m.name.as_str()).collect();
+    let shape_names: Vec<&str> = rig.targets.iter().map(|t| t.name.as_str()).collect();
+    assert_eq!(names, shape_names);
+    assert!(g.skipped.is_empty());
+    let (lo, hi) = rig.mesh.bounding_box().unwrap();
+    let mid = 0.5 * (lo.x + hi.x);
+    for (l, r) in [("squint_left", "squint_right"), ("smile_left", "smile_right")] {
+        let ml = &g.muscles[names.iter().position(|n| *n == l).unwrap()];
+        let mr = &g.muscles[names.iter().position(|n| *n == r).unwrap()];
+        let (cl, cr) = (centroid(&lat, ml), centroid(&lat, mr));
+        println!("{l}: {} elements at x {:.4}; {r}: {} elements at x {:.4}; mid {mid:.4}", ml.elements.len(), cl.x, mr.elements.len(), cr.x);
+        assert_ne!(ml.elements, mr.elements);
+        assert!((cl.x - mid) * (cr.x - mid) < 0.0, "{l} and {r} on the same side");
+        assert!(((cl.x - mid) + (cr.x - mid)).abs() < 0.1 * (cl.x - cr.x).abs());
+        assert!((cl.y - cr.y).abs() < 0.1 * (cl.x - cr.x).abs());
     }
     let mut f = Fitter::new(&lat, &mat, g.muscles.clone(), FitSettings::default()).unwrap();
-    let mut tot = (0.0, 0.0);
-    for t in rig.targets.iter() {
-        let target: Vec<_> = rig.mesh.positions.iter().zip(&t.positions).map(|(p, d)| p + d).collect();
-        let rms_t = (t.positions.iter().map(|d| d.norm_squared()).sum::<f64>() / t.positions.len() as f64).sqrt();
+    let (mut sum_t, mut sum_f) = (0.0, 0.0);
+    for (i, t) in rig.targets.iter().enumerate() {
+        let target: Vec<V3> = rig.mesh.positions.iter().zip(&t.positions).map(|(p, d)| p + d).collect();
         f.reset();
         let fit = f.fit_frame(&target).unwrap();
-        tot.0 += rms_t; tot.1 += fit.rms_residual;
-        println!("shape {} target rms {:.4} fit rms {:.4} a={:?}", t.name, rms_t, fit.rms_residual, fit.activations.iter().map(|v| (v*100.0).round()/100.0).collect::<Vec<_>>());
+        let rt = rms_of(&t.positions);
+        println!("{:>13}: target RMS {:.3} mm, fit RMS {:.3} mm, own activation {:.2}, largest {:.2}", t.name, rt * 1e3, fit.rms_residual * 1e3, fit.activations[i], fit.activations.iter().cloned().fold(0.0, f64::max));
+        assert!(fit.rms_residual <= rt + 1e-12);
+        sum_t += rt;
+        sum_f += fit.rms_residual;
+        if ["squint_left", "squint_right", "smile_left", "smile_right", "jaw_open", "pucker"].contains(&t.name.as_str()) {
+            let best = (0..fit.activations.len()).max_by(|&a, &b| fit.activations[a].total_cmp(&fit.activations[b])).unwrap();
+            assert_eq!(best, i, "{}: {:?}", t.name, fit.activations);
+        }
     }
-    println!("total {:?}", tot);
+    println!("sum of RMS over the shapes: target {:.3} mm, fit {:.3} mm", sum_t * 1e3, sum_f * 1e3);
+    assert!(sum_f < 0.8 * sum_t);
+    // Weights outside [0, 1].
+    let mut w = vec![0.0; rig.targets.len()];
+    w[0] = 2.0;
+    w[5] = -1.0;
+    w[7] = 1.5;
+    let mut target = rig.mesh.positions.clone();
+    for (t, &wt) in rig.targets.iter().zip(&w) {
+        for (p, d) in target.iter_mut().zip(&t.positions) {
+            *p += d * wt;
+        }
+    }
+    let fit = f.fit_frame(&target).unwrap();
+    assert_eq!(fit.status, FrameStatus::Fitted);
+    assert!(fit.activations.iter().all(|a| (0.0..=1.0).contains(a)));
+    assert!(fit.rms_residual.is_finite());
+    // An all-zero shape and a duplicated one.
+    let mut targets = rig.targets.clone();
+    let mut zero = targets[0].clone();
+    zero.name = "empty".into();
+    zero.positions.iter_mut().for_each(|d| *d = V3::zeros());
+    targets.push(zero);
+    targets.push(targets[5].clone());
+    let g2 = generate_muscles(&lat, &interior, &targets, &GenerateSettings::default()).unwrap();
+    println!("skipped: {:?}", g2.skipped);
+    assert_eq!(g2.skipped.len(), 1);
+    assert_eq!(g2.skipped[0].0, "empty");
+    let dup = g2.muscles.last().unwrap();
+    assert_eq!(dup.name, "smile_left#2");
+    assert_eq!(dup.elements, g2.muscles[5].elements);
+    let mut f2 = Fitter::new(&lat, &mat, g2.muscles.clone(), FitSettings::default()).unwrap();
+    let target: Vec<V3> = rig.mesh.positions.iter().zip(&rig.targets[5].positions).map(|(p, d)| p + d).collect();
+    let fit = f2.fit_frame(&target).unwrap();
+    let n = fit.activations.len();
+    println!("duplicated smile_left: {:.4} and {:.4}", fit.activations[5], fit.activations[n - 1]);
+    assert!(fit.activations.iter().all(|a| a.is_finite()));
+    assert!((fit.activations[5] - fit.activations[n - 1]).abs() < 1e-6);
 }
 
+/// A capture-style rig with the 52 ARKit shapes (synthetic smooth bumps on the face): 52
+/// muscles with the shapes' names; every `…Left` muscle lies on the +X half and its
+/// `…Right` partner on the −X half, as separate muscles; a frame mixing several shapes is
+/// fitted with a lower RMS error than the target's own displacement.
 #[test]
-fn face_timing_experiment() {
-    use furrow::muscle::generate::{generate_muscles, GenerateSettings};
-    use std::time::Instant;
+fn arkit_rig_gets_one_muscle_per_shape_with_pairs_kept_apart() {
     let rig = furrow::rig::face::generate();
     let lat = Lattice::build(&rig.mesh, &LatticeSettings::default()).unwrap();
     let mat = Material::default();
     let interior = Interior::new(&lat, &mat).unwrap();
-    let g = generate_muscles(&lat, &interior, &rig.targets, &GenerateSettings::default()).unwrap();
-    let a = vec![0.5; g.muscles.len()];
-    let x = lat.rest_flat();
-    let act = ActiveEnergy::new(&interior, &g.muscles, &a);
-    println!("active elements {}", act.element_count());
-    let t = Instant::now();
-    let mut trip = Vec::new();
-    interior.eval(&x, None, Some(&mut trip), false);
-    println!("interior hess {:.3}s {} triplets", t.elapsed().as_secs_f64(), trip.len());
-    let t = Instant::now();
-    act.eval(&x, None, Some(&mut trip), false);
-    println!("active hess {:.3}s", t.elapsed().as_secs_f64());
-    let t = Instant::now();
-    let mut gr = vec![0.0; x.len()];
-    interior.eval(&x, Some(&mut gr), None, false);
-    println!("interior grad {:.4}s", t.elapsed().as_secs_f64());
-    let t = Instant::now();
-    act.eval(&x, Some(&mut gr), None, false);
-    println!("active grad {:.4}s", t.elapsed().as_secs_f64());
-    let mut f = Forward::new(interior.clone(), g.muscles.clone(), x.clone(), lat.pinned.clone()).unwrap();
-    let t = Instant::now();
-    let (q, rep) = f.equilibrium(&a, &x).unwrap();
-    println!("equilibrium {:.3}s {rep:?}", t.elapsed().as_secs_f64());
-    let t = Instant::now();
-    f.response(&q, &a).unwrap();
-    println!("response {:.3}s", t.elapsed().as_secs_f64());
-    let t = Instant::now();
-    f.response(&q, &a).unwrap();
-    println!("response again {:.3}s", t.elapsed().as_secs_f64());
-    let a2 = vec![0.6; g.muscles.len()];
-    let t = Instant::now();
-    let (_q, rep) = f.equilibrium(&a2, &q).unwrap();
-    println!("equilibrium again {:.3}s {rep:?}", t.elapsed().as_secs_f64());
-}
-
-#[test]
-fn bench_experiment() {
-    for cells in [2000, 4000] {
-        let v = furrow::muscle::bench::bench_fit(cells, 1).unwrap();
-        println!("{}", serde_json::to_string_pretty(&v).unwrap());
+    let targets = synthetic_arkit_targets(&rig.mesh, 0.002, 0.02, 7);
+    let g = generate_muscles(&lat, &interior, &targets, &GenerateSettings::default()).unwrap();
+    assert_eq!(g.muscles.len(), 52, "skipped: {:?}", g.skipped);
+    let names: Vec<&str> = g.muscles.iter().map(|m| m.name.as_str()).collect();
+    assert_eq!(names, ARKIT_NAMES.to_vec());
+    let (lo, hi) = rig.mesh.bounding_box().unwrap();
+    let mid = 0.5 * (lo.x + hi.x);
+    let mut pairs = 0;
+    for (i, m) in g.muscles.iter().enumerate() {
+        if let Some(stem) = m.name.strip_suffix("Left") {
+            let j = names.iter().position(|n| *n == format!("{stem}Right")).unwrap();
+            let (cl, cr) = (centroid(&lat, m), centroid(&lat, &g.muscles[j]));
+            assert!(cl.x > mid && cr.x < mid, "{}: {:.4} / {:.4}", m.name, cl.x, cr.x);
+            assert_ne!(i, j);
+            pairs += 1;
+        }
     }
+    assert_eq!(pairs, 20);
+    let mut f = Fitter::new(&lat, &mat, g.muscles.clone(), FitSettings::default()).unwrap();
+    let w = &furrow::muscle::bench::synthetic_clip(52, 40, 1)[39];
+    let mut target = rig.mesh.positions.clone();
+    let mut disp = vec![V3::zeros(); target.len()];
+    for (t, &wt) in targets.iter().zip(w) {
+        for ((p, d), dd) in target.iter_mut().zip(&t.positions).zip(disp.iter_mut()) {
+            *p += d * wt;
+            *dd += d * wt;
+        }
+    }
+    let fit = f.fit_frame(&target).unwrap();
+    println!("52 shapes, {} active: target RMS {:.3} mm, fit RMS {:.3} mm, Jacobian {:.2} s", w.iter().filter(|&&x| x > 0.0).count(), rms_of(&disp) * 1e3, fit.rms_residual * 1e3, f.jacobian_s);
+    assert_eq!(fit.status, FrameStatus::Fitted);
+    assert!(fit.rms_residual < 0.8 * rms_of(&disp));
 }
