@@ -549,3 +549,136 @@ fn arkit_rig_gets_one_muscle_per_shape_with_pairs_kept_apart() {
     assert_eq!(fit.status, FrameStatus::Fitted);
     assert!(fit.rms_residual < 0.8 * rms_of(&disp));
 }
+
+/// Muscles from a TOML rig file: elements, a box and a vertex list resolve to the expected
+/// elements; mistakes are refused with the file, the muscle and the field named.
+#[test]
+fn rig_file_muscles_and_their_errors() {
+    use furrow::muscle::rigfile::parse;
+    let (mesh, lat, _) = muscle_block(0.2);
+    let path = std::path::Path::new("muscles.toml");
+    let ne = lat.elements.len();
+    // The vertex nearest the block's corner (0.04, 0.03, 0.02).
+    let corner = (0..mesh.vertex_count())
+        .min_by(|&a, &b| {
+            let c = V3::new(0.04, 0.03, 0.02);
+            (mesh.positions[a] - c).norm().total_cmp(&(mesh.positions[b] - c).norm())
+        })
+        .unwrap();
+    let text = format!(
+        r#"
+[[muscle]]
+name = "listed"
+fibre = [2.0, 0.0, 0.0]
+elements = [0, 1, 1]
+
+[[muscle]]
+name = "boxed"
+fibre = [0.0, 1.0, 1.0]
+max_contraction = 0.3
+bounds = [0.1, 0.8]
+box = {{ min = [0.0, 0.0, 0.0], max = [0.0199, 0.0199, 0.0099] }}
+
+[[muscle]]
+name = "by_vertex"
+fibre = [0.0, 0.0, 1.0]
+vertices = [{corner}]
+"#
+    );
+    let ms = parse(path, &text, &lat, &mesh).unwrap();
+    assert_eq!(ms.len(), 3);
+    assert_eq!(ms[0].elements, vec![0, 1]);
+    assert_eq!(ms[0].fibres[0], [1.0, 0.0, 0.0]);
+    // The box holds the centres of cells (0..2, 0..2, 0): four elements.
+    let want: Vec<usize> = (0..ne)
+        .filter(|&e| {
+            let c = lat.elements[e].cell;
+            c[0] < 2 && c[1] < 2 && c[2] == 0
+        })
+        .collect();
+    let mut got = ms[1].elements.clone();
+    got.retain(|e| want.contains(e));
+    assert_eq!(got, want);
+    assert_eq!(ms[1].bounds, [0.1, 0.8]);
+    assert_eq!(ms[1].max_contraction, 0.3);
+    assert_eq!(ms[2].elements, vec![lat.vertex_points[corner].element]);
+    assert_eq!(lat.elements[ms[2].elements[0]].cell, [3, 2, 1]);
+    for (bad, words) in [
+        ("[[muscle]]\nname = \"a\"\nfibre = [1, 0, 0]\nelements = [0]\ncolour = 3\n", vec!["colour"]),
+        ("[[muscle]]\nname = \"a\"\nfibre = [0, 0, 0]\nelements = [0]\n", vec!["'a'", "fibre"]),
+        ("[[muscle]]\nname = \"a\"\nfibre = [1, 0, 0]\n", vec!["'a'", "selects no lattice element"]),
+        ("[[muscle]]\nname = \"a\"\nfibre = [1, 0, 0]\nelements = [9999]\n", vec!["'a'", "9999"]),
+        ("[[muscle]]\nname = \"a\"\nfibre = [1, 0, 0]\nelements = [0]\nbounds = [1.0, 0.0]\n", vec!["'a'", "bounds"]),
+        ("[[muscle]]\nname = \"a\"\nfibre = [1, 0, 0]\nelements = [0]\nmax_contraction = 1.5\n", vec!["'a'", "max_contraction"]),
+        ("[[muscle]]\nname = \"a\"\nfibre = [1, 0, 0]\nelements = [0]\n[[muscle]]\nname = \"a\"\nfibre = [1, 0, 0]\nelements = [1]\n", vec!["'a'", "twice"]),
+        ("muscle = []\n", vec!["no [[muscle]]"]),
+    ] {
+        let e = parse(path, bad, &lat, &mesh).unwrap_err().to_string();
+        assert!(e.contains("muscles.toml"), "{e}");
+        for w in words {
+            assert!(e.contains(w), "{e} lacks {w}");
+        }
+    }
+}
+
+/// `furrow fit` on rigs/face.glb: a CSV with one row per frame, the 9 generated muscles,
+/// finite activations within [0, 1] and residuals; an empty range writes the header only;
+/// a bad range names --frames; an existing output is not overwritten without --force.
+#[test]
+fn fit_command_writes_activations_per_frame() {
+    use std::process::Command;
+    let bin = env!("CARGO_BIN_EXE_furrow");
+    let rig = concat!(env!("CARGO_MANIFEST_DIR"), "/rigs/face.glb");
+    let d = tempfile::tempdir().unwrap();
+    let csv = d.path().join("a.csv");
+    let o = Command::new(bin)
+        .args(["fit", rig, "--frames", "40:44", "--json", "-o"])
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["frames"], 4);
+    assert_eq!(j["muscles"].as_array().unwrap().len(), 9);
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines.len(), 5);
+    assert!(lines[0].starts_with("frame,time_s,brow_raise,"));
+    assert!(lines[0].ends_with(",rms_residual_m,status,clarabel_status"));
+    for (k, l) in lines[1..].iter().enumerate() {
+        let cols: Vec<&str> = l.split(',').collect();
+        assert_eq!(cols.len(), 2 + 9 + 3);
+        assert_eq!(cols[0], (40 + k).to_string());
+        for c in &cols[2..11] {
+            let a: f64 = c.parse().unwrap();
+            assert!((0.0..=1.0).contains(&a), "{l}");
+        }
+        let r: f64 = cols[11].parse().unwrap();
+        assert!(r.is_finite() && r >= 0.0);
+        assert_eq!(cols[12], "Fitted");
+    }
+    // Refused without --force; an empty range writes the header only.
+    let o = Command::new(bin).args(["fit", rig, "-o"]).arg(&csv).output().unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--force"));
+    let o = Command::new(bin)
+        .args(["fit", rig, "--frames", "7:7", "--force", "-o"])
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    assert_eq!(std::fs::read_to_string(&csv).unwrap().lines().count(), 1);
+    for bad in ["9:3", "0:100000", "a:b", "12"] {
+        let o = Command::new(bin)
+            .args(["fit", rig, "--force", "--frames", bad, "-o"])
+            .arg(&csv)
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(2), "{bad}");
+        assert!(String::from_utf8_lossy(&o.stderr).contains("--frames"), "{bad}");
+    }
+    for args in [vec!["fit", "--help"], vec!["bench", "fit", "--help"]] {
+        let o = Command::new(bin).args(&args).output().unwrap();
+        assert!(String::from_utf8_lossy(&o.stdout).contains("Example:\n  furrow "));
+    }
+}
