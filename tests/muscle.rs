@@ -12,7 +12,9 @@ use furrow::mesh::TriMesh;
 use furrow::muscle::generate::{
     generate_muscles, synthetic_arkit_targets, GenerateSettings, Lcg, ARKIT_NAMES,
 };
-use furrow::muscle::{ActiveEnergy, FitSettings, Fitter, Forward, ForwardStatus, FrameStatus, Muscle};
+use furrow::muscle::{
+    ActiveEnergy, FitSettings, Fitter, Forward, ForwardStatus, FrameStatus, Muscle,
+};
 use nalgebra::{Rotation3, Vector3};
 
 type V3 = Vector3<f64>;
@@ -69,7 +71,6 @@ fn box_lattice(cells: [usize; 3], h: f64, m: usize) -> (TriMesh, Lattice) {
     (mesh, lat)
 }
 
-
 /// The active energy of two overlapping muscles (different fibres, one with a negative
 /// activation) on a randomly deformed 2×2×2 block: gradient and Hessian against central
 /// differences; the PSD-projected Hessian has no negative eigenvalue.
@@ -90,7 +91,10 @@ fn active_energy_derivatives_match_finite_differences() {
     let e = ActiveEnergy::new(&interior, &muscles, &[0.7, -0.4]);
     let g = check_gradient(&e, &x, 0.01);
     let h = check_hessian(&e, &x, 0.01);
-    println!("gradient rel error {:.2e}, Hessian rel error {:.2e}", g.rel_error, h.rel_error);
+    println!(
+        "gradient rel error {:.2e}, Hessian rel error {:.2e}",
+        g.rel_error, h.rel_error
+    );
     assert!(g.rel_error < 1e-7, "{g:?}");
     assert!(h.rel_error < 1e-7, "{h:?}");
     // Projected Hessian: PSD.
@@ -112,13 +116,18 @@ fn active_energy_is_invariant_under_rigid_motion() {
     let (_, lat) = box_lattice([2, 2, 2], 0.01, 2);
     let interior = Interior::new(&lat, &Material::default()).unwrap();
     let ne = lat.elements.len();
-    let muscles = [Muscle::uniform("a", (0..ne).collect(), V3::new(0.3, 1.0, 0.5))];
+    let muscles = [Muscle::uniform(
+        "a",
+        (0..ne).collect(),
+        V3::new(0.3, 1.0, 0.5),
+    )];
     let mut rng = Lcg::new(5);
     let mut x = lat.rest_flat();
     for v in x.iter_mut() {
         *v += 0.003 * (rng.next_f64() - 0.5);
     }
-    let r = Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(V3::new(1.0, 2.0, -0.5)), 1.1);
+    let r =
+        Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(V3::new(1.0, 2.0, -0.5)), 1.1);
     let t = V3::new(0.3, -0.1, 0.05);
     let y: Vec<f64> = x
         .chunks_exact(3)
@@ -132,7 +141,10 @@ fn active_energy_is_invariant_under_rigid_motion() {
     let ex = e.eval(&x, Some(&mut gx), None, false);
     let ey = e.eval(&y, Some(&mut gy), None, false);
     assert!(ex.abs() > 1e-9, "a deformed muscle stores energy: {ex}");
-    assert!((ex - ey).abs() < 1e-12 * ex.abs().max(1e-12), "{ex} vs {ey}");
+    assert!(
+        (ex - ey).abs() < 1e-12 * ex.abs().max(1e-12),
+        "{ex} vs {ey}"
+    );
     let mut err: f64 = 0.0;
     let mut norm: f64 = 0.0;
     for (a, b) in gx.chunks_exact(3).zip(gy.chunks_exact(3)) {
@@ -191,7 +203,11 @@ fn muscle_block_shortens_by_the_stiffness_balance() {
             (1.0 + e1) * (1.0 + e2).powi(2)
         );
         assert!((e1 / -ac - 1.0).abs() < linear_tol, "{e1} vs {}", -ac);
-        assert!((e2 / (ac / 2.0) - 1.0).abs() < linear_tol, "{e2} vs {}", ac / 2.0);
+        assert!(
+            (e2 / (ac / 2.0) - 1.0).abs() < linear_tol,
+            "{e2} vs {}",
+            ac / 2.0
+        );
         let affine = |p: &[f64]| [p[0] * (1.0 + e1), p[1] * (1.0 + e2), p[2] * (1.0 + e2)];
         let rest = lat.rest_flat();
         let mut bone = rest.clone();
@@ -260,7 +276,10 @@ fn exact_settings(gauss_newton: usize) -> FitSettings {
 }
 
 fn max_diff(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
 }
 
 /// Activations chosen at random make a target through the linear model; the QP recovers
@@ -389,7 +408,10 @@ fn degenerate_inputs_have_defined_answers() {
         let mut f = Fitter::new(&lat, &Material::default(), muscles.clone(), settings).unwrap();
         let target = f.predict_linear(&truth);
         let fit = f.fit_frame(&target).unwrap();
-        println!("{settings:?}: {:?} {}", fit.activations, fit.clarabel_status);
+        println!(
+            "{settings:?}: {:?} {}",
+            fit.activations, fit.clarabel_status
+        );
         assert_eq!(fit.status, FrameStatus::Fitted);
         assert!(fit.activations.iter().all(|a| a.is_finite()));
         assert!(fit.rms_residual.is_finite() && fit.rms_residual < 1e-4);
@@ -440,33 +462,73 @@ fn face_rig_gets_sensible_muscles_without_a_file() {
     assert!(g.skipped.is_empty());
     let (lo, hi) = rig.mesh.bounding_box().unwrap();
     let mid = 0.5 * (lo.x + hi.x);
-    for (l, r) in [("squint_left", "squint_right"), ("smile_left", "smile_right")] {
+    for (l, r) in [
+        ("squint_left", "squint_right"),
+        ("smile_left", "smile_right"),
+    ] {
         let ml = &g.muscles[names.iter().position(|n| *n == l).unwrap()];
         let mr = &g.muscles[names.iter().position(|n| *n == r).unwrap()];
         let (cl, cr) = (centroid(&lat, ml), centroid(&lat, mr));
-        println!("{l}: {} elements at x {:.4}; {r}: {} elements at x {:.4}; mid {mid:.4}", ml.elements.len(), cl.x, mr.elements.len(), cr.x);
+        println!(
+            "{l}: {} elements at x {:.4}; {r}: {} elements at x {:.4}; mid {mid:.4}",
+            ml.elements.len(),
+            cl.x,
+            mr.elements.len(),
+            cr.x
+        );
         assert_ne!(ml.elements, mr.elements);
-        assert!((cl.x - mid) * (cr.x - mid) < 0.0, "{l} and {r} on the same side");
+        assert!(
+            (cl.x - mid) * (cr.x - mid) < 0.0,
+            "{l} and {r} on the same side"
+        );
         assert!(((cl.x - mid) + (cr.x - mid)).abs() < 0.1 * (cl.x - cr.x).abs());
         assert!((cl.y - cr.y).abs() < 0.1 * (cl.x - cr.x).abs());
     }
     let mut f = Fitter::new(&lat, &mat, g.muscles.clone(), FitSettings::default()).unwrap();
     let (mut sum_t, mut sum_f) = (0.0, 0.0);
     for (i, t) in rig.targets.iter().enumerate() {
-        let target: Vec<V3> = rig.mesh.positions.iter().zip(&t.positions).map(|(p, d)| p + d).collect();
+        let target: Vec<V3> = rig
+            .mesh
+            .positions
+            .iter()
+            .zip(&t.positions)
+            .map(|(p, d)| p + d)
+            .collect();
         f.reset();
         let fit = f.fit_frame(&target).unwrap();
         let rt = rms_of(&t.positions);
-        println!("{:>13}: target RMS {:.3} mm, fit RMS {:.3} mm, own activation {:.2}, largest {:.2}", t.name, rt * 1e3, fit.rms_residual * 1e3, fit.activations[i], fit.activations.iter().cloned().fold(0.0, f64::max));
+        println!(
+            "{:>13}: target RMS {:.3} mm, fit RMS {:.3} mm, own activation {:.2}, largest {:.2}",
+            t.name,
+            rt * 1e3,
+            fit.rms_residual * 1e3,
+            fit.activations[i],
+            fit.activations.iter().cloned().fold(0.0, f64::max)
+        );
         assert!(fit.rms_residual <= rt + 1e-12);
         sum_t += rt;
         sum_f += fit.rms_residual;
-        if ["squint_left", "squint_right", "smile_left", "smile_right", "jaw_open", "pucker"].contains(&t.name.as_str()) {
-            let best = (0..fit.activations.len()).max_by(|&a, &b| fit.activations[a].total_cmp(&fit.activations[b])).unwrap();
+        if [
+            "squint_left",
+            "squint_right",
+            "smile_left",
+            "smile_right",
+            "jaw_open",
+            "pucker",
+        ]
+        .contains(&t.name.as_str())
+        {
+            let best = (0..fit.activations.len())
+                .max_by(|&a, &b| fit.activations[a].total_cmp(&fit.activations[b]))
+                .unwrap();
             assert_eq!(best, i, "{}: {:?}", t.name, fit.activations);
         }
     }
-    println!("sum of RMS over the shapes: target {:.3} mm, fit {:.3} mm", sum_t * 1e3, sum_f * 1e3);
+    println!(
+        "sum of RMS over the shapes: target {:.3} mm, fit {:.3} mm",
+        sum_t * 1e3,
+        sum_f * 1e3
+    );
     assert!(sum_f < 0.8 * sum_t);
     // Weights outside [0, 1].
     let mut w = vec![0.0; rig.targets.len()];
@@ -498,10 +560,20 @@ fn face_rig_gets_sensible_muscles_without_a_file() {
     assert_eq!(dup.name, "smile_left#2");
     assert_eq!(dup.elements, g2.muscles[5].elements);
     let mut f2 = Fitter::new(&lat, &mat, g2.muscles.clone(), FitSettings::default()).unwrap();
-    let target: Vec<V3> = rig.mesh.positions.iter().zip(&rig.targets[5].positions).map(|(p, d)| p + d).collect();
+    let target: Vec<V3> = rig
+        .mesh
+        .positions
+        .iter()
+        .zip(&rig.targets[5].positions)
+        .map(|(p, d)| p + d)
+        .collect();
     let fit = f2.fit_frame(&target).unwrap();
     let n = fit.activations.len();
-    println!("duplicated smile_left: {:.4} and {:.4}", fit.activations[5], fit.activations[n - 1]);
+    println!(
+        "duplicated smile_left: {:.4} and {:.4}",
+        fit.activations[5],
+        fit.activations[n - 1]
+    );
     assert!(fit.activations.iter().all(|a| a.is_finite()));
     assert!((fit.activations[5] - fit.activations[n - 1]).abs() < 1e-6);
 }
@@ -526,9 +598,18 @@ fn arkit_rig_gets_one_muscle_per_shape_with_pairs_kept_apart() {
     let mut pairs = 0;
     for (i, m) in g.muscles.iter().enumerate() {
         if let Some(stem) = m.name.strip_suffix("Left") {
-            let j = names.iter().position(|n| *n == format!("{stem}Right")).unwrap();
+            let j = names
+                .iter()
+                .position(|n| *n == format!("{stem}Right"))
+                .unwrap();
             let (cl, cr) = (centroid(&lat, m), centroid(&lat, &g.muscles[j]));
-            assert!(cl.x > mid && cr.x < mid, "{}: {:.4} / {:.4}", m.name, cl.x, cr.x);
+            assert!(
+                cl.x > mid && cr.x < mid,
+                "{}: {:.4} / {:.4}",
+                m.name,
+                cl.x,
+                cr.x
+            );
             assert_ne!(i, j);
             pairs += 1;
         }
@@ -545,7 +626,13 @@ fn arkit_rig_gets_one_muscle_per_shape_with_pairs_kept_apart() {
         }
     }
     let fit = f.fit_frame(&target).unwrap();
-    println!("52 shapes, {} active: target RMS {:.3} mm, fit RMS {:.3} mm, Jacobian {:.2} s", w.iter().filter(|&&x| x > 0.0).count(), rms_of(&disp) * 1e3, fit.rms_residual * 1e3, f.jacobian_s);
+    println!(
+        "52 shapes, {} active: target RMS {:.3} mm, fit RMS {:.3} mm, Jacobian {:.2} s",
+        w.iter().filter(|&&x| x > 0.0).count(),
+        rms_of(&disp) * 1e3,
+        fit.rms_residual * 1e3,
+        f.jacobian_s
+    );
     assert_eq!(fit.status, FrameStatus::Fitted);
     assert!(fit.rms_residual < 0.8 * rms_of(&disp));
 }
@@ -562,7 +649,9 @@ fn rig_file_muscles_and_their_errors() {
     let corner = (0..mesh.vertex_count())
         .min_by(|&a, &b| {
             let c = V3::new(0.04, 0.03, 0.02);
-            (mesh.positions[a] - c).norm().total_cmp(&(mesh.positions[b] - c).norm())
+            (mesh.positions[a] - c)
+                .norm()
+                .total_cmp(&(mesh.positions[b] - c).norm())
         })
         .unwrap();
     let text = format!(
@@ -658,7 +747,11 @@ fn fit_command_writes_activations_per_frame() {
         assert_eq!(cols[12], "Fitted");
     }
     // Refused without --force; an empty range writes the header only.
-    let o = Command::new(bin).args(["fit", rig, "-o"]).arg(&csv).output().unwrap();
+    let o = Command::new(bin)
+        .args(["fit", rig, "-o"])
+        .arg(&csv)
+        .output()
+        .unwrap();
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("--force"));
     let o = Command::new(bin)
@@ -675,7 +768,10 @@ fn fit_command_writes_activations_per_frame() {
             .output()
             .unwrap();
         assert_eq!(o.status.code(), Some(2), "{bad}");
-        assert!(String::from_utf8_lossy(&o.stderr).contains("--frames"), "{bad}");
+        assert!(
+            String::from_utf8_lossy(&o.stderr).contains("--frames"),
+            "{bad}"
+        );
     }
     for args in [vec!["fit", "--help"], vec!["bench", "fit", "--help"]] {
         let o = Command::new(bin).args(&args).output().unwrap();

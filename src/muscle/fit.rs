@@ -225,15 +225,13 @@ impl Fitter {
 
     /// B applied to each node-space column, concatenated column-major (3V × m).
     fn surface_columns(&self, cols: &[Vec<f64>]) -> Vec<f64> {
-        cols.par_iter()
-            .flat_map_iter(|c| self.surface(c))
-            .collect()
+        cols.par_iter().flat_map_iter(|c| self.surface(c)).collect()
     }
 
     /// JᵀJ (m × m, row-major) of a column-major J with 3V rows.
     fn gram(&self, j: &[f64]) -> Vec<f64> {
         let r = 3 * self.vertices;
-        let m = if r == 0 { 0 } else { j.len() / r };
+        let m = j.len().checked_div(r).unwrap_or(0);
         let rows: Vec<Vec<f64>> = (0..m)
             .into_par_iter()
             .map(|a| {

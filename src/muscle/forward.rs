@@ -163,12 +163,7 @@ impl Forward {
     fn factorise(&mut self, q: &[f64], a: &[f64], project: bool) -> Result<(), MuscleError> {
         let mut trip = Vec::new();
         self.interior.eval(q, None, Some(&mut trip), false);
-        ActiveEnergy::new(&self.interior, &self.muscles, a).eval(
-            q,
-            None,
-            Some(&mut trip),
-            project,
-        );
+        ActiveEnergy::new(&self.interior, &self.muscles, a).eval(q, None, Some(&mut trip), project);
         let free = &self.free;
         let mut reduced: Vec<(usize, usize, f64)> = trip
             .into_iter()
@@ -283,8 +278,7 @@ impl Forward {
                 let et = self.energy(&trial, a, Some(&mut gt));
                 let ok = et.is_finite()
                     && (et <= e + 1e-4 * alpha * slope.min(0.0)
-                        || (et - e <= 1e-12 * e.abs().max(1e-300)
-                            && self.free_norm(&gt) < res));
+                        || (et - e <= 1e-12 * e.abs().max(1e-300) && self.free_norm(&gt) < res));
                 if ok {
                     accepted = Some(et);
                     break;

@@ -42,7 +42,10 @@ impl GenerateSettings {
     pub fn validate(&self) -> Result<(), MuscleError> {
         let bad = |field: &'static str, msg: String| Err(MuscleError::Settings { field, msg });
         if !(self.regulariser.is_finite() && self.regulariser > 0.0) {
-            return bad("regulariser", format!("must be > 0, got {}", self.regulariser));
+            return bad(
+                "regulariser",
+                format!("must be > 0, got {}", self.regulariser),
+            );
         }
         if !(self.threshold > 0.0 && self.threshold <= 1.0) {
             return bad(
@@ -227,7 +230,7 @@ pub fn generate_muscles(
     for (ti, (t, ut)) in targets.iter().zip(&u).enumerate() {
         let comp = element_compression(interior, &rest, ut);
         let max = comp.iter().map(|c| c.0).fold(0.0f64, f64::max);
-        if !(max > settings.min_compression) {
+        if max.is_nan() || max <= settings.min_compression {
             out.skipped.push((
                 t.name.clone(),
                 format!(
@@ -333,7 +336,10 @@ pub struct Lcg(u64);
 impl Lcg {
     /// A generator from `seed`.
     pub fn new(seed: u64) -> Self {
-        Self(seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407))
+        Self(
+            seed.wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407),
+        )
     }
 
     /// The next number in [0, 1).
@@ -358,9 +364,7 @@ pub fn synthetic_arkit_targets(
     seed: u64,
 ) -> Vec<MorphTarget> {
     let mut rng = Lcg::new(seed);
-    let (lo, hi) = mesh
-        .bounding_box()
-        .unwrap_or((V3::zeros(), V3::zeros()));
+    let (lo, hi) = mesh.bounding_box().unwrap_or((V3::zeros(), V3::zeros()));
     let mid = 0.5 * (lo.x + hi.x);
     let margin = 0.1 * (hi.x - lo.x);
     ARKIT_NAMES

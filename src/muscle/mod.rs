@@ -45,7 +45,7 @@ pub mod model;
 pub mod qp;
 pub mod rigfile;
 
-pub use fit::{FitSettings, FrameFit, FrameStatus, Fitter};
+pub use fit::{FitSettings, Fitter, FrameFit, FrameStatus};
 pub use forward::{Forward, ForwardReport, ForwardStatus};
 pub use generate::{generate_muscles, GenerateSettings, Generated};
 pub use model::{unit_forces, ActiveEnergy, Muscle, DEFAULT_MAX_CONTRACTION};

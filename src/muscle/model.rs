@@ -134,7 +134,11 @@ impl<'a> ActiveEnergy<'a> {
     /// The active energy of `muscles` at `activations` (one per muscle, dimensionless) on
     /// `interior`. Muscles are assumed validated against the interior's lattice.
     pub fn new(interior: &'a Interior, muscles: &[Muscle], activations: &[f64]) -> Self {
-        assert_eq!(muscles.len(), activations.len(), "one activation per muscle");
+        assert_eq!(
+            muscles.len(),
+            activations.len(),
+            "one activation per muscle"
+        );
         let mut per: Vec<Vec<(V3, f64)>> = vec![Vec::new(); interior.elements.len()];
         for (m, &a) in muscles.iter().zip(activations) {
             let s = a * m.stress(interior.mu);
@@ -335,7 +339,11 @@ impl Energy for ActiveEnergy<'_> {
             .into_par_iter()
             .map(|t| {
                 let mut g = vec![0.0; n3];
-                let mut h = if want_h { vec![0.0; n3 * n3] } else { Vec::new() };
+                let mut h = if want_h {
+                    vec![0.0; n3 * n3]
+                } else {
+                    Vec::new()
+                };
                 let en = self.element(
                     x,
                     t,
@@ -414,7 +422,11 @@ mod tests {
             for r in 0..9 {
                 let (ri, rj) = (r % 3, r / 3);
                 let num = (pp[(ri, rj)] - pm[(ri, rj)]) / (2.0 * eps);
-                assert!((num - h[r][c]).abs() < 1e-7, "{r} {c}: {num} vs {}", h[r][c]);
+                assert!(
+                    (num - h[r][c]).abs() < 1e-7,
+                    "{r} {c}: {num} vs {}",
+                    h[r][c]
+                );
             }
         }
     }

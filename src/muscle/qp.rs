@@ -134,7 +134,10 @@ pub fn solve_qp(p: &QpProblem) -> QpSolution {
     solver.solve();
     let sol = &solver.solution;
     let status = format!("{:?}", sol.status);
-    let ok = matches!(sol.status, SolverStatus::Solved | SolverStatus::AlmostSolved);
+    let ok = matches!(
+        sol.status,
+        SolverStatus::Solved | SolverStatus::AlmostSolved
+    );
     if !ok || sol.x.iter().any(|v| !v.is_finite()) {
         return failed(status, sol.iterations);
     }
@@ -203,10 +206,10 @@ fn polish(
         let chol = nalgebra::Cholesky::new(h.clone())?;
         // Reject nearly singular reduced systems (rank-deficient J without regularisation).
         let d = chol.l().diagonal();
-        let (dmin, dmax) = d
-            .iter()
-            .fold((f64::INFINITY, 0.0f64), |(lo, hi), v| (lo.min(*v), hi.max(*v)));
-        if !(dmin > 1e-7 * dmax) {
+        let (dmin, dmax) = d.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), v| {
+            (lo.min(*v), hi.max(*v))
+        });
+        if dmin.is_nan() || dmin <= 1e-7 * dmax {
             return None;
         }
         let sol = chol.solve(&rhs);
@@ -214,7 +217,10 @@ fn polish(
             x[i] = sol[r];
         }
     }
-    let scale: f64 = (0..m).map(|i| hess(i, i).abs()).fold(0.0, f64::max).max(1e-300);
+    let scale: f64 = (0..m)
+        .map(|i| hess(i, i).abs())
+        .fold(0.0, f64::max)
+        .max(1e-300);
     for i in 0..m {
         let [lo, hi] = p.bounds[i];
         let tol = 1e-9 * (hi - lo).abs().max(1.0);

@@ -105,7 +105,7 @@ pub fn parse(
         }
         if let Some(b) = &m.region {
             let (lo, hi) = (Vector3::from(b.min), Vector3::from(b.max));
-            if (0..3).any(|i| !(lo[i] <= hi[i])) {
+            if (0..3).any(|i| lo[i].is_nan() || hi[i].is_nan() || lo[i] > hi[i]) {
                 return Err(err(format!(
                     "muscle '{name}': box min {:?} must be ≤ max {:?}",
                     b.min, b.max
