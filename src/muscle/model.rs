@@ -128,6 +128,8 @@ pub struct ActiveEnergy<'a> {
     interior: &'a Interior,
     /// Per element: (fibre, a σ in Pa) of each muscle acting on it.
     terms: Vec<(usize, Vec<(V3, f64)>)>,
+    /// [`triple_tensor`] of the interior, computed on the first Hessian request.
+    triple: std::sync::OnceLock<Vec<f64>>,
 }
 
 impl<'a> ActiveEnergy<'a> {
@@ -151,7 +153,11 @@ impl<'a> ActiveEnergy<'a> {
             .enumerate()
             .filter(|(_, t)| !t.is_empty())
             .collect();
-        Self { interior, terms }
+        Self {
+            interior,
+            terms,
+            triple: std::sync::OnceLock::new(),
+        }
     }
 
     /// Elements touched by at least one muscle.
@@ -241,29 +247,41 @@ impl ActiveEnergy<'_> {
         let n3 = 3 * k;
         let mut energy = 0.0;
         let mut hess = hess;
+        let cheap = hess.is_some() && !project_psd;
+        // Upper node-pair blocks (b ≥ a) of the Hessian on the cheap path.
+        let mut hb = if cheap {
+            vec![M3::zeros(); k * k]
+        } else {
+            Vec::new()
+        };
+        let mut c = [0.0; 27];
         for (q, f) in self.interior.qp.iter().zip(&fs) {
             let mut p_tot = M3::zeros();
             let mut h9 = [[0.0; 9]; 9];
-            // Cheap Hessian path pieces: Σ s (I − nnᵀ)/l with the fibre, and Σ s F.
-            let mut lam: Vec<(f64, V3, M3)> = Vec::new();
-            let mut s_sum = 0.0;
             for (fib, s) in terms {
                 let (psi, p, l, n) = density(f, fib);
                 energy += q.w * s * psi;
                 p_tot += p * *s;
-                if hess.is_some() {
-                    if project_psd {
-                        let hd = density_hessian(f, fib, l, &n);
-                        for i in 0..9 {
-                            for j in 0..9 {
-                                h9[i][j] += s * hd[i][j];
-                            }
+                if project_psd && hess.is_some() {
+                    let hd = density_hessian(f, fib, l, &n);
+                    for i in 0..9 {
+                        for j in 0..9 {
+                            h9[i][j] += s * hd[i][j];
                         }
-                    } else {
-                        if l > MIN_STRETCH {
-                            lam.push((*s, *fib, (M3::identity() - n * n.transpose()) / l));
+                    }
+                } else if cheap && l > MIN_STRETCH && *s != 0.0 {
+                    // Fibre term: (f·g_a)(f·g_b) w s (I − nnᵀ)/l.
+                    let wsa = (M3::identity() - n * n.transpose()) * (q.w * s / l);
+                    for a in 0..k {
+                        c[a] = fib.x * q.g[a][0] + fib.y * q.g[a][1] + fib.z * q.g[a][2];
+                    }
+                    for a in 0..k {
+                        if c[a] == 0.0 {
+                            continue;
                         }
-                        s_sum += s;
+                        for b in a..k {
+                            hb[a * k + b] += wsa * (c[a] * c[b]);
+                        }
                     }
                 }
             }
@@ -274,43 +292,55 @@ impl ActiveEnergy<'_> {
                     grad[3 * a + i] += fa[i];
                 }
             }
+            if !project_psd {
+                continue;
+            }
             let Some(hm) = hess.as_deref_mut() else {
                 continue;
             };
-            if project_psd {
-                let m = nalgebra::SMatrix::<f64, 9, 9>::from_fn(|i, j| h9[i][j]);
-                let mut eig = SymmetricEigen::new(m);
-                eig.eigenvalues.iter_mut().for_each(|v| *v = v.max(0.0));
-                let mp = eig.recompose();
-                for a in 0..k {
-                    for b in 0..k {
-                        let (ga, gb) = (q.g[a], q.g[b]);
-                        for i in 0..3 {
-                            for m2 in 0..3 {
-                                let mut v = 0.0;
-                                for j in 0..3 {
-                                    for l in 0..3 {
-                                        v += ga[j] * mp[(3 * j + i, 3 * l + m2)] * gb[l];
-                                    }
+            let m = nalgebra::SMatrix::<f64, 9, 9>::from_fn(|i, j| h9[i][j]);
+            let mut eig = SymmetricEigen::new(m);
+            eig.eigenvalues.iter_mut().for_each(|v| *v = v.max(0.0));
+            let mp = eig.recompose();
+            for a in 0..k {
+                for b in 0..k {
+                    let (ga, gb) = (q.g[a], q.g[b]);
+                    for i in 0..3 {
+                        for m2 in 0..3 {
+                            let mut v = 0.0;
+                            for j in 0..3 {
+                                for l in 0..3 {
+                                    v += ga[j] * mp[(3 * j + i, 3 * l + m2)] * gb[l];
                                 }
-                                hm[(3 * a + i) * n3 + 3 * b + m2] += q.w * v;
                             }
+                            hm[(3 * a + i) * n3 + 3 * b + m2] += q.w * v;
                         }
                     }
                 }
-            } else {
-                for a in 0..k {
-                    let ga = V3::new(q.g[a][0], q.g[a][1], q.g[a][2]);
-                    for b in 0..k {
-                        let gb = V3::new(q.g[b][0], q.g[b][1], q.g[b][2]);
-                        let mut blk = skew(&(f * ga.cross(&gb))) * (s_sum / 3.0);
-                        for (s, fib, am) in &lam {
-                            blk += am * (s * fib.dot(&ga) * fib.dot(&gb));
-                        }
-                        for i in 0..3 {
-                            for m2 in 0..3 {
-                                hm[(3 * a + i) * n3 + 3 * b + m2] += q.w * blk[(i, m2)];
-                            }
+            }
+        }
+        if let (true, Some(hm)) = (cheap, hess) {
+            // Volume term: Σ_q w (s_sum/3) [F_q (g_a × g_b)]× = (s_sum/3) [Σ_c T_abc x_c]×,
+            // with T_abc = Σ_q w g_c · (g_a × g_b) (the same for every element).
+            let s3: f64 = terms.iter().map(|(_, s)| s).sum::<f64>() / 3.0;
+            let t = self.triple.get_or_init(|| triple_tensor(self.interior));
+            let nodes = &self.interior.elements[*e];
+            let xs: Vec<V3> = nodes
+                .iter()
+                .map(|&n| V3::new(x[3 * n], x[3 * n + 1], x[3 * n + 2]))
+                .collect();
+            for a in 0..k {
+                for b in a..k {
+                    let mut blk = hb[a * k + b];
+                    if a != b && s3 != 0.0 {
+                        let row = &t[(a * k + b) * k..(a * k + b + 1) * k];
+                        let v: V3 = row.iter().zip(&xs).map(|(tc, xc)| xc * *tc).sum();
+                        blk += skew(&(v * s3));
+                    }
+                    for i in 0..3 {
+                        for m2 in 0..3 {
+                            hm[(3 * a + i) * n3 + 3 * b + m2] = blk[(i, m2)];
+                            hm[(3 * b + m2) * n3 + 3 * a + i] = blk[(i, m2)];
                         }
                     }
                 }
@@ -318,6 +348,28 @@ impl ActiveEnergy<'_> {
         }
         energy
     }
+}
+
+/// T_abc = Σ_q w_q g_c · (g_a × g_b) over the interior's Gauss points (m³/m³ = 1),
+/// index (a·K + b)·K + c.
+fn triple_tensor(interior: &Interior) -> Vec<f64> {
+    let k = interior.nodes_per_element();
+    let mut t = vec![0.0; k * k * k];
+    for q in &interior.qp {
+        let g: Vec<V3> = q.g.iter().map(|g| V3::new(g[0], g[1], g[2])).collect();
+        for a in 0..k {
+            for b in 0..k {
+                if a == b {
+                    continue;
+                }
+                let ab = g[a].cross(&g[b]) * q.w;
+                for (cc, gc) in g.iter().enumerate() {
+                    t[(a * k + b) * k + cc] += gc.dot(&ab);
+                }
+            }
+        }
+    }
+    t
 }
 
 impl Energy for ActiveEnergy<'_> {
