@@ -778,3 +778,50 @@ fn fit_command_writes_activations_per_frame() {
         assert!(String::from_utf8_lossy(&o.stdout).contains("Example:\n  furrow "));
     }
 }
+
+/// The interior's own quasi-static solver (fem::BackwardEuler, gravity off) driven by the
+/// muscles through [`linearised_terms`] as extra terms, re-linearised a few times, reaches
+/// the same equilibrium as the muscle forward model.
+#[test]
+fn linearised_terms_drive_the_interior_solver_to_the_muscle_equilibrium() {
+    use furrow::fem::{BackwardEuler, StepSettings};
+    use furrow::muscle::linearised_terms;
+    let (_, lat, muscles) = muscle_block(0.2);
+    let mat = Material::default();
+    let a = [0.8, 0.3, 0.5, 0.9, 0.2, 0.6];
+    let interior = Interior::new(&lat, &mat).unwrap();
+    let rest = lat.rest_flat();
+    let mut fw = Forward::new(
+        interior.clone(),
+        muscles.clone(),
+        rest.clone(),
+        lat.pinned.clone(),
+    )
+    .unwrap();
+    let (q_ref, _) = fw.equilibrium(&a, &rest).unwrap();
+    let settings = StepSettings {
+        gravity: [0.0; 3],
+        ..Default::default()
+    };
+    let mut be =
+        BackwardEuler::new(interior.clone(), rest.clone(), lat.pinned.clone(), settings).unwrap();
+    let zero = vec![0.0; rest.len()];
+    let scale = q_ref
+        .iter()
+        .zip(&rest)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max);
+    let mut err = f64::INFINITY;
+    for _ in 0..12 {
+        let e = ActiveEnergy::new(&interior, &muscles, &a);
+        let (k, f) = linearised_terms(&e, &be.q);
+        let extra = furrow::fem::ExtraTerms {
+            stiffness: &k,
+            force: &f,
+        };
+        be.quasi_static(&zero, Some(&extra)).unwrap();
+        err = max_diff(&be.q, &q_ref);
+    }
+    println!("max node difference {err:.2e} m of {scale:.2e} m motion");
+    assert!(err < 1e-6 * scale, "{err} vs {scale}");
+}

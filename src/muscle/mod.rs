@@ -48,7 +48,7 @@ pub mod rigfile;
 pub use fit::{FitSettings, Fitter, FrameFit, FrameStatus};
 pub use forward::{Forward, ForwardReport, ForwardStatus};
 pub use generate::{generate_muscles, GenerateSettings, Generated};
-pub use model::{unit_forces, ActiveEnergy, Muscle, DEFAULT_MAX_CONTRACTION};
+pub use model::{linearised_terms, unit_forces, ActiveEnergy, Muscle, DEFAULT_MAX_CONTRACTION};
 pub use qp::{solve_qp, QpProblem, QpSolution, QpStatus};
 
 /// Errors of the muscle layer (bad input; numerical outcomes are statuses).

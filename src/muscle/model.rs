@@ -451,6 +451,19 @@ pub fn unit_forces(interior: &Interior, muscles: &[Muscle], x: &[f64]) -> Vec<Ve
         .collect()
 }
 
+/// The active energy linearised at node positions `q` (flat, m), in the form of
+/// [`crate::fem::ExtraTerms`] for one backward Euler step or quasi-static solve of the
+/// interior: the force F = −∇E_a(q) (flat, N) and the stiffness K = ∇²E_a(q) projected to
+/// positive semi-definite (triplets, N/m), so that E_a(y) ≈ E_a(q) − Fᵀ(y − q) +
+/// ½ (y − q)ᵀ K (y − q) within the step. (Add the skin's terms to these when both act.)
+pub fn linearised_terms(energy: &ActiveEnergy, q: &[f64]) -> (Vec<(usize, usize, f64)>, Vec<f64>) {
+    let mut g = vec![0.0; q.len()];
+    let mut k = Vec::new();
+    energy.eval(q, Some(&mut g), Some(&mut k), true);
+    g.iter_mut().for_each(|v| *v = -*v);
+    (k, g)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
