@@ -4,7 +4,7 @@
 //! 2013): a coarse quadratic B-spline hexahedral lattice simulates the soft interior, and a
 //! high-resolution thin shell (the skin) is tied to it only at low spatial frequency so that
 //! wrinkles form at the critical wavelength. Layers, bottom to top: [`math`], [`mesh`],
-//! [`solver`], [`io`], [`lattice`], [`fem`], [`shell`], [`coupling`], [`scene`],
+//! [`solver`], [`io`], [`lattice`], [`fem`], [`shell`], [`coupling`], [`muscle`], [`scene`],
 //! [`validate`], [`report`], [`pipeline`], [`rig`], [`cli`].
 
 pub mod cli;
@@ -14,6 +14,7 @@ pub mod io;
 pub mod lattice;
 pub mod math;
 pub mod mesh;
+pub mod muscle;
 pub mod pipeline;
 pub mod report;
 pub mod rig;

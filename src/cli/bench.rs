@@ -22,6 +22,16 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 1000)]
         elements: usize,
     },
+    /// Activation fit: 52 muscles on a face lattice of about N cells, a 335-frame clip.
+    #[command(after_help = "Example:\n  furrow bench fit\n  furrow bench fit --cells 2000 --json")]
+    Fit {
+        /// Approximate lattice cell count over the face's bounding box.
+        #[arg(long, default_value_t = 2000)]
+        cells: usize,
+        /// Frames timed with one Gauss–Newton re-linearisation.
+        #[arg(long, default_value_t = 3)]
+        gn_frames: usize,
+    },
 }
 
 fn print(out: &Output, title: &str, v: &serde_json::Value) {
@@ -57,6 +67,21 @@ pub fn run(c: BenchCommand, out: &Output) -> anyhow::Result<()> {
                 out,
                 "bench lattice",
                 &crate::fem::bench::bench_lattice(elements)?,
+            );
+        }
+        BenchCommand::Fit { cells, gn_frames } => {
+            anyhow::ensure!(
+                (1..=1_000_000).contains(&cells),
+                "--cells must be between 1 and 1,000,000, got {cells}"
+            );
+            anyhow::ensure!(
+                gn_frames <= 335,
+                "--gn-frames must be at most 335, got {gn_frames}"
+            );
+            print(
+                out,
+                "bench fit",
+                &crate::muscle::bench::bench_fit(cells, gn_frames)?,
             );
         }
     }

@@ -3,6 +3,7 @@
 mod animate;
 mod bench;
 mod demo;
+mod fit;
 mod inspect;
 mod output;
 mod rig;
@@ -75,6 +76,11 @@ pub enum Command {
     /// Run a synthetic scene (slab, cushions, cubes) and write its frames and wavelengths.
     #[command(after_help = "Example:\n  furrow scene examples/cushions.toml --out out/scenes")]
     Scene(scene::SceneArgs),
+    /// Muscle activations per frame fitted to the blend-shape animation (CSV).
+    #[command(
+        after_help = "Example:\n  furrow fit rigs/face.glb -o activations.csv\n  furrow fit rigs/face.glb --frames 0:60 --gauss-newton 2 --json"
+    )]
+    Fit(fit::FitArgs),
     /// Benchmarks that print or write their measurements.
     #[command(
         subcommand,
@@ -102,6 +108,7 @@ pub fn main() -> i32 {
         Command::Rig(c) => rig::run(c, &out),
         Command::Demo(a) => demo::run(a, &out),
         Command::Wavelength(a) => wavelength::run(a, &out),
+        Command::Fit(a) => fit::run(a, &out),
         Command::Bench(c) => bench::run(c, &out),
         Command::Animate(a) => animate::run(a, &out),
         Command::Batch(a) => animate::batch(a, &out),
