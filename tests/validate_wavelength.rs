@@ -25,3 +25,38 @@ fn explore() {
     for (x, w) in r.profile.iter().step_by(2) { print!("{:.2}:{:+.2e} ", x / r.predicted, w / r.predicted); }
     println!();
 }
+
+#[test]
+#[ignore]
+fn transmission() {
+    use furrow::coupling::clusters::Clusters;
+    use furrow::shell::sheet::equilateral_sheet;
+    let a = 1e-3;
+    let sheet = equilateral_sheet(140, 160, a);
+    let m = &sheet.mesh;
+    for sigma in [6e-3, 10e-3] {
+        let c = Clusters::build(m, sigma).unwrap();
+        let side = 140.0 * a;
+        let sidey = 160.0 * a * 0.866;
+        for ratio in [1.8, 2.0, 2.2, 2.5, 3.0, std::f64::consts::PI, 4.0] {
+            let len = ratio * sigma;
+            let mut amp = 0.0;
+            let mut count = 0;
+            for dir in 0..2 {
+                let coord = |p: &nalgebra::Vector3<f64>| if dir == 0 { p.x } else { p.y };
+                let fs: Vec<f64> = m.positions.iter().map(|p| (2.0 * std::f64::consts::PI * coord(p) / len).sin()).collect();
+                let fc: Vec<f64> = m.positions.iter().map(|p| (2.0 * std::f64::consts::PI * coord(p) / len).cos()).collect();
+                let hs = c.apply(&fs);
+                let hc = c.apply(&fc);
+                for (k, &centre) in c.centres.iter().enumerate() {
+                    let p = m.positions[centre];
+                    if p.x > 3.0 * sigma && p.x < side - 3.0 * sigma && p.y > 3.0 * sigma && p.y < sidey - 3.0 * sigma {
+                        amp += (hs[k] * hs[k] + hc[k] * hc[k]).sqrt();
+                        count += 1;
+                    }
+                }
+            }
+            println!("sigma {sigma} L/sigma {ratio:.3}: T = {:.4}", amp / count as f64);
+        }
+    }
+}

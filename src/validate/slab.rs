@@ -21,7 +21,7 @@
 //! wavelengths: λ stays well below the slab size by construction.
 
 use crate::coupling::clusters::ClusterStats;
-use crate::coupling::embedded::{two_step_with, EmbeddedShell, InteriorMode, TwoStepReport};
+use crate::coupling::embedded::{sigma_for_wavelength, two_step_with, EmbeddedShell, InteriorMode, TwoStepReport};
 use crate::coupling::wavelength::Bilayer;
 use crate::fem::{BackwardEuler, Interior, LinearSolver, Material, StepSettings};
 use crate::lattice::{shape, Element, ElementKind, ElementOrder, Lattice, MaterialPoint};
@@ -55,7 +55,8 @@ pub struct SlabSettings {
     pub vertices_per_wavelength: f64,
     /// Prescribed compressive strain ε along x (dimensionless, > 0).
     pub compression: f64,
-    /// Cluster width σ as a multiple of λ/π (1 is DESIGN.md's σ = λ/π).
+    /// Cluster width σ as a multiple of the derived width
+    /// [`crate::coupling::embedded::sigma_for_wavelength`] (≈ λ/2; 1 is the default).
     pub sigma_factor: f64,
     /// Loading steps: the strain grows geometrically from `onset` × ε_b to `compression`
     /// over this many steps, one two-step solve (shell statics, interior quasi-statics) each.
@@ -71,7 +72,8 @@ pub struct SlabSettings {
 
 impl SlabSettings {
     /// The default scene for a bilayer: 8 λ long, 1.2 λ wide, 4 cells along, 2 deep,
-    /// quadratic elements, 10 vertices per λ, 6 % compression, σ = λ/π, one round.
+    /// quadratic elements, 10 vertices per λ, 6 % compression reached in 8 geometric
+    /// loading steps from 1.5 ε_b, σ from [`sigma_for_wavelength`].
     pub fn new(bilayer: Bilayer) -> Self {
         Self {
             bilayer,
@@ -293,7 +295,7 @@ pub fn run_slab(s: &SlabSettings) -> anyhow::Result<SlabResult> {
         poisson: b.skin_poisson,
         thickness: b.thickness,
     };
-    let sigma = s.sigma_factor * lambda / std::f64::consts::PI;
+    let sigma = s.sigma_factor * sigma_for_wavelength(&mesh, lambda);
     let settings = StaticSettings {
         tolerance: 1e-9 * b.skin_modulus * b.thickness * edge,
         max_iterations: 200,
