@@ -74,7 +74,11 @@ fn rest_and_rigid_motion_are_exact_and_warm_start_is_free() {
         assert!((p - b).norm() < 1e-14, "{p} vs {b}");
     }
     let r0 = skin.solve(&q0).unwrap();
-    assert_eq!((r0.status, r0.iterations), (SolveStatus::Converged, 0), "{r0:?}");
+    assert_eq!(
+        (r0.status, r0.iterations),
+        (SolveStatus::Converged, 0),
+        "{r0:?}"
+    );
 
     let rot = Rotation3::from_euler_angles(0.3, -0.2, 0.5);
     let t = Vector3::new(0.01, -0.02, 0.005);
@@ -103,7 +107,11 @@ fn rest_and_rigid_motion_are_exact_and_warm_start_is_free() {
     let analyses = r1.symbolic_s;
     let r2 = skin.solve(&q1).unwrap();
     assert_eq!(r2.status, SolveStatus::Converged);
-    assert!(r2.iterations <= 1, "warm start took {} iterations", r2.iterations);
+    assert!(
+        r2.iterations <= 1,
+        "warm start took {} iterations",
+        r2.iterations
+    );
     assert_eq!(r2.symbolic_s, 0.0, "pattern analysis redone ({analyses})");
 }
 
@@ -113,9 +121,15 @@ fn rest_and_rigid_motion_are_exact_and_warm_start_is_free() {
 fn coupling_terms_equal_dense_products() {
     let (lat, mesh, emb) = scene([2, 1, 1], 0.01, 8, 4, 0.0025, 0.01);
     let n = lat.node_count();
-    let mut skin =
-        EmbeddedShell::new(mesh.clone(), skin_material(), emb.clone(), n, 0.003, settings())
-            .unwrap();
+    let mut skin = EmbeddedShell::new(
+        mesh.clone(),
+        skin_material(),
+        emb.clone(),
+        n,
+        0.003,
+        settings(),
+    )
+    .unwrap();
     // A compressed lattice and a perturbed skin state (not an equilibrium: F_x ≠ 0).
     let q: Vec<f64> = lat
         .rest
@@ -204,7 +218,11 @@ fn stiff_skin_reduces_sag_as_composite_beam_theory_says() {
     };
     let k = 3;
     let nn0 = lat.dims[0] + k - 1;
-    let pinned: Vec<bool> = lat.grid.iter().map(|g| g[0] < 2 || g[0] >= nn0 - 2).collect();
+    let pinned: Vec<bool> = lat
+        .grid
+        .iter()
+        .map(|g| g[0] < 2 || g[0] >= nn0 - 2)
+        .collect();
     let centre_sag = |q: &[f64]| -> f64 {
         // Mean z displacement of the nodes in the middle node layer (x = L/2).
         let mut s = 0.0;
@@ -241,8 +259,7 @@ fn stiff_skin_reduces_sag_as_composite_beam_theory_says() {
         poisson: 0.0,
         thickness: h,
     };
-    let mut skin =
-        EmbeddedShell::new(mesh, skin_mat, emb, n, 0.005, settings()).unwrap();
+    let mut skin = EmbeddedShell::new(mesh, skin_mat, emb, n, 0.005, settings()).unwrap();
     let mut be = BackwardEuler::new(
         Interior::new(&lat, &material).unwrap(),
         lat.rest_flat(),
@@ -319,16 +336,86 @@ fn bad_input_is_named() {
         .err()
         .unwrap();
     assert!(err.to_string().contains("sum to"), "{err}");
-    let err = EmbeddedShell::new(mesh.clone(), skin_material(), emb.clone(), 5, 0.003, settings())
-        .err()
-        .unwrap();
+    let err = EmbeddedShell::new(
+        mesh.clone(),
+        skin_material(),
+        emb.clone(),
+        5,
+        0.003,
+        settings(),
+    )
+    .err()
+    .unwrap();
     assert!(err.to_string().contains("node"), "{err}");
-    let err = EmbeddedShell::new(mesh.clone(), skin_material(), emb.clone(), n, 0.0, settings())
-        .err()
-        .unwrap();
+    let err = EmbeddedShell::new(
+        mesh.clone(),
+        skin_material(),
+        emb.clone(),
+        n,
+        0.0,
+        settings(),
+    )
+    .err()
+    .unwrap();
     assert!(err.to_string().contains("σ"), "{err}");
-    let mut skin =
-        EmbeddedShell::new(mesh, skin_material(), emb, n, 0.003, settings()).unwrap();
+    let mut skin = EmbeddedShell::new(mesh, skin_material(), emb, n, 0.003, settings()).unwrap();
     assert!(skin.solve(&[0.0; 6]).is_err());
     assert!(skin.set_pinned(&[100000]).is_err());
+}
+
+/// Cost of the coupling terms at the face rig's size (not a pass/fail test; run with
+/// `cargo test --release --test embedded coupling_terms_cost -- --ignored --nocapture`).
+#[test]
+#[ignore]
+fn coupling_terms_cost_on_the_face_rig() {
+    use furrow::lattice::LatticeSettings;
+    let rig = furrow::rig::face::generate();
+    let cells: usize = std::env::var("CELLS")
+        .map(|v| v.parse().unwrap())
+        .unwrap_or(3000);
+    let lat = Lattice::build(
+        &rig.mesh,
+        &LatticeSettings {
+            target_cells: Some(cells),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let emb = lat.embedding_triplets();
+    let t = std::time::Instant::now();
+    let skin = EmbeddedShell::new(
+        rig.mesh.clone(),
+        skin_material(),
+        emb,
+        lat.node_count(),
+        0.004,
+        settings(),
+    )
+    .unwrap();
+    let build_s = t.elapsed().as_secs_f64();
+    let mut times = Vec::new();
+    let mut eval_times = Vec::new();
+    let mut len = 0;
+    for _ in 0..4 {
+        let t = std::time::Instant::now();
+        let mut g = vec![0.0; skin.x().len()];
+        let mut h = Vec::new();
+        skin.shell.eval(skin.x(), Some(&mut g), Some(&mut h), true);
+        eval_times.push(t.elapsed().as_secs_f64());
+        let t = std::time::Instant::now();
+        let (k, f) = skin.coupling_terms();
+        times.push(t.elapsed().as_secs_f64());
+        len = k.len();
+        assert_eq!(f.len(), 3 * lat.node_count());
+    }
+    println!(
+        "face: {} vertices, {} triangles, {} nodes; EmbeddedShell::new {build_s:.2} s; \
+         coupling_terms {:?} s (first builds the Hessian pattern), of which the projected \
+         shell Hessian and gradient alone take {:?} s; {len} triplets",
+        rig.mesh.positions.len(),
+        rig.mesh.triangles.len(),
+        lat.node_count(),
+        times,
+        eval_times
+    );
 }

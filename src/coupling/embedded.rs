@@ -48,6 +48,12 @@ pub struct EmbeddedShell {
     rows: Vec<Vec<(usize, f64)>>,
     /// Transposed embedding: for each node, its (vertex, weight) pairs.
     cols: Vec<Vec<(usize, f64)>>,
+    /// Vertices grouped by identical embedding node lists (one group per lattice element in
+    /// practice): the node list of each group, the group of each vertex, and the start of
+    /// each group's block in a flat per-group accumulator (3 × group nodes values).
+    group_nodes: Vec<Vec<usize>>,
+    group_of: Vec<usize>,
+    group_offset: Vec<usize>,
     nodes: usize,
     /// Current skin state (flat, 3n, m).
     x: Vec<f64>,
@@ -105,7 +111,9 @@ impl EmbeddedShell {
                 bail!("embedding entry names skin vertex {v}, but the skin has {n} vertices");
             }
             if node >= nodes {
-                bail!("embedding entry names lattice node {node}, but the lattice has {nodes} nodes");
+                bail!(
+                    "embedding entry names lattice node {node}, but the lattice has {nodes} nodes"
+                );
             }
             if !w.is_finite() {
                 bail!("embedding weight of vertex {v} on node {node} is not finite ({w})");
@@ -140,9 +148,32 @@ impl EmbeddedShell {
                 cols[node].push((v, w));
             }
         }
+        let mut group_nodes: Vec<Vec<usize>> = Vec::new();
+        let mut group_id: HashMap<Vec<usize>, usize> = HashMap::new();
+        let group_of: Vec<usize> = rows
+            .iter()
+            .map(|r| {
+                let key: Vec<usize> = r.iter().map(|p| p.0).collect();
+                *group_id.entry(key.clone()).or_insert_with(|| {
+                    group_nodes.push(key);
+                    group_nodes.len() - 1
+                })
+            })
+            .collect();
+        let mut group_offset = Vec::with_capacity(group_nodes.len() + 1);
+        let mut off = 0;
+        for g in &group_nodes {
+            group_offset.push(off);
+            off += 3 * g.len();
+        }
+        group_offset.push(off);
         let solver = StaticSolver::new(settings).map_err(|e| anyhow!("{e}"))?;
         let clusters = Clusters::build(&rest, sigma).map_err(|e| anyhow!("clusters: {e}"))?;
-        let x: Vec<f64> = rest.positions.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
+        let x: Vec<f64> = rest
+            .positions
+            .iter()
+            .flat_map(|p| [p.x, p.y, p.z])
+            .collect();
         let shell = Shell::new(rest, material)?;
         let mut entries = Vec::with_capacity(3 * clusters.entries.len());
         for &(c, v, w) in &clusters.entries {
@@ -164,6 +195,9 @@ impl EmbeddedShell {
             clusters,
             rows,
             cols,
+            group_nodes,
+            group_of,
+            group_offset,
             nodes,
             x,
             solver,
@@ -221,7 +255,10 @@ impl EmbeddedShell {
         let mut p = vertices.to_vec();
         p.sort_unstable();
         p.dedup();
-        self.problem.pinned = p.iter().flat_map(|&v| [3 * v, 3 * v + 1, 3 * v + 2]).collect();
+        self.problem.pinned = p
+            .iter()
+            .flat_map(|&v| [3 * v, 3 * v + 1, 3 * v + 2])
+            .collect();
         self.pinned_vertices = p;
         Ok(())
     }
@@ -328,11 +365,25 @@ impl EmbeddedShell {
         let kr = k.as_ref();
         let nv = self.rows.len();
         // Column (3m + a) of Bᵀ K B, for every node m and axis a, in parallel over m.
+        let ng = self.group_nodes.len();
+        let gsize = *self.group_offset.last().expect("offsets");
+        // Column (3m + a) of Bᵀ K B, for every node m and axis a, in parallel over m:
+        // acc = K (B e_{3m+a}) over skin dofs, then Bᵀ acc gathered per vertex group (dense
+        // loops over the group's nodes) and scattered once per group.
         let columns: Vec<Vec<(usize, usize, f64)>> = (0..self.nodes)
             .into_par_iter()
             .map_init(
-                || (vec![0.0; 3 * nv], vec![false; 3 * nv], vec![0.0; nd], vec![false; nd]),
-                |(acc, seen, out, oseen), m| {
+                || {
+                    (
+                        vec![0.0; 3 * nv],
+                        vec![false; 3 * nv],
+                        vec![0.0; gsize],
+                        vec![false; ng],
+                        vec![0.0; nd],
+                        vec![false; nd],
+                    )
+                },
+                |(acc, seen, gacc, gseen, out, oseen), m| {
                     let mut col_trip = Vec::new();
                     for a in 0..3 {
                         let mut touched = Vec::new();
@@ -346,20 +397,41 @@ impl EmbeddedShell {
                                 acc[i] += w * kv;
                             }
                         }
-                        let mut otouched = Vec::new();
+                        let mut gtouched = Vec::new();
                         for &i in &touched {
                             let (u, b) = (i / 3, i % 3);
+                            let g = self.group_of[u];
+                            if !gseen[g] {
+                                gseen[g] = true;
+                                gtouched.push(g);
+                            }
+                            let row = &self.rows[u];
+                            let base = self.group_offset[g] + b * row.len();
                             let val = acc[i];
-                            for &(node, w) in &self.rows[u] {
-                                let r = 3 * node + b;
-                                if !oseen[r] {
-                                    oseen[r] = true;
-                                    otouched.push(r);
-                                }
-                                out[r] += w * val;
+                            for (slot, &(_, w)) in gacc[base..base + row.len()].iter_mut().zip(row)
+                            {
+                                *slot += w * val;
                             }
                             acc[i] = 0.0;
                             seen[i] = false;
+                        }
+                        let mut otouched = Vec::new();
+                        for &g in &gtouched {
+                            let gn = &self.group_nodes[g];
+                            let base = self.group_offset[g];
+                            for b in 0..3 {
+                                for (k, &node) in gn.iter().enumerate() {
+                                    let r = 3 * node + b;
+                                    if !oseen[r] {
+                                        oseen[r] = true;
+                                        otouched.push(r);
+                                    }
+                                    let slot = &mut gacc[base + b * gn.len() + k];
+                                    out[r] += *slot;
+                                    *slot = 0.0;
+                                }
+                            }
+                            gseen[g] = false;
                         }
                         otouched.sort_unstable();
                         for &r in &otouched {

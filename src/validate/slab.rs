@@ -21,7 +21,9 @@
 //! wavelengths: λ stays well below the slab size by construction.
 
 use crate::coupling::clusters::ClusterStats;
-use crate::coupling::embedded::{sigma_for_wavelength, two_step_with, EmbeddedShell, InteriorMode, TwoStepReport};
+use crate::coupling::embedded::{
+    sigma_for_wavelength, two_step_with, EmbeddedShell, InteriorMode, TwoStepReport,
+};
 use crate::coupling::wavelength::Bilayer;
 use crate::fem::{BackwardEuler, Interior, LinearSolver, Material, StepSettings};
 use crate::lattice::{shape, Element, ElementKind, ElementOrder, Lattice, MaterialPoint};
@@ -110,7 +112,10 @@ impl SlabSettings {
         pos(self.compression, "compression")?;
         pos(self.sigma_factor, "sigma_factor")?;
         if !(self.noise.is_finite() && self.noise >= 0.0) {
-            bail!("slab setting `noise` must be ≥ 0 (edge lengths), got {}", self.noise);
+            bail!(
+                "slab setting `noise` must be ≥ 0 (edge lengths), got {}",
+                self.noise
+            );
         }
         if self.compression >= 0.5 {
             bail!(
@@ -186,8 +191,7 @@ pub fn block_lattice(
             for ix in 0..nn[0] {
                 grid.push([ix, jy, kz]);
                 rest.push(
-                    origin
-                        + Vector3::new(ix as f64 + off, jy as f64 + off, kz as f64 + off) * cell,
+                    origin + Vector3::new(ix as f64 + off, jy as f64 + off, kz as f64 + off) * cell,
                 );
             }
         }
@@ -382,8 +386,10 @@ pub fn run_slab(s: &SlabSettings) -> anyhow::Result<SlabResult> {
     }
     // Final shell statics at the final interior state.
     let last = skin.solve(&be.q)?;
-    let converged =
-        rounds.iter().all(|r| r.shell.status == SolveStatus::Converged) && last.status == SolveStatus::Converged;
+    let converged = rounds
+        .iter()
+        .all(|r| r.shell.status == SolveStatus::Converged)
+        && last.status == SolveStatus::Converged;
     let bq = skin.embedded_positions(&be.q);
     let x = skin.x();
     let mid = &sheet.rows[ny / 2];
