@@ -69,7 +69,7 @@ pub fn zero_crossings(profile: &[(f64, f64)], margin: f64) -> Option<Crossings> 
         .filter(|p| p.0 >= lo && p.0 <= hi)
         .collect();
     let amp = pts.iter().map(|p| p.1.abs()).fold(0.0, f64::max);
-    if !(amp > 0.0) {
+    if amp.is_nan() || amp <= 0.0 {
         return None;
     }
     let band = 0.1 * amp;
