@@ -1,5 +1,8 @@
-//! Validation that the physics is right: the compressed-slab scene of the paper and the
-//! wrinkle wavelength it produces against the film-on-substrate formula.
+//! Validation that the physics is right: the compressed-slab scene of the paper, the wrinkle
+//! wavelength it produces against the film-on-substrate formula, wavelength measurement,
+//! and a dense reference simulation.
 
+pub mod dense;
+pub mod measure;
 pub mod slab;
 pub mod wavelength;
