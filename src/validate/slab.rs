@@ -7,14 +7,19 @@
 //! trilinear hexahedra, a few cells along the depth) built directly (no surface cutting is
 //! needed for a box). The sheet is embedded in it by the lattice's shape functions.
 //!
-//! Loading (prescribed strain): every lattice node starts at the affinely compressed position
-//! x ↦ x_c + (1 − ε)(x − x_c); the two node layers at each x end and the two bottom layers are
-//! pinned there (a slab glued to a compressed base, ends held), the others are free. The skin
-//! starts on the embedded surface B q with a tiny deterministic pseudo-random height noise
-//! (10⁻³ of an edge) that breaks the symmetry. Then `rounds` two-step rounds run: shell
-//! statics under H x = H B q, then the quasi-static interior with the skin's Bᵀ F_x and
-//! Bᵀ K_x B. The result is the skin's height above the embedded surface, w = z − (B q)_z,
-//! along the middle row of the sheet (the compression axis).
+//! Loading (prescribed strain, quasi-static): the two node layers at each x end and the two
+//! bottom layers are pinned (a slab glued to a base, ends held) and all nodes are moved by the
+//! affine compression x ↦ x_c + (1 − ε)(x − x_c), ε growing geometrically over `steps` load
+//! steps from `onset` × ε_b (ε_b = (2πh/λ)²/12, the strain at which a free sheet buckles
+//! into waves of length λ) to `compression`. Ramping matters: compressed at once far beyond
+//! onset, the flat skin falls into the fastest-growing (much shorter) mode and stays there
+//! (measured 0.64 λ at 6 % strain in one step); ramped, the first mode to buckle is the
+//! longest one the constraints allow, and later steps only grow its amplitude, as in a
+//! physical film on a substrate. The skin starts on B q with a tiny deterministic
+//! pseudo-random height noise (`noise` × edge) that breaks the symmetry. Each step is one
+//! two-step solve: shell statics under H x = H B q, then the quasi-static interior with the
+//! skin's Bᵀ F_x and Bᵀ K_x B. The result is the skin's height above the embedded surface,
+//! w = z − (B q)_z, along the middle row of the sheet (the compression axis).
 //!
 //! All lengths scale with the predicted wavelength λ (slab length, sheet width, edge length,
 //! cell size, σ), so every (E_x/E_q, h) point costs the same and holds the same number of

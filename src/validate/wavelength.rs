@@ -1,6 +1,16 @@
 //! Wavelength validation: the compressed slab ([`super::slab`]) over a grid of stiffness
 //! ratios E_x/E_q and skin thicknesses h, the wrinkle wavelength measured from the skin's
 //! height profile against the formula λ = 2π h [(1 − ν_q²) E_x / (3 (1 − ν_x²) E_q)]^(1/3).
+//!
+//! What this checks, and what it does not: in the embedded-shell method the interior's
+//! stiffness reaches the skin's wrinkle wavelength only through the cluster width σ, which
+//! is computed from the formula's λ ([`crate::coupling::embedded::sigma_for_wavelength`]).
+//! The sweep therefore checks that the frequency-limited constraints make the skin wrinkle at
+//! the λ they were built for, across skin thickness-to-wavelength ratios h/λ from 1/20
+//! (E_x/E_q = 10²) to 1/94 (10⁴); the slab is scaled with λ, so every point has the same
+//! number of vertices per λ and of wavelengths in the slab. It is not an independent check
+//! of the formula itself (that is the dense volumetric reference, [`super::dense`]).
+//! Measured with [`super::measure::wavelength`] (zero crossings, detrended).
 
 use super::measure;
 use super::slab::{run_slab, SlabSettings};
