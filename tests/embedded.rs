@@ -395,6 +395,7 @@ fn coupling_terms_cost_on_the_face_rig() {
     let build_s = t.elapsed().as_secs_f64();
     let mut times = Vec::new();
     let mut eval_times = Vec::new();
+    let mut assembly_times = Vec::new();
     let mut len = 0;
     for _ in 0..4 {
         let t = std::time::Instant::now();
@@ -402,6 +403,10 @@ fn coupling_terms_cost_on_the_face_rig() {
         let mut h = Vec::new();
         skin.shell.eval(skin.x(), Some(&mut g), Some(&mut h), true);
         eval_times.push(t.elapsed().as_secs_f64());
+        let pat = furrow::math::sparse::Pattern::new(g.len(), &h).unwrap();
+        let t = std::time::Instant::now();
+        let _k = pat.assemble(&h).unwrap();
+        assembly_times.push(t.elapsed().as_secs_f64());
         let t = std::time::Instant::now();
         let (k, f) = skin.coupling_terms();
         times.push(t.elapsed().as_secs_f64());
@@ -411,11 +416,13 @@ fn coupling_terms_cost_on_the_face_rig() {
     println!(
         "face: {} vertices, {} triangles, {} nodes; EmbeddedShell::new {build_s:.2} s; \
          coupling_terms {:?} s (first builds the Hessian pattern), of which the projected \
-         shell Hessian and gradient alone take {:?} s; {len} triplets",
+         shell Hessian and gradient alone take {:?} s and its compressed assembly {:?} s; \
+         {len} triplets",
         rig.mesh.positions.len(),
         rig.mesh.triangles.len(),
         lat.node_count(),
         times,
-        eval_times
+        eval_times,
+        assembly_times
     );
 }
