@@ -111,3 +111,33 @@ fn constraints_are_blind_at_the_kernel_zero() {
     assert!(t_pi > 0.2, "{t_pi}");
     assert!(t_long > 0.8, "{t_long}");
 }
+
+/// The full grid (5 ratios × 4 thicknesses; about 2–3 minutes in the test profile):
+/// `cargo test --test validate_wavelength full_sweep -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn full_sweep() {
+    use furrow::validate::wavelength::sweep;
+    let ratios = [1e2, 3e2, 1e3, 3e3, 1e4];
+    let hs = [0.1e-3, 0.3e-3, 0.5e-3, 0.7e-3];
+    let rows = sweep(&ratios, &hs, &|_| {}).unwrap();
+    for r in &rows {
+        println!(
+            "{:>7} {:.1} mm: predicted {:.3} mm measured {:.3} mm error {:.1} % converged {} {:.1} s",
+            r.ratio,
+            r.thickness * 1e3,
+            r.predicted * 1e3,
+            r.measured * 1e3,
+            100.0 * r.error,
+            r.converged,
+            r.seconds
+        );
+    }
+    let (median, worst) = summary(&rows);
+    println!(
+        "median {:.1} %, worst {:.1} %",
+        100.0 * median,
+        100.0 * worst
+    );
+    assert!(median < 0.05 && worst < 0.15);
+}
