@@ -252,3 +252,116 @@ pub fn embedding_triplets(lattice: &Lattice, points: &[MaterialPoint]) -> Vec<(u
     }
     t
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lattice::LatticeSettings;
+    use crate::mesh::topology::Topology;
+    use crate::shell::sheet::equilateral_sheet;
+
+    /// Every refined vertex sits at the weighted sum of its origins, weights sum to one.
+    fn check_origin(mesh0: &TriMesh, r: &Refined) {
+        assert_eq!(r.origin.len(), r.mesh.positions.len());
+        for (v, o) in r.origin.iter().enumerate() {
+            let s: f64 = o.iter().map(|p| p.1).sum();
+            assert!((s - 1.0).abs() < 1e-12);
+            let p = o.iter().fold(nalgebra::Vector3::zeros(), |acc, &(u, w)| {
+                acc + w * mesh0.positions[u]
+            });
+            assert!((p - r.mesh.positions[v]).norm() < 1e-12);
+        }
+    }
+
+    /// A sheet of edge 1 mm: λ = 10 mm needs nothing; λ = 3 mm needs one level (6 × 1/3 = 2
+    /// → log₂ 2 = 1), which halves every edge, quadruples the triangles, adds one vertex per
+    /// edge, (about) halves the mean edge, keeps the area and the winding; λ = 0.1 mm would need 6 levels and is refused
+    /// with a message that names λ, the edge, and max_levels.
+    #[test]
+    fn sheet_refinement_levels_counts_and_refusal() {
+        let sheet = equilateral_sheet(10, 8, 1e-3);
+        let m = &sheet.mesh;
+        let s = RefineSettings::default();
+        let r0 = refine_for_wavelength(m, 10e-3, &s).unwrap();
+        assert_eq!(r0.report.levels, 0);
+        assert_eq!(r0.mesh, *m);
+        let r1 = refine_for_wavelength(m, 3e-3, &s).unwrap();
+        let edges = Topology::new(m).unwrap().edges.len();
+        assert_eq!(r1.report.levels, 1);
+        assert_eq!(r1.mesh.positions.len(), m.positions.len() + edges);
+        assert_eq!(r1.mesh.triangles.len(), 4 * m.triangles.len());
+        // Every child edge is half a parent edge (the inner triangle's edges are halves of the
+        // opposite sides), so the mean halves up to the mix of edge lengths (2 %).
+        let ratio = r1.report.mean_edge_after / r1.report.mean_edge_before;
+        assert!((ratio - 0.5).abs() < 0.01, "{ratio}");
+        assert!(r1.report.vertices_per_wavelength >= 6.0, "{:?}", r1.report);
+        assert!((r1.mesh.area() - m.area()).abs() < 1e-15);
+        for t in 0..r1.mesh.triangles.len() {
+            let [a, b, c] = r1.mesh.triangles[t];
+            let p = &r1.mesh.positions;
+            assert!((p[b] - p[a]).cross(&(p[c] - p[a])).z > 0.0);
+        }
+        Topology::new(&r1.mesh).unwrap();
+        check_origin(m, &r1);
+        let r2 = refine_for_wavelength(
+            m,
+            1.2e-3,
+            &RefineSettings {
+                vertices_per_wavelength: 6.0,
+                max_levels: 3,
+            },
+        )
+        .unwrap();
+        assert_eq!(r2.report.levels, 3);
+        check_origin(m, &r2);
+        let err = refine_for_wavelength(m, 0.1e-3, &s)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("λ = 0.100 mm")
+                && err.contains("max_levels = 3")
+                && err.contains("6 levels"),
+            "{err}"
+        );
+        assert!(refine_for_wavelength(m, -1.0, &s).is_err());
+        let bad = RefineSettings {
+            vertices_per_wavelength: 1.0,
+            max_levels: 3,
+        };
+        assert!(refine_for_wavelength(m, 3e-3, &bad)
+            .unwrap_err()
+            .to_string()
+            .contains("vertices_per_wavelength"));
+    }
+
+    /// The face rig's mesh refined for the paper's λ = 4.04 mm: the report is consistent,
+    /// origins reproduce positions, the area is unchanged, and the refined vertices embedded
+    /// in the face's lattice (through their origins' elements) sit where they are at rest.
+    #[test]
+    fn face_rig_refinement_and_embedding() {
+        let rig = crate::rig::face::generate();
+        let m = &rig.mesh;
+        let edge = mean_edge(m);
+        let r = refine_for_wavelength(m, 4.04e-3, &RefineSettings::default()).unwrap();
+        println!("face: {:?}", r.report);
+        let want = (6.0 * edge / 4.04e-3).log2().ceil().max(0.0) as usize;
+        assert_eq!(r.report.levels, want);
+        assert!(r.report.levels >= 1, "face edge {edge}");
+        assert!(r.report.vertices_per_wavelength >= 6.0);
+        assert!((r.mesh.area() - m.area()).abs() < 1e-12 * m.area().max(1.0));
+        check_origin(m, &r);
+        let lat = Lattice::build(m, &LatticeSettings::default()).unwrap();
+        let pts = embed_refined(&lat, &r).unwrap();
+        let q = lat.rest_flat();
+        let mut worst: f64 = 0.0;
+        for (v, mp) in pts.iter().enumerate() {
+            worst = worst.max((lat.position(&q, mp) - r.mesh.positions[v]).norm());
+        }
+        println!("refined embedding: max |B q_rest − x| = {worst:.2e} m");
+        assert!(worst < 1e-9, "{worst}");
+        let t = embedding_triplets(&lat, &pts);
+        assert!(t
+            .iter()
+            .all(|&(v, n, w)| v < pts.len() && n < lat.node_count() && w.is_finite()));
+    }
+}

@@ -1,6 +1,6 @@
-//! Validation that the physics is right: wrinkle wavelength measurement, the compressed-slab
-//! scene of the paper against the film-on-substrate formula, and a dense plane-strain reference
-//! simulation of the same bilayer.
+//! Validation that the physics is right: the compressed-slab scene of the paper, the wrinkle
+//! wavelength it produces against the film-on-substrate formula, wavelength measurement,
+//! and a dense reference simulation.
 
 pub mod dense;
 pub mod measure;

@@ -7,21 +7,28 @@
 //! trilinear hexahedra, a few cells along the depth) built directly (no surface cutting is
 //! needed for a box). The sheet is embedded in it by the lattice's shape functions.
 //!
-//! Loading (prescribed strain): every lattice node starts at the affinely compressed position
-//! x ↦ x_c + (1 − ε)(x − x_c); the two node layers at each x end and the two bottom layers are
-//! pinned there (a slab glued to a compressed base, ends held), the others are free. The skin
-//! starts on the embedded surface B q with a tiny deterministic pseudo-random height noise
-//! (10⁻³ of an edge) that breaks the symmetry. Then `rounds` two-step rounds run: shell
-//! statics under H x = H B q, then the quasi-static interior with the skin's Bᵀ F_x and
-//! Bᵀ K_x B. The result is the skin's height above the embedded surface, w = z − (B q)_z,
-//! along the middle row of the sheet (the compression axis).
+//! Loading (prescribed strain, quasi-static): the two node layers at each x end and the two
+//! bottom layers are pinned (a slab glued to a base, ends held) and all nodes are moved by the
+//! affine compression x ↦ x_c + (1 − ε)(x − x_c), ε growing geometrically over `steps` load
+//! steps from `onset` × ε_b (ε_b = (2πh/λ)²/12, the strain at which a free sheet buckles
+//! into waves of length λ) to `compression`. Ramping matters: compressed at once far beyond
+//! onset, the flat skin falls into the fastest-growing (much shorter) mode and stays there
+//! (measured 0.64 λ at 6 % strain in one step); ramped, the first mode to buckle is the
+//! longest one the constraints allow, and later steps only grow its amplitude, as in a
+//! physical film on a substrate. The skin starts on B q with a tiny deterministic
+//! pseudo-random height noise (`noise` × edge) that breaks the symmetry. Each step is one
+//! two-step solve: shell statics under H x = H B q, then the quasi-static interior with the
+//! skin's Bᵀ F_x and Bᵀ K_x B. The result is the skin's height above the embedded surface,
+//! w = z − (B q)_z, along the middle row of the sheet (the compression axis).
 //!
 //! All lengths scale with the predicted wavelength λ (slab length, sheet width, edge length,
 //! cell size, σ), so every (E_x/E_q, h) point costs the same and holds the same number of
 //! wavelengths: λ stays well below the slab size by construction.
 
 use crate::coupling::clusters::ClusterStats;
-use crate::coupling::embedded::{two_step_with, EmbeddedShell, InteriorMode, TwoStepReport};
+use crate::coupling::embedded::{
+    sigma_for_wavelength, two_step_with, EmbeddedShell, InteriorMode, TwoStepReport,
+};
 use crate::coupling::wavelength::Bilayer;
 use crate::fem::{BackwardEuler, Interior, LinearSolver, Material, StepSettings};
 use crate::lattice::{shape, Element, ElementKind, ElementOrder, Lattice, MaterialPoint};
@@ -55,7 +62,8 @@ pub struct SlabSettings {
     pub vertices_per_wavelength: f64,
     /// Prescribed compressive strain ε along x (dimensionless, > 0).
     pub compression: f64,
-    /// Cluster width σ as a multiple of λ/π (1 is DESIGN.md's σ = λ/π).
+    /// Cluster width σ as a multiple of the derived width
+    /// [`crate::coupling::embedded::sigma_for_wavelength`] (≈ λ/2; 1 is the default).
     pub sigma_factor: f64,
     /// Loading steps: the strain grows geometrically from `onset` × ε_b to `compression`
     /// over this many steps, one two-step solve (shell statics, interior quasi-statics) each.
@@ -71,7 +79,8 @@ pub struct SlabSettings {
 
 impl SlabSettings {
     /// The default scene for a bilayer: 8 λ long, 1.2 λ wide, 4 cells along, 2 deep,
-    /// quadratic elements, 10 vertices per λ, 6 % compression, σ = λ/π, one round.
+    /// quadratic elements, 10 vertices per λ, 6 % compression reached in 8 geometric
+    /// loading steps from 1.5 ε_b, σ from [`sigma_for_wavelength`].
     pub fn new(bilayer: Bilayer) -> Self {
         Self {
             bilayer,
@@ -295,7 +304,7 @@ pub fn run_slab(s: &SlabSettings) -> anyhow::Result<SlabResult> {
         poisson: b.skin_poisson,
         thickness: b.thickness,
     };
-    let sigma = s.sigma_factor * lambda / std::f64::consts::PI;
+    let sigma = s.sigma_factor * sigma_for_wavelength(&mesh, lambda);
     let settings = StaticSettings {
         tolerance: 1e-9 * b.skin_modulus * b.thickness * edge,
         max_iterations: 200,
