@@ -27,7 +27,7 @@ pub mod record;
 pub mod synthetic;
 pub mod weld;
 
-use crate::coupling::embedded::EmbeddedShell;
+use crate::coupling::embedded::{sigma_for_wavelength, EmbeddedShell};
 use crate::coupling::refine::{self, RefineSettings};
 use crate::coupling::wavelength::Bilayer;
 use crate::fem::{BackwardEuler, ExtraTerms, Interior, LinearSolver, StepSettings};
@@ -110,6 +110,8 @@ struct Setup {
     track_stiffness: Vec<(usize, usize, f64)>,
     /// Bᵀ K_x B of the skin, once computed (N/m, triplets over node dofs).
     skin_stiffness: Option<Vec<(usize, usize, f64)>>,
+    /// Cluster width σ (m); NaN when no skin is simulated.
+    sigma: f64,
     /// Tracking and skin stiffness summed into one compact triplet list (N/m).
     combined: Option<Vec<(usize, usize, f64)>>,
 }
@@ -148,7 +150,6 @@ pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<R
         interior_poisson: materials.interior.poisson,
     }
     .critical_wavelength();
-    let sigma = lambda / std::f64::consts::PI;
     let face = rig.face();
     if !scene.skin.meshes.is_empty() && !scene.skin.meshes.contains(&face.name) {
         bail!(
@@ -168,19 +169,8 @@ pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<R
         ),
         0.0,
     ));
-    let t = Instant::now();
-    let setup = build(
-        rig,
-        scene,
-        lambda,
-        sigma,
-        &mut stages,
-        &mut warnings,
-        progress,
-    )?;
-    let setup_ms = t.elapsed().as_secs_f64() * 1e3;
-    let _ = setup_ms;
-    let mut setup = setup;
+    let mut setup = build(rig, scene, lambda, &mut stages, &mut warnings, progress)?;
+    let sigma = setup.sigma;
 
     // The frame loop.
     let dynamics = scene.dynamics.enabled.unwrap_or(animated);
@@ -519,7 +509,6 @@ fn build(
     rig: &Rig,
     scene: &Scene,
     lambda: f64,
-    sigma: f64,
     stages: &mut Vec<StagePlan>,
     warnings: &mut Vec<String>,
     progress: Progress,
@@ -668,6 +657,7 @@ fn build(
                     .all(|&v| mask.iter().any(|b| b.contains(&skin_mesh.positions[v])))
         })
         .collect();
+    let mut sigma = f64::NAN;
     let shell = if sim_tris.is_empty() {
         stages.push(StagePlan::skipped(
             "shell",
@@ -701,6 +691,9 @@ fn build(
             .enumerate()
             .flat_map(|(i, &v)| rows[v].iter().map(move |&(n, w)| (i, n, w)))
             .collect();
+        // σ that puts the wrinkles at λ on this mesh (the truncated kernel's first zero,
+        // corrected for edge-path distances; see `coupling::embedded`).
+        sigma = sigma_for_wavelength(&sub, lambda);
         let edge = refine::mean_edge(&sub);
         let stretch = scene.skin.material()?.stretch_stiffness();
         let settings = StaticSettings {
@@ -790,6 +783,7 @@ fn build(
         track_k,
         track_stiffness,
         skin_stiffness: None,
+        sigma,
         combined: None,
     })
 }

@@ -17,7 +17,7 @@
 //! different skins. For each copy the report gives the predicted λ and the wavelength measured
 //! on the last frame along the middle row (height above the embedded surface).
 
-use crate::coupling::embedded::{two_step_with, EmbeddedShell, InteriorMode};
+use crate::coupling::embedded::{sigma_for_wavelength, two_step_with, EmbeddedShell, InteriorMode};
 use crate::coupling::wavelength::Bilayer;
 use crate::fem::{BackwardEuler, Interior, LinearSolver, StepSettings, GRAVITY};
 use crate::lattice::{shape, ElementOrder};
@@ -203,7 +203,7 @@ fn run_copy(
         skin_mat,
         embedding.clone(),
         lattice.node_count(),
-        lambda / std::f64::consts::PI,
+        sigma_for_wavelength(&skin_mesh, lambda),
         StaticSettings {
             tolerance: scene.solver.shell_tolerance.unwrap_or(1e-6)
                 * skin_mat.stretch_stiffness()
