@@ -255,6 +255,15 @@ fn every_subcommand_has_help_with_an_example() {
         vec!["bench"],
         vec!["bench", "shell"],
         vec!["bench", "lattice"],
+        vec!["bench", "fit"],
+        vec!["fit"],
+        vec!["animate"],
+        vec!["batch"],
+        vec!["merge"],
+        vec!["scene"],
+        vec!["validate"],
+        vec!["validate", "wavelength"],
+        vec!["validate", "dense"],
     ] {
         let o = Command::new(bin)
             .args(&args)

@@ -47,6 +47,10 @@ pub struct AnimateArgs {
     /// With --frames, do not write the chunk file (`furrow merge` needs it).
     #[arg(long)]
     pub no_chunk: bool,
+    /// Cut a --frames range that ends past the clip down to the clip (the demo's default
+    /// range on a shorter rig) instead of refusing it.
+    #[arg(skip)]
+    pub clamp_frames: bool,
 }
 
 /// The chunk file written next to an output limited to `--frames`.
@@ -95,6 +99,9 @@ pub struct Animated {
 /// Load, run and write one rig (shared by `animate`, `batch` and `demo`).
 pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
     let t0 = Instant::now();
+    if !(a.fps.is_finite() && a.fps > 0.0 && a.fps <= 1000.0) {
+        bail!("--fps must lie in (0, 1000], got {}", a.fps);
+    }
     let scene = match &a.scene {
         Some(p) => Scene::load(p)?,
         None => Scene::default(),
@@ -126,6 +133,11 @@ pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
     out.note(&rig.face_reason);
     let count = rig.frame_weights(a.fps).len();
     let frames = match &a.frames {
+        Some(t) if a.clamp_frames => {
+            let (start, end) = t.split_once(':').unwrap_or((t, ""));
+            let end = end.trim().parse::<usize>().map_or(count, |e| e.min(count));
+            Some(FrameRange::parse(&format!("{start}:{end}"), count)?)
+        }
         Some(t) => Some(FrameRange::parse(t, count)?),
         None => None,
     };
@@ -295,6 +307,7 @@ pub fn batch(a: BatchArgs, out: &Output) -> anyhow::Result<()> {
             // An output without its report is an unfinished earlier attempt: redo it.
             force: true,
             no_chunk: false,
+            clamp_frames: false,
         };
         match animate_one(&args, out) {
             Ok(done) => {

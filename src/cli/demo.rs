@@ -68,6 +68,7 @@ pub fn run(a: DemoArgs, out: &Output) -> anyhow::Result<()> {
         // The demo's folder is its own: an earlier demo's files are replaced (and said so).
         force: true,
         no_chunk: true,
+        clamp_frames: true,
     };
     let done = animate::animate_one(&args, out)?;
     if replaced {

@@ -39,6 +39,9 @@ pub struct FitArgs {
     /// Gauss–Newton re-linearisations per frame with the nonlinear forward model.
     #[arg(long, default_value_t = 0)]
     pub gauss_newton: usize,
+    /// Also write a PNG of the activations over time (and the fit residual).
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
 }
 
 /// Parse `A:B` against `n` frames into a range; the error names `--frames`.
@@ -92,11 +95,13 @@ pub fn run(a: FitArgs, out: &Output) -> anyhow::Result<()> {
         "--gauss-newton must be at most 50, got {}",
         a.gauss_newton
     );
-    if !a.force && a.output.exists() {
-        anyhow::bail!(
-            "{}: already exists; furrow does not overwrite files unless told to (pass --force)",
-            a.output.display()
-        );
+    for p in std::iter::once(&a.output).chain(a.plot.as_ref()) {
+        if !a.force && p.exists() {
+            anyhow::bail!(
+                "{}: already exists; furrow does not overwrite files unless told to (pass --force)",
+                p.display()
+            );
+        }
     }
     let t0 = Instant::now();
     let rig = fio::load(&a.rig, &LoadOptions::default())?;
@@ -152,12 +157,14 @@ pub fn run(a: FitArgs, out: &Output) -> anyhow::Result<()> {
     let pb = out.progress(range.len() as u64, "fitting");
     let (mut rms_max, mut rms_sum, mut qp_s) = (0.0f64, 0.0, 0.0);
     let mut not_fitted: Vec<(usize, FrameStatus)> = Vec::new();
+    let mut curves: Vec<Vec<(f64, f64)>> = vec![Vec::new(); names.len()];
     for k in range.clone() {
         let target = rig.blend(&weights[k]);
         let f = fitter.fit_frame(&target)?;
         let _ = write!(csv, "{k},{:.6}", k as f64 / a.fps);
-        for v in &f.activations {
+        for (c, v) in curves.iter_mut().zip(&f.activations) {
             let _ = write!(csv, ",{v:.9}");
+            c.push((k as f64 / a.fps, *v));
         }
         let _ = writeln!(
             csv,
@@ -184,6 +191,21 @@ pub fn run(a: FitArgs, out: &Output) -> anyhow::Result<()> {
             Overwrite::Refuse
         },
     )?;
+    if let Some(p) = &a.plot {
+        use crate::report::plot::{line_chart, Chart, Series, Style};
+        let chart = Chart {
+            title: format!("muscle activations of {}", a.rig.display()),
+            x_label: "time (s)".into(),
+            y_label: "activation (0 = relaxed, 1 = fully contracted)".into(),
+            series: names
+                .iter()
+                .zip(curves)
+                .map(|(n, pts)| Series::new(n.clone(), pts, Style::Line))
+                .collect(),
+            ..Default::default()
+        };
+        line_chart(p, &chart)?;
+    }
     let nf = range.len();
     let mean = if nf > 0 { rms_sum / nf as f64 } else { 0.0 };
     let secs = t0.elapsed().as_secs_f64();

@@ -8,6 +8,7 @@ mod inspect;
 mod output;
 mod rig;
 mod scene;
+mod validate;
 mod wavelength;
 
 use clap::{Parser, Subcommand};
@@ -81,6 +82,12 @@ pub enum Command {
         after_help = "Example:\n  furrow fit rigs/face.glb -o activations.csv\n  furrow fit rigs/face.glb --frames 0:60 --gauss-newton 2 --json"
     )]
     Fit(fit::FitArgs),
+    /// Validations of the physics: wrinkle wavelength against the formula and a dense simulation.
+    #[command(
+        subcommand,
+        after_help = "Example:\n  furrow validate wavelength --out out/validate\n  furrow validate dense --quick"
+    )]
+    Validate(validate::ValidateCommand),
     /// Benchmarks that print or write their measurements.
     #[command(
         subcommand,
@@ -114,6 +121,7 @@ pub fn main() -> i32 {
         Command::Batch(a) => animate::batch(a, &out),
         Command::Merge(a) => animate::merge(a, &out),
         Command::Scene(a) => scene::run(a, &out),
+        Command::Validate(c) => validate::run(c, &out),
     };
     match result {
         Ok(()) => 0,

@@ -118,15 +118,10 @@ pub struct DynamicsSection {
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct MuscleSection {
-    /// `auto` (generate from the blend shapes; default), `none` (the interior tracks the
-    /// blended surface directly, no QP), or a path to a muscle TOML file.
+    /// `none` (default: the interior tracks the blended surface directly, no QP). Muscle-driven
+    /// runs (`auto` or a muscle file) are refused in this version: `furrow fit` computes the
+    /// activations, the pipeline does not yet drive the interior with them.
     pub source: Option<String>,
-    /// Size regularisation λ_s (m²).
-    pub size_weight: Option<f64>,
-    /// Temporal regularisation λ_t (m²).
-    pub smooth_weight: Option<f64>,
-    /// Gauss–Newton re-linearisations per frame (default 2).
-    pub gauss_newton: Option<usize>,
 }
 
 /// `[solver]`: tolerances.
@@ -322,22 +317,6 @@ impl Scene {
                 bail!(
                     "`dynamics.dt` = {dt} s is longer than a second; a frame step is 0.005–0.1 s"
                 );
-            }
-        }
-        let m = &self.muscles;
-        for (k, v) in [
-            ("muscles.size_weight", m.size_weight),
-            ("muscles.smooth_weight", m.smooth_weight),
-        ] {
-            if let Some(x) = v {
-                if !(x.is_finite() && x >= 0.0) {
-                    bail!("`{k}` must be a non-negative number, got {x}");
-                }
-            }
-        }
-        if let Some(n) = m.gauss_newton {
-            if n > 20 {
-                bail!("`muscles.gauss_newton` = {n}: at most 20 re-linearisations");
             }
         }
         positive("solver.shell_tolerance", self.solver.shell_tolerance)?;
