@@ -5,6 +5,7 @@ mod bench;
 mod demo;
 mod inspect;
 mod output;
+mod report;
 mod rig;
 mod scene;
 mod wavelength;
@@ -81,6 +82,12 @@ pub enum Command {
         after_help = "Example:\n  furrow bench shell --faces 20000\n  furrow bench lattice --elements 1000 --json"
     )]
     Bench(bench::BenchCommand),
+    /// Measured reports: error against run time, stability on stiff and extreme cases.
+    #[command(
+        subcommand,
+        after_help = "Example:\n  furrow report tradeoff --quick --out out/report\n  furrow report stability --out out/report"
+    )]
+    Report(report::ReportCommand),
 }
 
 /// A failure whose details were already printed (in JSON mode, as the command's own result
@@ -107,6 +114,7 @@ pub fn main() -> i32 {
         Command::Batch(a) => animate::batch(a, &out),
         Command::Merge(a) => animate::merge(a, &out),
         Command::Scene(a) => scene::run(a, &out),
+        Command::Report(c) => report::run(c, &out),
     };
     match result {
         Ok(()) => 0,

@@ -19,6 +19,7 @@ use crate::io::load::{load_bytes, LoadOptions, Rig};
 use crate::io::model::{MorphTarget, WeightKeys};
 use crate::lattice::geom::closest_point_on_triangle;
 use crate::mesh::TriMesh;
+use crate::pipeline::frames::FrameRange;
 use crate::pipeline::{self, synthetic, RunOptions};
 use crate::report::pareto::pareto_front;
 use crate::report::plot::{line_chart, Chart, LegendAt, Series, Style};
@@ -144,6 +145,9 @@ pub struct TradeoffRun {
     pub rms_m: f64,
     /// Largest such distance (m).
     pub max_m: f64,
+    /// Size of the wrinkles themselves: rig, RMS over vertices and frames of the wrinkled
+    /// minus the blend-shape surface; slab, the sine-fit amplitude on the last frame (m).
+    pub wrinkle_m: f64,
     /// Slab: wavelength measured on the last frame (m).
     pub measured_wavelength_m: Option<f64>,
     /// Slab: λ from the formula (m).
@@ -159,7 +163,7 @@ pub struct TradeoffRun {
 }
 
 /// The CSV header written by [`write_csv`].
-pub const CSV_HEADER: &str = "case,knob,value,default,reference,wall_s,rms_m,max_m,measured_wavelength_m,predicted_wavelength_m,wavelength_error,frames_not_converged,pareto,status";
+pub const CSV_HEADER: &str = "case,knob,value,default,reference,wall_s,rms_m,max_m,wrinkle_m,measured_wavelength_m,predicted_wavelength_m,wavelength_error,frames_not_converged,pareto,status";
 
 /// How big a sweep to run.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -358,11 +362,14 @@ impl ErrorSum {
     }
 }
 
-/// Sweep the quality knobs on a rig. `progress(done, total)` is called before each run.
+/// Sweep the quality knobs on a rig, sampled at `fps` and limited to `frames` (the pipeline
+/// simulates from frame 0 up to the range's end). `progress(done, total)` is called before
+/// each run.
 pub fn rig_sweep(
     rig: &Rig,
     base: &Scene,
     fps: f64,
+    frames: Option<FrameRange>,
     quick: bool,
     progress: &dyn Fn(usize, usize),
 ) -> anyhow::Result<Vec<TradeoffRun>> {
@@ -375,7 +382,7 @@ pub fn rig_sweep(
             scene: s.scene.clone(),
             scene_path: None,
             fps,
-            frames: None,
+            frames,
         };
         let t = Instant::now();
         let r = pipeline::run(rig, &opts, &|_, _, _| {});
@@ -400,6 +407,7 @@ pub fn rig_sweep(
                 }
                 row.rms_m = e.rms();
                 row.max_m = e.max;
+                row.wrinkle_m = wrinkle_rms(out);
                 row.frames_not_converged = out.report.totals.frames_not_converged;
             }
             Err(e) => row.status = format!("{e:#}"),
@@ -420,6 +428,7 @@ fn blank_row(case: &str, s: &Setting, wall: f64) -> TradeoffRun {
         wall_s: wall,
         rms_m: f64::NAN,
         max_m: f64::NAN,
+        wrinkle_m: f64::NAN,
         measured_wavelength_m: None,
         predicted_wavelength_m: None,
         wavelength_error: None,
@@ -496,6 +505,7 @@ pub fn slab_sweep(
                 row.rms_m = e.rms();
                 row.max_m = e.max;
                 let c = &out.copies[0];
+                row.wrinkle_m = c.amplitude_m.unwrap_or(0.0);
                 row.measured_wavelength_m = c.measured_wavelength_m;
                 row.predicted_wavelength_m = Some(c.predicted_wavelength_m);
                 row.wavelength_error = Some(
@@ -522,7 +532,7 @@ pub fn to_csv(rows: &[TradeoffRun]) -> String {
     s.push('\n');
     for r in rows {
         s.push_str(&format!(
-            "{},{},{},{},{},{:.4},{:.6e},{:.6e},{},{},{},{},{},\"{}\"\n",
+            "{},{},{},{},{},{:.4},{:.6e},{:.6e},{:.6e},{},{},{},{},{},\"{}\"\n",
             r.case,
             r.knob,
             if r.value.is_finite() {
@@ -535,6 +545,7 @@ pub fn to_csv(rows: &[TradeoffRun]) -> String {
             r.wall_s,
             r.rms_m,
             r.max_m,
+            r.wrinkle_m,
             opt(r.measured_wavelength_m),
             opt(r.predicted_wavelength_m),
             opt(r.wavelength_error),
