@@ -70,6 +70,10 @@ pub struct StabilityArgs {
     /// Quads per side of the sheet rig (2 n² triangles before refinement).
     #[arg(long, default_value_t = 12)]
     pub n: usize,
+    /// Side of the sheet rig (m); the skin is refined to hold its wrinkles (λ ≈ 2 cm), so the
+    /// cost grows with size².
+    #[arg(long, default_value_t = 0.1)]
+    pub size: f64,
     /// Clip length (s) of the sheet rig.
     #[arg(long, default_value_t = 0.1)]
     pub seconds: f64,
@@ -135,7 +139,9 @@ fn run_tradeoff(a: TradeoffArgs, out: &Output) -> anyhow::Result<()> {
     let rig_name = a
         .rig
         .as_ref()
-        .map_or("built-in sheet rig".to_string(), |p| p.display().to_string());
+        .map_or("built-in sheet rig".to_string(), |p| {
+            p.display().to_string()
+        });
     let frames = match &a.frames {
         Some(t) => Some(FrameRange::parse(t, rig.frame_weights(a.fps).len())?),
         None => None,
@@ -252,11 +258,14 @@ fn run_stability(a: StabilityArgs, out: &Output) -> anyhow::Result<()> {
     if !(a.seconds.is_finite() && a.seconds > 0.0 && a.seconds <= 10.0) {
         bail!("--seconds must lie in (0, 10], got {}", a.seconds);
     }
+    if !(a.size.is_finite() && a.size > 0.0 && a.size <= 10.0) {
+        bail!("--size must lie in (0, 10] m, got {}", a.size);
+    }
     let csv = a.out.join("stability.csv");
     let md = a.out.join("stability.md");
     let ow = check_free(&[&csv, &md], a.force)?;
     let pb = out.progress(1, "cases");
-    let rows = stability::run_all(a.quick, a.n, a.seconds, &|k, n| {
+    let rows = stability::run_all(a.quick, a.n, a.size, a.seconds, &|k, n| {
         pb.set_length(n as u64);
         pb.set_position(k as u64);
     });

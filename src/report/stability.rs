@@ -72,12 +72,13 @@ pub struct StabilityRow {
 pub const CSV_HEADER: &str = "case,parameter,outcome,interior_status,interior_iterations,interior_residual,shell_status,shell_iterations,shell_residual,frames,wrinkle_depth_max_m,wall_s,non_finite,message";
 
 /// The cases. `quick` keeps each end of every range (a reduced set for tests); the full set
-/// adds intermediate values. The sheet is `n` quads per side over 10 cm (the model size),
-/// 15 % strain over `seconds`, flesh interior (E_q = 10 kPa) and the `skin` preset.
-pub fn cases(quick: bool, n: usize, seconds: f64) -> Vec<Case> {
+/// adds intermediate values. The sheet is `n` quads per side over `size` (m, the model size),
+/// 15 % strain over `seconds`, flesh interior (E_q = 10 kPa) and the `skin` preset
+/// (λ ≈ 2 cm: the skin is refined to about 3 mm edges whatever `n`, so `size` sets the cost).
+pub fn cases(quick: bool, n: usize, size: f64, seconds: f64) -> Vec<Case> {
     let base = SheetRig {
         n,
-        size: 0.1,
+        size,
         strain: 0.15,
         weight: 1.0,
         seconds,
@@ -258,10 +259,7 @@ pub fn run_case(c: &Case) -> StabilityRow {
             row.shell_iterations = si;
             row.shell_residual = sr;
             row.frames = pf.len();
-            row.wrinkle_depth_max_m = pf
-                .iter()
-                .map(|f| f.wrinkle_depth_max_m)
-                .fold(0.0, f64::max);
+            row.wrinkle_depth_max_m = pf.iter().map(|f| f.wrinkle_depth_max_m).fold(0.0, f64::max);
             row.non_finite = out
                 .frames
                 .iter()
@@ -419,10 +417,11 @@ pub fn inverted_interior(steps: usize) -> StabilityRow {
 pub fn run_all(
     quick: bool,
     n: usize,
+    size: f64,
     seconds: f64,
     progress: &dyn Fn(usize, usize),
 ) -> Vec<StabilityRow> {
-    let cs = cases(quick, n, seconds);
+    let cs = cases(quick, n, size, seconds);
     let total = cs.len() + 1;
     let mut rows = Vec::new();
     for (i, c) in cs.iter().enumerate() {
@@ -435,9 +434,14 @@ pub fn run_all(
     rows
 }
 
-/// The rows as CSV (header [`CSV_HEADER`]); text fields quoted.
+/// `s` on one line (line breaks become spaces).
+fn one_line(s: &str) -> String {
+    s.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
+/// The rows as CSV (header [`CSV_HEADER`]); text fields quoted, on one line.
 pub fn to_csv(rows: &[StabilityRow]) -> String {
-    let q = |s: &str| format!("\"{}\"", s.replace('"', "'"));
+    let q = |s: &str| format!("\"{}\"", one_line(s).replace('"', "'"));
     let mut s = String::from(CSV_HEADER);
     s.push('\n');
     for r in rows {
@@ -468,8 +472,9 @@ pub fn to_markdown(rows: &[StabilityRow]) -> String {
         "| case | parameter | outcome | interior (it, residual N) | shell (it, residual N) | frames | max depth (mm) | time (s) | non-finite | message |\n|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
-        let mut msg: String = r.message.chars().take(120).collect();
-        if r.message.chars().count() > 120 {
+        let full = one_line(&r.message);
+        let mut msg: String = full.chars().take(120).collect();
+        if full.chars().count() > 120 {
             msg.push('…');
         }
         s.push_str(&format!(
@@ -499,7 +504,7 @@ mod tests {
 
     #[test]
     fn every_case_has_a_valid_scene_and_the_ranges_reach_their_ends() {
-        let cs = cases(true, 8, 0.1);
+        let cs = cases(true, 8, 0.1, 0.1);
         for c in &cs {
             c.scene.validate().unwrap();
         }

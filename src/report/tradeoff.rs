@@ -178,7 +178,7 @@ fn rig_knobs(quick: bool) -> Vec<(&'static str, Vec<f64>)> {
     if quick {
         vec![
             ("interior.target_cells", vec![100.0, 1000.0]),
-            ("skin.vertices_per_wavelength", vec![3.0, 9.0]),
+            ("skin.vertices_per_wavelength", vec![3.0, 12.0]),
             ("solver.shell_tolerance", vec![1e-3, 1e-8]),
             ("dynamics.dt", vec![0.0334, 0.01]),
         ]
@@ -392,9 +392,9 @@ pub fn rig_sweep(
     let (_, reference) = outputs.last().expect("reference run");
     let reference = match reference {
         Ok(r) => r,
-        Err(e) => anyhow::bail!(
-            "the reference (finest) run failed, nothing to measure against: {e:#}"
-        ),
+        Err(e) => {
+            anyhow::bail!("the reference (finest) run failed, nothing to measure against: {e:#}")
+        }
     };
     let mut rows = Vec::new();
     for (s, (wall, r)) in set.iter().zip(&outputs) {
@@ -551,7 +551,11 @@ pub fn to_csv(rows: &[TradeoffRun]) -> String {
             opt(r.wavelength_error),
             r.frames_not_converged,
             r.pareto,
-            r.status.replace('"', "'")
+            r.status
+                .split_whitespace()
+                .collect::<Vec<_>>()
+                .join(" ")
+                .replace('"', "'")
         ));
     }
     s
@@ -559,7 +563,12 @@ pub fn to_csv(rows: &[TradeoffRun]) -> String {
 
 /// The log-log chart of error against wall time for one case: every run per knob, the
 /// Pareto front, the default highlighted. `err` picks the error (and `y_label` names it).
-pub fn chart(rows: &[TradeoffRun], title: &str, y_label: &str, err: fn(&TradeoffRun) -> f64) -> Chart {
+pub fn chart(
+    rows: &[TradeoffRun],
+    title: &str,
+    y_label: &str,
+    err: fn(&TradeoffRun) -> f64,
+) -> Chart {
     let ok: Vec<&TradeoffRun> = rows
         .iter()
         .filter(|r| r.status == "ok" && !r.is_reference)
@@ -725,7 +734,7 @@ mod tests {
         assert_eq!(s[0].knob, "default");
         let r = &s.last().unwrap().scene;
         assert_eq!(r.interior.target_cells, Some(1000));
-        assert_eq!(r.skin.vertices_per_wavelength, Some(9.0));
+        assert_eq!(r.skin.vertices_per_wavelength, Some(12.0));
         assert_eq!(r.solver.shell_tolerance, Some(1e-8));
         assert_eq!(r.dynamics.dt, Some(0.01));
         let dt = s.iter().find(|x| x.knob == "dynamics.dt").unwrap();
