@@ -6,6 +6,7 @@ mod demo;
 mod fit;
 mod inspect;
 mod output;
+mod report;
 mod rig;
 mod scene;
 mod validate;
@@ -94,6 +95,12 @@ pub enum Command {
         after_help = "Example:\n  furrow bench shell --faces 20000\n  furrow bench lattice --elements 1000 --json"
     )]
     Bench(bench::BenchCommand),
+    /// Measured reports: error against run time, stability on stiff and extreme cases.
+    #[command(
+        subcommand,
+        after_help = "Example:\n  furrow report tradeoff --quick --out out/report\n  furrow report stability --out out/report"
+    )]
+    Report(report::ReportCommand),
 }
 
 /// A failure whose details were already printed (in JSON mode, as the command's own result
@@ -122,6 +129,7 @@ pub fn main() -> i32 {
         Command::Merge(a) => animate::merge(a, &out),
         Command::Scene(a) => scene::run(a, &out),
         Command::Validate(c) => validate::run(c, &out),
+        Command::Report(c) => report::run(c, &out),
     };
     match result {
         Ok(()) => 0,

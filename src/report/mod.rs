@@ -13,6 +13,8 @@ pub mod pareto;
 pub mod plot;
 pub mod preview;
 pub mod raster;
+pub mod stability;
+pub mod tradeoff;
 
 use anyhow::{anyhow, Result};
 use image::RgbImage;

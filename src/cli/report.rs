@@ -1,0 +1,293 @@
+//! `furrow report tradeoff` and `furrow report stability`: measured error against run time,
+//! and how the solvers end on stiff and extreme cases.
+
+use super::Output;
+use crate::io::atomic::{self, Overwrite};
+use crate::io::LoadOptions;
+use crate::pipeline::frames::FrameRange;
+use crate::report::stability;
+use crate::report::tradeoff::{self, Pick, SheetRig, TradeoffRun};
+use crate::scene::Scene;
+use anyhow::{bail, Context};
+use std::path::{Path, PathBuf};
+
+/// `furrow report …` subcommands.
+#[derive(Debug, clap::Subcommand)]
+pub enum ReportCommand {
+    /// Sweep the quality knobs (cell size, skin resolution, shell tolerance, time step) on a rig
+    /// and on the validation slab; CSV and log-log PNG of error against wall time.
+    #[command(
+        after_help = "Example:\n  furrow report tradeoff --quick --out out/report\n  furrow report tradeoff rigs/face.glb --frames 0:10 --out out/report"
+    )]
+    Tradeoff(TradeoffArgs),
+    /// Run stiff and extreme cases (stiffness ratio, thickness, compression, weights, time
+    /// step, inverted start, degenerate triangle, stiff skin); CSV and markdown table.
+    #[command(after_help = "Example:\n  furrow report stability --quick --out out/report")]
+    Stability(StabilityArgs),
+}
+
+/// Arguments of `furrow report tradeoff`.
+#[derive(Debug, clap::Args)]
+pub struct TradeoffArgs {
+    /// The rig (glTF with a blend-shape face); default: a 24 × 24 sheet rig built in code
+    /// (10 cm, 15 % compression on its left half over 0.3 s).
+    pub rig: Option<PathBuf>,
+    /// Output folder: tradeoff.csv, tradeoff_rig.png, tradeoff_slab.png, tradeoff.json.
+    #[arg(long, default_value = "out/report")]
+    pub out: PathBuf,
+    /// Fewer knob values and a smaller slab (a few minutes instead of tens).
+    #[arg(long)]
+    pub quick: bool,
+    /// Scene file for the rig runs (the base the knobs are changed around).
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
+    /// Frames of the rig's clip, `A:B` (end exclusive; frames 0..B are simulated).
+    #[arg(long)]
+    pub frames: Option<String>,
+    /// Frames per second at which the rig's clip is sampled.
+    #[arg(long, default_value_t = 30.0)]
+    pub fps: f64,
+    /// The face mesh by name or index (default: the mesh with the most morph targets).
+    #[arg(long)]
+    pub mesh: Option<String>,
+    /// Leave out the slab sweep.
+    #[arg(long)]
+    pub no_slab: bool,
+    /// Replace existing outputs.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// Arguments of `furrow report stability`.
+#[derive(Debug, clap::Args)]
+pub struct StabilityArgs {
+    /// Output folder: stability.csv and stability.md.
+    #[arg(long, default_value = "out/report")]
+    pub out: PathBuf,
+    /// One value at each end of every range instead of the full sweep.
+    #[arg(long)]
+    pub quick: bool,
+    /// Quads per side of the sheet rig (2 n² triangles before refinement).
+    #[arg(long, default_value_t = 12)]
+    pub n: usize,
+    /// Side of the sheet rig (m); the skin is refined to hold its wrinkles (λ ≈ 2 cm), so the
+    /// cost grows with size².
+    #[arg(long, default_value_t = 0.1)]
+    pub size: f64,
+    /// Clip length (s) of the sheet rig.
+    #[arg(long, default_value_t = 0.1)]
+    pub seconds: f64,
+    /// Replace existing outputs.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// Run `furrow report …`.
+pub fn run(c: ReportCommand, out: &Output) -> anyhow::Result<()> {
+    match c {
+        ReportCommand::Tradeoff(a) => run_tradeoff(a, out),
+        ReportCommand::Stability(a) => run_stability(a, out),
+    }
+}
+
+fn check_free(paths: &[&Path], force: bool) -> anyhow::Result<Overwrite> {
+    if force {
+        return Ok(Overwrite::Replace);
+    }
+    for p in paths {
+        if p.exists() {
+            bail!(
+                "{}: already exists; furrow does not overwrite files unless told to (pass --force)",
+                p.display()
+            );
+        }
+    }
+    Ok(Overwrite::Refuse)
+}
+
+fn rig_err(r: &TradeoffRun) -> f64 {
+    r.rms_m
+}
+
+fn slab_err(r: &TradeoffRun) -> f64 {
+    r.wavelength_error.unwrap_or(f64::NAN)
+}
+
+fn run_tradeoff(a: TradeoffArgs, out: &Output) -> anyhow::Result<()> {
+    if !(a.fps.is_finite() && a.fps > 0.0 && a.fps <= 1000.0) {
+        bail!("--fps must lie in (0, 1000], got {}", a.fps);
+    }
+    let csv = a.out.join("tradeoff.csv");
+    let rig_png = a.out.join("tradeoff_rig.png");
+    let slab_png = a.out.join("tradeoff_slab.png");
+    let json = a.out.join("tradeoff.json");
+    let ow = check_free(&[&csv, &rig_png, &slab_png, &json], a.force)?;
+    let scene = match &a.scene {
+        Some(p) => Scene::load(p)?,
+        None => Scene::default(),
+    };
+    let rig = match &a.rig {
+        Some(p) => crate::io::load(
+            p,
+            &LoadOptions {
+                mesh: a.mesh.clone(),
+                animation: None,
+            },
+        )?,
+        None => tradeoff::sheet_rig(&SheetRig::default())?,
+    };
+    let rig_name = a
+        .rig
+        .as_ref()
+        .map_or("built-in sheet rig".to_string(), |p| {
+            p.display().to_string()
+        });
+    let frames = match &a.frames {
+        Some(t) => Some(FrameRange::parse(t, rig.frame_weights(a.fps).len())?),
+        None => None,
+    };
+    let pb = out.progress(1, "rig sweep");
+    let mut rows = tradeoff::rig_sweep(&rig, &scene, a.fps, frames, a.quick, &|k, n| {
+        pb.set_length(n as u64);
+        pb.set_position(k as u64);
+    })
+    .with_context(|| format!("{rig_name}: the tradeoff sweep"))?;
+    pb.finish_and_clear();
+    // Rig tolerances from the wrinkles themselves: the default run's wrinkle RMS.
+    let amp = rows
+        .iter()
+        .find(|r| r.is_default)
+        .map_or(f64::NAN, |r| r.wrinkle_m);
+    let rig_rows = rows.clone();
+    let mut picks_rig = tradeoff::picks(&rig_rows, rig_err, 0.5 * amp, 0.1 * amp, "m");
+    let mut picks_slab: Vec<Pick> = Vec::new();
+    if !a.no_slab {
+        let pb = out.progress(1, "slab sweep");
+        let slab = tradeoff::slab_sweep(&tradeoff::slab_scene(a.quick), a.quick, &|k, n| {
+            pb.set_length(n as u64);
+            pb.set_position(k as u64);
+        })
+        .context("the slab sweep")?;
+        pb.finish_and_clear();
+        picks_slab = tradeoff::picks(&slab, slab_err, 0.15, 0.05, "(relative)");
+        tradeoff::write_chart(
+            &slab_png,
+            &slab,
+            "validation slab: wavelength error against wall time",
+            "|λ measured / λ formula − 1|",
+            slab_err,
+        )?;
+        rows.extend(slab);
+    }
+    tradeoff::write_chart(
+        &rig_png,
+        &rig_rows,
+        &format!("{rig_name}: surface error against wall time"),
+        "RMS distance to the finest run (m)",
+        rig_err,
+    )?;
+    atomic::write(&csv, tradeoff::to_csv(&rows).as_bytes(), ow)?;
+    for p in &mut picks_rig {
+        p.purpose = format!("rig {}", p.purpose);
+    }
+    for p in &mut picks_slab {
+        p.purpose = format!("slab {}", p.purpose);
+    }
+    let all_picks: Vec<Pick> = picks_rig.into_iter().chain(picks_slab).collect();
+    let doc = serde_json::json!({
+        "ok": true,
+        "rig": rig_name,
+        "wrinkle_rms_m": amp,
+        "csv": csv,
+        "charts": [rig_png, slab_png],
+        "picks": all_picks,
+        "runs": rows,
+    });
+    atomic::write(&json, &serde_json::to_vec_pretty(&doc)?, ow)?;
+    out.json_result(&doc);
+    out.say(format!(
+        "{:<6} {:<30} {:>10} {:>9} {:>11} {:>11} {:>9}  status",
+        "case", "setting", "value", "wall s", "RMS m", "max m", "λ err"
+    ));
+    for r in &rows {
+        out.say(format!(
+            "{:<6} {:<30} {:>10} {:>9.2} {:>11.3e} {:>11.3e} {:>9}  {}{}",
+            r.case,
+            r.knob,
+            if r.value.is_finite() {
+                format!("{}", r.value)
+            } else {
+                String::new()
+            },
+            r.wall_s,
+            r.rms_m,
+            r.max_m,
+            r.wavelength_error
+                .map_or(String::new(), |e| format!("{:.1} %", e * 100.0)),
+            if r.pareto { "pareto " } else { "" },
+            r.status
+        ));
+    }
+    out.say(format!(
+        "wrinkle RMS of the default rig run: {amp:.3e} m; preview ≤ 50 %, final ≤ 10 % of it"
+    ));
+    for p in &all_picks {
+        out.say(format!(
+            "pick for {}: {} ({:.2} s, error {:.3e}; {})",
+            p.purpose, p.setting, p.wall_s, p.error, p.rule
+        ));
+    }
+    out.say(format!(
+        "wrote {}, {}, {}{}",
+        csv.display(),
+        json.display(),
+        rig_png.display(),
+        if a.no_slab {
+            String::new()
+        } else {
+            format!(", {}", slab_png.display())
+        }
+    ));
+    Ok(())
+}
+
+fn run_stability(a: StabilityArgs, out: &Output) -> anyhow::Result<()> {
+    if !(2..=64).contains(&a.n) {
+        bail!("--n must lie in [2, 64], got {}", a.n);
+    }
+    if !(a.seconds.is_finite() && a.seconds > 0.0 && a.seconds <= 10.0) {
+        bail!("--seconds must lie in (0, 10], got {}", a.seconds);
+    }
+    if !(a.size.is_finite() && a.size > 0.0 && a.size <= 10.0) {
+        bail!("--size must lie in (0, 10] m, got {}", a.size);
+    }
+    let csv = a.out.join("stability.csv");
+    let md = a.out.join("stability.md");
+    let ow = check_free(&[&csv, &md], a.force)?;
+    let pb = out.progress(1, "cases");
+    let rows = stability::run_all(a.quick, a.n, a.size, a.seconds, &|k, n| {
+        pb.set_length(n as u64);
+        pb.set_position(k as u64);
+    });
+    pb.finish_and_clear();
+    let table = stability::to_markdown(&rows);
+    atomic::write(&csv, stability::to_csv(&rows).as_bytes(), ow)?;
+    atomic::write(&md, table.as_bytes(), ow)?;
+    let bad: Vec<&stability::StabilityRow> = rows.iter().filter(|r| r.non_finite).collect();
+    out.json_result(&serde_json::json!({
+        "ok": bad.is_empty(), "csv": csv, "markdown": md, "cases": rows,
+    }));
+    out.say(table);
+    out.say(format!("wrote {} and {}", csv.display(), md.display()));
+    if !bad.is_empty() {
+        bail!(
+            "{} case(s) produced a non-finite output: {}",
+            bad.len(),
+            bad.iter()
+                .map(|r| format!("{} ({})", r.case, r.parameter))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,550 @@
+//! Stiff and extreme cases (`furrow report stability`): run the pipeline on a small sheet rig
+//! (see [`super::tradeoff::sheet_rig`]) with one thing pushed to an extreme per case, and the
+//! interior alone from an inverted start, and record per case how each stage ended
+//! (converged, a named non-convergence status, or a refusal with a message), the iterations,
+//! residuals and time, and whether any output was non-finite.
+//!
+//! The goal the table checks: every case converges or stops with a named status and a
+//! message saying what to change; no NaN or infinity reaches an output.
+
+use super::tradeoff::{sheet_rig, SheetRig};
+use crate::fem::{BackwardEuler, Interior, LinearSolver, SolveStatus, StepSettings};
+use crate::lattice::ElementOrder;
+use crate::pipeline::{self, record::StageRecord, RunOptions};
+use crate::scene::Scene;
+use crate::validate::slab::block_lattice;
+use nalgebra::Vector3;
+use serde::Serialize;
+use std::time::Instant;
+
+/// One extreme case: the sheet rig, the scene and the sampling rate to run it with.
+#[derive(Debug, Clone)]
+pub struct Case {
+    /// Short name of what is pushed (`stiffness_ratio`, `thickness`, …).
+    pub name: String,
+    /// The extreme value, as text with its unit.
+    pub parameter: String,
+    /// The rig.
+    pub rig: SheetRig,
+    /// The scene.
+    pub scene: Scene,
+    /// Frames per second.
+    pub fps: f64,
+}
+
+/// How one case ended.
+#[derive(Debug, Clone, Serialize)]
+pub struct StabilityRow {
+    /// What is pushed.
+    pub case: String,
+    /// Its value.
+    pub parameter: String,
+    /// `converged` (every stage of every frame), `not_converged` (a named solver status in
+    /// some frame, outputs finite), `refused` (the run stopped with a message before writing
+    /// anything) or `non_finite` (a NaN or infinity in an output: a bug).
+    pub outcome: String,
+    /// The interior's worst status over the frames, with the count (`converged`,
+    /// `iterationlimit (2/5)`, …).
+    pub interior_status: String,
+    /// Interior Newton iterations summed over frames.
+    pub interior_iterations: usize,
+    /// Largest final interior residual over frames (N).
+    pub interior_residual: f64,
+    /// The shell's worst status over the frames, with the count.
+    pub shell_status: String,
+    /// Shell Newton iterations summed over frames.
+    pub shell_iterations: usize,
+    /// Largest final shell residual over frames (N).
+    pub shell_residual: f64,
+    /// Frames simulated.
+    pub frames: usize,
+    /// Largest wrinkle depth over frames (m).
+    pub wrinkle_depth_max_m: f64,
+    /// Wall time (s).
+    pub wall_s: f64,
+    /// Whether any output position was NaN or infinite.
+    pub non_finite: bool,
+    /// The refusal message, or the run's warnings (joined by " | ").
+    pub message: String,
+}
+
+/// The CSV header written by [`to_csv`].
+pub const CSV_HEADER: &str = "case,parameter,outcome,interior_status,interior_iterations,interior_residual,shell_status,shell_iterations,shell_residual,frames,wrinkle_depth_max_m,wall_s,non_finite,message";
+
+/// The cases. `quick` keeps each end of every range (a reduced set for tests); the full set
+/// adds intermediate values. The sheet is `n` quads per side over `size` (m, the model size),
+/// 15 % strain over `seconds`, flesh interior (E_q = 10 kPa) and the `skin` preset
+/// (λ ≈ 2 cm: the skin is refined to about 3 mm edges whatever `n`, so `size` sets the cost).
+pub fn cases(quick: bool, n: usize, size: f64, seconds: f64) -> Vec<Case> {
+    let base = SheetRig {
+        n,
+        size,
+        strain: 0.15,
+        weight: 1.0,
+        seconds,
+        sliver: None,
+    };
+    let scene = Scene::default();
+    let e_q = scene
+        .interior
+        .material()
+        .expect("default interior is valid")
+        .young;
+    let mut out = Vec::new();
+    let mut push = |name: &str, parameter: String, rig: SheetRig, scene: Scene, fps: f64| {
+        out.push(Case {
+            name: name.into(),
+            parameter,
+            rig,
+            scene,
+            fps,
+        })
+    };
+    push("baseline", "defaults".into(), base, scene.clone(), 30.0);
+    let ratios: &[f64] = if quick {
+        &[10.0, 1e6]
+    } else {
+        &[10.0, 1e2, 1e3, 1e4, 1e5, 1e6]
+    };
+    for &r in ratios {
+        let mut s = scene.clone();
+        s.skin.young = Some(r * e_q);
+        push("stiffness_ratio", format!("E_x/E_q = {r:e}"), base, s, 30.0);
+    }
+    let thick: &[f64] = if quick {
+        &[1e-4, 1e-1]
+    } else {
+        &[1e-4, 1e-3, 1e-2, 1e-1]
+    };
+    for &t in thick {
+        let mut s = scene.clone();
+        s.skin.thickness = Some(t * base.size);
+        push(
+            "thickness",
+            format!("h = {t:e} × size = {:.1e} m", t * base.size),
+            base,
+            s,
+            30.0,
+        );
+    }
+    let strains: &[f64] = if quick { &[0.5] } else { &[0.3, 0.5] };
+    for &c in strains {
+        push(
+            "compression",
+            format!("{:.0} %", c * 100.0),
+            SheetRig { strain: c, ..base },
+            scene.clone(),
+            30.0,
+        );
+    }
+    for w in [-0.5, 2.0] {
+        push(
+            "weight",
+            format!("blend weight → {w}"),
+            SheetRig { weight: w, ..base },
+            scene.clone(),
+            30.0,
+        );
+    }
+    // The pipeline sub-steps a frame by at most dt: steps shorter than a frame (1/30 s) are
+    // sub-steps; for longer ones the sampling rate is 1/dt so that the step really is dt.
+    let dts: &[f64] = if quick {
+        &[0.005, 0.1]
+    } else {
+        &[0.005, 0.02, 0.05, 0.1]
+    };
+    for &dt in dts {
+        let mut s = scene.clone();
+        s.dynamics.dt = Some(dt);
+        push(
+            "time_step",
+            format!("dt = {dt} s"),
+            base,
+            s,
+            if dt < 1.0 / 30.0 { 30.0 } else { 1.0 / dt },
+        );
+    }
+    let slivers: &[f64] = if quick { &[1e-4] } else { &[1e-2, 1e-4] };
+    for &e in slivers {
+        push(
+            "degenerate_triangle",
+            format!("2 triangles of area {e:e} × ½ℓ²"),
+            SheetRig {
+                sliver: Some(e),
+                ..base
+            },
+            scene.clone(),
+            30.0,
+        );
+    }
+    {
+        // A skin far stiffer than the lattice: membrane stiffness E_x h ≈ 10⁶ × E_q ℓ.
+        let mut s = scene.clone();
+        s.skin.young = Some(1e6 * e_q);
+        s.skin.thickness = Some(0.1 * base.size);
+        push(
+            "stiff_skin",
+            "E_x/E_q = 1e6, h = 0.1 × size".into(),
+            base,
+            s,
+            30.0,
+        );
+    }
+    out
+}
+
+/// Worst status over frames: the first non-`converged` status and how many frames had a
+/// non-converged status, or `converged`.
+fn worst<'a>(recs: impl Iterator<Item = &'a StageRecord>) -> (String, usize, f64, usize) {
+    let (mut bad, mut first, mut it, mut res, mut n) = (0, None, 0, 0.0f64, 0);
+    for r in recs {
+        n += 1;
+        it += r.iterations;
+        res = res.max(r.residual);
+        if r.status != "converged" {
+            bad += 1;
+            first.get_or_insert_with(|| r.status.clone());
+        }
+    }
+    let s = match (n, first) {
+        (0, _) => "skipped".to_string(),
+        (_, None) => "converged".to_string(),
+        (_, Some(f)) => format!("{f} ({bad}/{n})"),
+    };
+    (s, it, res, bad)
+}
+
+/// Run one case.
+pub fn run_case(c: &Case) -> StabilityRow {
+    let t = Instant::now();
+    let mut row = StabilityRow {
+        case: c.name.clone(),
+        parameter: c.parameter.clone(),
+        outcome: "refused".into(),
+        interior_status: "-".into(),
+        interior_iterations: 0,
+        interior_residual: 0.0,
+        shell_status: "-".into(),
+        shell_iterations: 0,
+        shell_residual: 0.0,
+        frames: 0,
+        wrinkle_depth_max_m: 0.0,
+        wall_s: 0.0,
+        non_finite: false,
+        message: String::new(),
+    };
+    let result = sheet_rig(&c.rig).and_then(|rig| {
+        pipeline::run(
+            &rig,
+            &RunOptions {
+                scene: c.scene.clone(),
+                scene_path: None,
+                fps: c.fps,
+                frames: None,
+            },
+            &|_, _, _| {},
+        )
+    });
+    row.wall_s = t.elapsed().as_secs_f64();
+    match result {
+        Err(e) => row.message = format!("{e:#}"),
+        Ok(out) => {
+            let pf = &out.report.per_frame;
+            let (is, ii, ir, ib) = worst(pf.iter().filter_map(|f| f.interior.as_ref()));
+            let (ss, si, sr, sb) = worst(pf.iter().filter_map(|f| f.shell.as_ref()));
+            row.interior_status = is;
+            row.interior_iterations = ii;
+            row.interior_residual = ir;
+            row.shell_status = ss;
+            row.shell_iterations = si;
+            row.shell_residual = sr;
+            row.frames = pf.len();
+            row.wrinkle_depth_max_m = pf.iter().map(|f| f.wrinkle_depth_max_m).fold(0.0, f64::max);
+            row.non_finite = out
+                .frames
+                .iter()
+                .chain(&out.smooth)
+                .flatten()
+                .any(|p| !p.iter().all(|v| v.is_finite()))
+                || !row.wrinkle_depth_max_m.is_finite();
+            row.outcome = if row.non_finite {
+                "non_finite"
+            } else if ib + sb > 0 {
+                "not_converged"
+            } else {
+                "converged"
+            }
+            .into();
+            row.message = out.report.warnings.join(" | ");
+        }
+    }
+    row
+}
+
+/// The interior alone (no skin) from an inverted start: a 3 × 3 × 2 block of flesh (2 cm
+/// cells, quadratic elements, two bottom node layers pinned) whose free nodes start
+/// squeezed through the plane z₀ of the top pinned layer, z ↦ z₀ − ½ (z − z₀) (the upper
+/// elements inverted with stretch ½ across their thickness), then `steps` quasi-static
+/// solves. Outcome `converged` when the last solve converged and the
+/// block came back to its rest shape (largest node distance from rest below 1 % of a cell).
+pub fn inverted_interior(steps: usize) -> StabilityRow {
+    let t = Instant::now();
+    let cell = 0.02;
+    let lattice = block_lattice(Vector3::zeros(), cell, [3, 3, 2], ElementOrder::Quadratic);
+    let rest = lattice.rest_flat();
+    let layers = ElementOrder::Quadratic.per_axis() - 1;
+    let pinned: Vec<bool> = lattice.grid.iter().map(|g| g[2] < layers).collect();
+    let z0 = lattice
+        .grid
+        .iter()
+        .zip(lattice.rest.iter())
+        .filter(|(g, _)| g[2] == layers - 1)
+        .map(|(_, p)| p.z)
+        .fold(f64::NEG_INFINITY, f64::max);
+    let mut q0 = rest.clone();
+    for (n, &p) in pinned.iter().enumerate() {
+        if !p {
+            q0[3 * n + 2] = z0 - 0.5 * (rest[3 * n + 2] - z0);
+        }
+    }
+    let mut row = StabilityRow {
+        case: "inverted_start".into(),
+        parameter: "interior alone, squeezed to −½ through the pinned layer".into(),
+        outcome: "refused".into(),
+        interior_status: "-".into(),
+        interior_iterations: 0,
+        interior_residual: 0.0,
+        shell_status: "skipped".into(),
+        shell_iterations: 0,
+        shell_residual: 0.0,
+        frames: 0,
+        wrinkle_depth_max_m: 0.0,
+        wall_s: 0.0,
+        non_finite: false,
+        message: String::new(),
+    };
+    let material = Scene::default()
+        .interior
+        .material()
+        .expect("default interior is valid");
+    let result = Interior::new(&lattice, &material).and_then(|interior| {
+        BackwardEuler::new(
+            interior,
+            q0,
+            pinned,
+            StepSettings {
+                dt: 0.02,
+                max_newton: 30,
+                tolerance: 1e-6,
+                lumped_mass: false,
+                gravity: [0.0; 3],
+                linear_solver: LinearSolver::Auto,
+            },
+        )
+    });
+    let mut be = match result {
+        Ok(be) => be,
+        Err(e) => {
+            row.message = e.to_string();
+            row.wall_s = t.elapsed().as_secs_f64();
+            return row;
+        }
+    };
+    let zero = vec![0.0; be.q.len()];
+    let mut last = None;
+    let mut bad = 0;
+    for _ in 0..steps {
+        match be.quasi_static(&zero, None) {
+            Ok(rep) => {
+                row.frames += 1;
+                row.interior_iterations += rep.iterations;
+                row.interior_residual = rep.residual;
+                if rep.status != SolveStatus::Converged {
+                    bad += 1;
+                }
+                last = Some(rep.status);
+            }
+            Err(e) => {
+                row.message = e.to_string();
+                break;
+            }
+        }
+    }
+    row.non_finite = be.q.iter().any(|v| !v.is_finite());
+    let dist = (0..be.q.len() / 3)
+        .map(|n| {
+            Vector3::new(
+                be.q[3 * n] - rest[3 * n],
+                be.q[3 * n + 1] - rest[3 * n + 1],
+                be.q[3 * n + 2] - rest[3 * n + 2],
+            )
+            .norm()
+        })
+        .fold(0.0, f64::max);
+    row.wrinkle_depth_max_m = 0.0;
+    row.interior_status = match last {
+        None => "-".into(),
+        Some(SolveStatus::Converged) => "converged".into(),
+        Some(s) => format!("{} ({bad}/{})", format!("{s:?}").to_lowercase(), row.frames),
+    };
+    let back = dist < 0.01 * cell;
+    row.outcome = if row.non_finite {
+        "non_finite".into()
+    } else if last.is_none() {
+        "refused".into()
+    } else if last == Some(SolveStatus::Converged) && back {
+        "converged".into()
+    } else {
+        "not_converged".into()
+    };
+    if row.message.is_empty() {
+        row.message = format!(
+            "largest node distance from rest after {} solve(s): {:.3e} m ({})",
+            row.frames,
+            dist,
+            if back {
+                "recovered"
+            } else {
+                "not recovered: more solves or a smaller load step"
+            }
+        );
+    }
+    row.wall_s = t.elapsed().as_secs_f64();
+    row
+}
+
+/// Run every case of [`cases`] and [`inverted_interior`]; `progress(done, total)` before each.
+pub fn run_all(
+    quick: bool,
+    n: usize,
+    size: f64,
+    seconds: f64,
+    progress: &dyn Fn(usize, usize),
+) -> Vec<StabilityRow> {
+    let cs = cases(quick, n, size, seconds);
+    let total = cs.len() + 1;
+    let mut rows = Vec::new();
+    for (i, c) in cs.iter().enumerate() {
+        progress(i, total);
+        rows.push(run_case(c));
+    }
+    progress(cs.len(), total);
+    rows.push(inverted_interior(if quick { 3 } else { 6 }));
+    progress(total, total);
+    rows
+}
+
+/// `s` on one line (line breaks become spaces).
+fn one_line(s: &str) -> String {
+    s.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
+/// The rows as CSV (header [`CSV_HEADER`]); text fields quoted, on one line.
+pub fn to_csv(rows: &[StabilityRow]) -> String {
+    let q = |s: &str| format!("\"{}\"", one_line(s).replace('"', "'"));
+    let mut s = String::from(CSV_HEADER);
+    s.push('\n');
+    for r in rows {
+        s.push_str(&format!(
+            "{},{},{},{},{},{:.3e},{},{},{:.3e},{},{:.3e},{:.3},{},{}\n",
+            r.case,
+            q(&r.parameter),
+            r.outcome,
+            q(&r.interior_status),
+            r.interior_iterations,
+            r.interior_residual,
+            q(&r.shell_status),
+            r.shell_iterations,
+            r.shell_residual,
+            r.frames,
+            r.wrinkle_depth_max_m,
+            r.wall_s,
+            r.non_finite,
+            q(&r.message)
+        ));
+    }
+    s
+}
+
+/// The rows as a markdown table (the message cut to 120 characters).
+pub fn to_markdown(rows: &[StabilityRow]) -> String {
+    let mut s = String::from(
+        "| case | parameter | outcome | interior (it, residual N) | shell (it, residual N) | frames | max depth (mm) | time (s) | non-finite | message |\n|---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    for r in rows {
+        let full = one_line(&r.message);
+        let mut msg: String = full.chars().take(120).collect();
+        if full.chars().count() > 120 {
+            msg.push('…');
+        }
+        s.push_str(&format!(
+            "| {} | {} | {} | {} ({}, {:.1e}) | {} ({}, {:.1e}) | {} | {:.3} | {:.2} | {} | {} |\n",
+            r.case,
+            r.parameter,
+            r.outcome,
+            r.interior_status,
+            r.interior_iterations,
+            r.interior_residual,
+            r.shell_status,
+            r.shell_iterations,
+            r.shell_residual,
+            r.frames,
+            r.wrinkle_depth_max_m * 1e3,
+            r.wall_s,
+            r.non_finite,
+            msg.replace('|', "/")
+        ));
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_case_has_a_valid_scene_and_the_ranges_reach_their_ends() {
+        let cs = cases(true, 8, 0.1, 0.1);
+        for c in &cs {
+            c.scene.validate().unwrap();
+        }
+        let names: Vec<&str> = cs.iter().map(|c| c.name.as_str()).collect();
+        for n in [
+            "stiffness_ratio",
+            "thickness",
+            "compression",
+            "weight",
+            "time_step",
+            "degenerate_triangle",
+            "stiff_skin",
+        ] {
+            assert!(names.contains(&n), "{n} missing");
+        }
+        let ratios: Vec<String> = cs
+            .iter()
+            .filter(|c| c.name == "stiffness_ratio")
+            .map(|c| c.parameter.clone())
+            .collect();
+        assert_eq!(ratios, vec!["E_x/E_q = 1e1", "E_x/E_q = 1e6"]);
+    }
+
+    #[test]
+    fn worst_status_names_the_first_failure_and_counts() {
+        let rec = |s: &str, it: usize, r: f64| StageRecord {
+            status: s.into(),
+            iterations: it,
+            residual: r,
+            ms: 0.0,
+        };
+        let v = [
+            rec("converged", 2, 1e-9),
+            rec("iteration_limit", 60, 1e-3),
+            rec("stalled", 5, 1e-5),
+        ];
+        let (s, it, res, bad) = worst(v.iter());
+        assert_eq!(s, "iteration_limit (2/3)");
+        assert_eq!((it, bad), (67, 2));
+        assert_eq!(res, 1e-3);
+        assert_eq!(worst([].iter()).0, "skipped");
+    }
+}

@@ -1,0 +1,221 @@
+//! `furrow report tradeoff` and `furrow report stability` on a reduced set: small sheet rigs,
+//! few frames. Run with `cargo test --release --test reports`.
+
+use furrow::report::stability::{self, run_all};
+use furrow::report::tradeoff::{self, sheet_rig, SheetRig};
+use furrow::scene::Scene;
+use std::process::Command;
+
+/// Every stability case ends with a named outcome, no output is non-finite, and a case that
+/// stops says why.
+#[test]
+fn stability_cases_end_with_a_named_status_and_finite_outputs() {
+    let rows = run_all(true, 4, 0.04, 0.07, &|_, _| {});
+    eprintln!("{}", stability::to_markdown(&rows));
+    assert!(rows.len() >= 13, "{} cases", rows.len());
+    for r in &rows {
+        assert!(
+            ["converged", "not_converged", "refused"].contains(&r.outcome.as_str()),
+            "{}: {} ended {} ({})",
+            r.case,
+            r.parameter,
+            r.outcome,
+            r.message
+        );
+        assert!(
+            !r.non_finite,
+            "{} {}: non-finite output",
+            r.case, r.parameter
+        );
+        assert!(
+            r.interior_residual.is_finite() && r.shell_residual.is_finite(),
+            "{} {}: residuals {} {}",
+            r.case,
+            r.parameter,
+            r.interior_residual,
+            r.shell_residual
+        );
+        if r.outcome == "refused" {
+            assert!(
+                r.message.len() > 20,
+                "{} {}: refused without a message",
+                r.case,
+                r.parameter
+            );
+        }
+        if r.outcome == "not_converged" {
+            assert!(
+                r.interior_status.contains('(') || r.shell_status.contains('('),
+                "{} {}: not converged but no stage names a status: {} / {}",
+                r.case,
+                r.parameter,
+                r.interior_status,
+                r.shell_status
+            );
+        }
+    }
+    // The defaults run every frame and the skin converges (the interior takes a fixed few
+    // Newton iterations per step by default and may report its iteration limit).
+    let base = rows.iter().find(|r| r.case == "baseline").unwrap();
+    assert_ne!(base.outcome, "refused", "{}", base.message);
+    assert_eq!(base.shell_status, "converged", "{}", base.message);
+    assert!(base.frames >= 3);
+    // A wavelength far below the mesh resolution is refused with a message saying so.
+    let thin = rows
+        .iter()
+        .find(|r| r.case == "thickness" && r.parameter.starts_with("h = 1e-4"))
+        .unwrap();
+    assert_eq!(thin.outcome, "refused");
+    assert!(thin.message.contains("too coarse"), "{}", thin.message);
+    // The inverted interior recovers its rest shape.
+    let inv = rows.iter().find(|r| r.case == "inverted_start").unwrap();
+    assert_eq!(inv.outcome, "converged", "{}", inv.message);
+    // The CSV has one line per case plus the header.
+    let csv = stability::to_csv(&rows);
+    assert_eq!(csv.lines().count(), rows.len() + 1);
+    assert_eq!(csv.lines().next().unwrap(), stability::CSV_HEADER);
+}
+
+/// The tradeoff sweep on a small sheet rig (thick skin so λ is large and the meshes small) and
+/// a small slab: the CSV has its columns, every run succeeded, the reference has zero error,
+/// coarser settings have a positive one, and the Pareto front is marked and non-empty.
+#[test]
+fn tradeoff_csv_has_the_columns_and_a_pareto_front() {
+    let rig = sheet_rig(&SheetRig {
+        n: 8,
+        seconds: 0.07,
+        ..SheetRig::default()
+    })
+    .unwrap();
+    let mut scene = Scene::default();
+    scene.skin.thickness = Some(0.002);
+    let rows = tradeoff::rig_sweep(&rig, &scene, 30.0, None, true, &|_, _| {}).unwrap();
+    let mut slab_scene = tradeoff::slab_scene(true);
+    if let Some(g) = slab_scene.geometry.as_mut() {
+        g.size = [0.04, 0.008, 0.02];
+    }
+    let slab = tradeoff::slab_sweep(&slab_scene, true, &|_, _| {}).unwrap();
+    let all: Vec<_> = rows.iter().chain(&slab).cloned().collect();
+    let csv = tradeoff::to_csv(&all);
+    eprintln!("{csv}");
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    for col in [
+        "case",
+        "knob",
+        "value",
+        "wall_s",
+        "rms_m",
+        "max_m",
+        "wavelength_error",
+        "pareto",
+    ] {
+        assert!(header.contains(&col), "column {col} missing: {header:?}");
+    }
+    assert_eq!(lines.count(), all.len());
+    for set in [&rows, &slab] {
+        for r in set.iter() {
+            assert_eq!(
+                r.status, "ok",
+                "{} {} = {}: {}",
+                r.case, r.knob, r.value, r.status
+            );
+            assert!(r.wall_s > 0.0 && r.rms_m.is_finite() && r.max_m >= r.rms_m);
+        }
+        let reference = set.iter().find(|r| r.is_reference).unwrap();
+        assert!(
+            reference.rms_m < 1e-12,
+            "reference error {}",
+            reference.rms_m
+        );
+        assert!(set.iter().any(|r| r.is_default));
+        let front: Vec<_> = set.iter().filter(|r| r.pareto).collect();
+        assert!(!front.is_empty());
+        assert!(front.iter().all(|r| !r.is_reference));
+        // Nothing off the front beats a front point on both time and error.
+        let err = |r: &tradeoff::TradeoffRun| {
+            if r.case == "slab" {
+                r.wavelength_error.unwrap()
+            } else {
+                r.rms_m
+            }
+        };
+        for r in set.iter().filter(|r| !r.pareto && !r.is_reference) {
+            assert!(
+                front
+                    .iter()
+                    .any(|f| f.wall_s <= r.wall_s && err(f) <= err(r)),
+                "{} = {} is dominated by no front point",
+                r.knob,
+                r.value
+            );
+        }
+    }
+    // The rig's coarsest shell tolerance moves the surface; the wrinkles are there at all.
+    let def = rows.iter().find(|r| r.is_default).unwrap();
+    assert!(
+        def.wrinkle_m > 1e-5,
+        "default wrinkle RMS {}",
+        def.wrinkle_m
+    );
+    // The slab's finest run finds wrinkles of the formula's wavelength within a factor 1.5
+    // (on this 4 × 0.8 cm slab at 8 % compression it measures about 5.2 mm for 7.8 mm).
+    let sref = slab.iter().find(|r| r.is_reference).unwrap();
+    assert!(
+        sref.wavelength_error.unwrap() < 0.5,
+        "slab reference: measured {:?} vs predicted {:?}",
+        sref.measured_wavelength_m,
+        sref.predicted_wavelength_m
+    );
+    // The chart renders (log-log, Pareto series, default highlighted).
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("t.png");
+    tradeoff::write_chart(&png, &rows, "t", "RMS (m)", |r| r.rms_m).unwrap();
+    assert!(std::fs::metadata(&png).unwrap().len() > 1000);
+    let chart = tradeoff::chart(&rows, "t", "RMS (m)", |r| r.rms_m);
+    assert!(chart.log_x && chart.log_y);
+    assert!(chart.series.iter().any(|s| s.name == "Pareto front"));
+    assert!(chart
+        .series
+        .iter()
+        .any(|s| s.name == "default" && s.highlight));
+}
+
+/// The CLI: `report stability --quick` writes its CSV and table and refuses to overwrite.
+#[test]
+fn cli_report_stability_writes_and_refuses_to_overwrite() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("r");
+    let run = || {
+        Command::new(env!("CARGO_BIN_EXE_furrow"))
+            .args([
+                "report",
+                "stability",
+                "--quick",
+                "--n",
+                "4",
+                "--size",
+                "0.03",
+                "--seconds",
+                "0.04",
+                "--out",
+            ])
+            .arg(&out)
+            .output()
+            .unwrap()
+    };
+    let o = run();
+    assert!(
+        o.status.success(),
+        "{}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let csv = std::fs::read_to_string(out.join("stability.csv")).unwrap();
+    assert!(csv.starts_with(stability::CSV_HEADER));
+    assert!(!csv.contains("NaN") && !csv.contains("inf"), "{csv}");
+    assert!(out.join("stability.md").exists());
+    let o = run();
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--force"));
+}
