@@ -124,7 +124,7 @@ fn animate_writes_valid_gltf_and_report_and_refuses_to_overwrite() {
         assert!(frames[3].get(key).is_some(), "per_frame lacks {key}");
     }
     assert!(j["wavelength_m"].as_f64().unwrap() > 0.0);
-    if let Some(v) = common::validate(&[out.clone()]) {
+    if let Some(v) = common::validate(std::slice::from_ref(&out)) {
         common::assert_valid(&v);
     }
     // A second run without --force must refuse and leave the file as it was.

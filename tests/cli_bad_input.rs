@@ -93,6 +93,8 @@ fn tiny_rig_itself_is_accepted() {
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // A 1 m square of two triangles cannot carry a 1 mm skin's 2 cm wrinkles: refused, with
+    // the numbers, and nothing written.
     let out = tempfile::tempdir().unwrap();
     let o = Command::new(env!("CARGO_BIN_EXE_furrow"))
         .args(["--quiet", "demo", "--rig"])
@@ -101,8 +103,28 @@ fn tiny_rig_itself_is_accepted() {
         .arg(out.path())
         .output()
         .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(e.contains("tiny.glb") && e.contains("too coarse"), "{e}");
+    assert!(!out.path().join("face_wrinkled.glb").exists());
+    // With a skin of its scale it is animated.
+    let scene = out.path().join("thick.toml");
+    std::fs::write(
+        &scene,
+        "[skin]\nthickness = 0.1\n[interior]\ncell_size = 0.25\n",
+    )
+    .unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_furrow"))
+        .args(["--quiet", "animate"])
+        .arg(&p)
+        .arg("--scene")
+        .arg(&scene)
+        .arg("-o")
+        .arg(out.path().join("tiny_out.glb"))
+        .output()
+        .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    assert!(out.path().join("face_frames.glb").exists());
+    assert!(out.path().join("tiny_out.glb").exists());
 }
 
 #[test]

@@ -158,7 +158,11 @@ fn run_wavelength(a: ValidateArgs, out: &Output) -> anyhow::Result<()> {
         median * 100.0,
         max * 100.0
     ));
-    out.say(format!("  {}\n  {}", csv_path.display(), png_path.display()));
+    out.say(format!(
+        "  {}\n  {}",
+        csv_path.display(),
+        png_path.display()
+    ));
     Ok(())
 }
 
@@ -248,14 +252,25 @@ fn run_dense(a: ValidateArgs, out: &Output) -> anyhow::Result<()> {
     }
     atomic::write(&cost_path, cost.as_bytes(), ow)?;
     let chart = Chart {
-        title: format!("wavelength error against run time (E_x/E_q = {r}, h = {} mm)", h * 1e3),
+        title: format!(
+            "wavelength error against run time (E_x/E_q = {r}, h = {} mm)",
+            h * 1e3
+        ),
         x_label: "run time (s)".into(),
         y_label: "relative error of λ against the formula".into(),
         log_x: true,
         log_y: true,
         series: vec![
-            Series::new("dense plane strain (elements per λ)", dense_pts, Style::LinePoints),
-            Series::new("embedded shell (vertices per λ)", emb_pts, Style::LinePoints),
+            Series::new(
+                "dense plane strain (elements per λ)",
+                dense_pts,
+                Style::LinePoints,
+            ),
+            Series::new(
+                "embedded shell (vertices per λ)",
+                emb_pts,
+                Style::LinePoints,
+            ),
         ],
         ..Default::default()
     };
