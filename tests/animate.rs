@@ -400,3 +400,42 @@ fn a_too_coarse_skin_is_refused_with_the_numbers() {
     );
     assert!(!out.exists());
 }
+
+#[test]
+fn muscles_fitted_per_frame_drive_the_interior_and_the_skin_wrinkles() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_sheet(dir.path(), "sheet.glb");
+    let rig = load_bytes(
+        &path,
+        &std::fs::read(&path).unwrap(),
+        &LoadOptions::default(),
+    )
+    .unwrap();
+    let opts = RunOptions {
+        scene: Scene::parse("[muscles]\nsource = \"auto\"\n", "m.toml").unwrap(),
+        scene_path: None,
+        fps: 30.0,
+        frames: None,
+    };
+    let out = pipeline::run(&rig, &opts, &|_, _, _| {}).unwrap();
+    assert_eq!(
+        out.report.sizes["muscles"], 1,
+        "one muscle for the one blend shape"
+    );
+    for s in ["muscles", "fit"] {
+        let st = out.report.stages.iter().find(|x| x.stage == s).unwrap();
+        assert!(st.is_ran(), "{s}: {st:?}");
+    }
+    let last = out.report.per_frame.last().unwrap();
+    let fit = last.fit.as_ref().expect("the fit ran in every frame");
+    assert_eq!(fit.status, "converged");
+    assert!(fit.residual.is_finite() && fit.residual < 5e-3, "{fit:?}");
+    let n = out.frames.len() - 1;
+    let left = detail_rms(&out, n, |x| (0.01..0.035).contains(&x));
+    let right = detail_rms(&out, n, |x| (0.065..0.09).contains(&x));
+    eprintln!("muscle-driven wrinkle RMS: compressed {left:.3e} m, stretched {right:.3e} m");
+    assert!(
+        left > 1e-4 && left > 5.0 * right,
+        "{left:.3e} vs {right:.3e}"
+    );
+}

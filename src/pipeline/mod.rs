@@ -48,6 +48,72 @@ use std::time::Instant;
 /// offers, so the lattice follows the artist's shape to about 10 % of its own error.
 pub const TRACKING_STIFFNESS: f64 = 10.0;
 
+/// Tracking stiffness factor κ when muscles drive the interior: a tenth of
+/// [`TRACKING_STIFFNESS`], enough to carry motion muscles cannot make (a jaw's rotation about
+/// bone) without overriding their shape.
+pub const MUSCLE_TRACKING: f64 = 1.0;
+
+/// Muscles of a run and their current activations.
+struct MuscleDrive {
+    fitter: crate::muscle::Fitter,
+    activations: Vec<f64>,
+    origin: String,
+}
+
+/// Muscles from `source` (`auto`: generated from the rig's blend shapes on the welded skin;
+/// otherwise a muscle TOML file), with their fitter.
+fn build_muscles(rig: &Rig, scene: &Scene, s: &Setup, source: &str) -> anyhow::Result<MuscleDrive> {
+    use crate::io::model::MorphTarget;
+    use crate::muscle::{generate_muscles, FitSettings, Fitter, GenerateSettings};
+    let material = scene.interior.material()?;
+    let welded_mesh = TriMesh::new(
+        s.welded_loaded
+            .iter()
+            .map(|&i| rig.face().positions[i])
+            .collect(),
+        Vec::new(),
+    );
+    let (muscles, origin) = if source == "auto" {
+        let targets: Vec<MorphTarget> = rig
+            .face()
+            .targets
+            .iter()
+            .map(|t| MorphTarget {
+                name: t.name.clone(),
+                positions: s.welded_loaded.iter().map(|&i| t.positions[i]).collect(),
+                normals: None,
+            })
+            .collect();
+        let interior = Interior::new(&s.lattice, &material)?;
+        let g = generate_muscles(
+            &s.lattice,
+            &interior,
+            &targets,
+            &GenerateSettings::default(),
+        )?;
+        (g.muscles, "generated from the blend shapes".to_string())
+    } else {
+        let path = std::path::Path::new(source);
+        (
+            crate::muscle::rigfile::load(path, &s.lattice, &welded_mesh)?,
+            format!("from {source}"),
+        )
+    };
+    if muscles.is_empty() {
+        bail!(
+            "{}: no muscles ({source}): every blend shape is empty; give a muscle file or use muscles.source = \"none\"",
+            rig.path.display()
+        );
+    }
+    let n = muscles.len();
+    let fitter = Fitter::new(&s.lattice, &material, muscles, FitSettings::default())?;
+    Ok(MuscleDrive {
+        fitter,
+        activations: vec![0.0; n],
+        origin,
+    })
+}
+
 /// Interior Newton tolerance: ‖∇Φ‖ relative to the larger of the initial gradient and the
 /// applied force (the tracking and skin forces). 1e-4 leaves position errors far below the
 /// lattice's own discretisation error; the linearised corotational Hessian converges only
@@ -98,6 +164,8 @@ struct Setup {
     origin: Vec<VertexOrigin>,
     /// Loaded vertex → welded vertex.
     welded_of_loaded: Vec<usize>,
+    /// Welded vertex → one loaded vertex.
+    welded_loaded: Vec<usize>,
     welded_count: usize,
     lattice: Lattice,
     /// Embedding rows of every export vertex (node, weight).
@@ -208,18 +276,37 @@ pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<R
             0.0,
         ));
     }
-    match scene.muscles.source.as_deref().unwrap_or("none") {
+    // Muscles: generated from the blend shapes (`auto`) or read from a file; their
+    // activations are fitted to every frame and drive the interior.
+    let mut muscles = match scene.muscles.source.as_deref().unwrap_or("none") {
         "none" => {
             stages.push(StagePlan::skipped(
                 "muscles",
                 "muscles.source = none: the interior tracks the blended surface directly",
             ));
             stages.push(StagePlan::skipped("fit", "no muscles: no activation QP"));
+            None
         }
-        other => bail!(
-            "`muscles.source` = \"{other}\": muscle-driven runs are not available in this build; use \"none\""
-        ),
-    }
+        source => {
+            let t = Instant::now();
+            let m = build_muscles(rig, scene, &setup, source)?;
+            stages.push(StagePlan::ran(
+                "muscles",
+                format!(
+                    "{} muscles {}; a weak tracking (κ = {MUSCLE_TRACKING}) carries what they cannot make (bone motion)",
+                    m.fitter.muscles().len(),
+                    m.origin
+                ),
+                t.elapsed().as_secs_f64() * 1e3,
+            ));
+            stages.push(StagePlan::ran(
+                "fit",
+                "activations per frame: clarabel QP on the linearised response (warm-started)",
+                0.0,
+            ));
+            Some(m)
+        }
+    };
     if setup.shell.is_some() {
         stages.push(StagePlan::ran(
             "shell",
@@ -284,9 +371,43 @@ pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<R
             }
             setup.combined = Some(aggregate(all));
         }
-        let stiffness = setup.combined.clone().unwrap_or_default();
+        let mut stiffness = setup.combined.clone().unwrap_or_default();
+        let base_len = stiffness.len();
+        // Fit the activations to this frame's target.
+        let mut fit_rec = None;
+        if let Some(m) = muscles.as_mut() {
+            let t = Instant::now();
+            let f = m.fitter.fit_frame(&welded_target)?;
+            m.activations = f.activations.clone();
+            fit_rec = Some(StageRecord {
+                status: if f.status == crate::muscle::FrameStatus::Fitted {
+                    "converged".into()
+                } else {
+                    format!("{:?} ({})", f.status, f.clarabel_status).to_lowercase()
+                },
+                iterations: f.gauss_newton + 1,
+                residual: f.rms_residual,
+                ms: t.elapsed().as_secs_f64() * 1e3,
+            });
+            totals.fit_ms += fit_rec.as_ref().map_or(0.0, |r| r.ms);
+        }
         for _ in 0..steps {
             let mut force = tracking_force(&setup, &welded_target);
+            if let Some(m) = muscles.as_ref() {
+                // The active energy linearised at the step's start (PSD stiffness), like the
+                // skin's terms; its triplet layout is the same every step.
+                let act = crate::muscle::ActiveEnergy::new(
+                    &setup.stepper.interior,
+                    m.fitter.muscles(),
+                    &m.activations,
+                );
+                let (k, f) = crate::muscle::linearised_terms(&act, &setup.stepper.q);
+                stiffness.truncate(base_len);
+                stiffness.extend_from_slice(&k);
+                for (a, b) in force.iter_mut().zip(&f) {
+                    *a += b;
+                }
+            }
             if let Some((_, fs)) = &skin_terms {
                 for (f, g) in force.iter_mut().zip(fs) {
                     *f += g;
@@ -369,7 +490,7 @@ pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<R
         per_frame.push(FrameRecord {
             frame: k,
             time_s: k as f64 / opts.fps,
-            fit: None,
+            fit: fit_rec,
             interior: Some(interior_rec),
             shell: shell_rec,
             wrinkle_depth_max_m: depth_max,
@@ -403,6 +524,7 @@ pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<R
         "lattice_nodes": n_nodes,
         "bone_nodes": setup.lattice.pinned_count(),
         "clusters": setup.shell.as_ref().map_or(0, |(s, _)| s.cluster_stats().clusters),
+        "muscles": muscles.as_ref().map_or(0, |m| m.fitter.muscles().len()),
     });
     let report = RunReport {
         furrow: env!("CARGO_PKG_VERSION").into(),
@@ -750,9 +872,13 @@ fn build(
     )?;
     // Tracking stiffness per welded vertex: κ E_q A_v / ℓ.
     let areas = vertex_areas(&welded.mesh);
+    let kappa = match scene.muscles.source.as_deref().unwrap_or("none") {
+        "none" => TRACKING_STIFFNESS,
+        _ => MUSCLE_TRACKING,
+    };
     let track_k: Vec<f64> = areas
         .iter()
-        .map(|a| TRACKING_STIFFNESS * material.young * a / lattice.cell_size)
+        .map(|a| kappa * material.young * a / lattice.cell_size)
         .collect();
     // Bᵀ k B summed per node pair once (the same on every step): 27² pairs per vertex would
     // otherwise be re-assembled every step.
@@ -775,6 +901,7 @@ fn build(
         target_of,
         origin,
         welded_of_loaded: welded.of_loaded.clone(),
+        welded_loaded: welded.loaded_of.clone(),
         welded_count: welded.mesh.positions.len(),
         lattice,
         rows,

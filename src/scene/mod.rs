@@ -118,9 +118,9 @@ pub struct DynamicsSection {
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct MuscleSection {
-    /// `none` (default: the interior tracks the blended surface directly, no QP). Muscle-driven
-    /// runs (`auto` or a muscle file) are refused in this version: `furrow fit` computes the
-    /// activations, the pipeline does not yet drive the interior with them.
+    /// `none` (default: the interior tracks the blended surface directly, no QP), `auto`
+    /// (muscles generated from the blend shapes, activations fitted per frame), or the path of
+    /// a muscle TOML file.
     pub source: Option<String>,
 }
 
