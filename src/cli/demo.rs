@@ -30,9 +30,9 @@ pub struct DemoArgs {
 /// bifurcations and costs far more per frame than it saves in frames.
 pub const DEMO_FPS: f64 = 30.0;
 
-/// The demo's frames: the first 1.6 s of the performance (the brow raise and its forehead
+/// The demo's frames: the first 1.33 s of the performance (the brow raise and its forehead
 /// lines), which keeps the demo near two minutes on two cores.
-pub const DEMO_FRAMES: &str = ":48";
+pub const DEMO_FRAMES: &str = ":40";
 
 /// The project's face rig: `rigs/face.glb` here, else in the source checkout.
 pub fn default_rig() -> PathBuf {
