@@ -58,28 +58,9 @@ pub fn chunk_path(output: &Path) -> PathBuf {
     output.with_extension("furrow-chunk")
 }
 
-fn overwrite(force: bool) -> Overwrite {
-    if force {
-        Overwrite::Replace
-    } else {
-        Overwrite::Refuse
-    }
-}
-
 /// Refuse early (before minutes of simulation) when an output exists and `--force` is absent.
 fn preflight(paths: &[&Path], force: bool) -> anyhow::Result<()> {
-    if force {
-        return Ok(());
-    }
-    for p in paths {
-        if p.exists() {
-            bail!(
-                "{}: already exists; furrow does not overwrite files unless told to (pass --force)",
-                p.display()
-            );
-        }
-    }
-    Ok(())
+    atomic::check_free(paths, Overwrite::from_force(force))
 }
 
 /// The settings that decide a run's result, hashed to tie chunks to one run.
@@ -165,7 +146,7 @@ pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
         fps: a.fps,
     };
     let t = Instant::now();
-    export::write_animated(&rig, &set, &a.output, overwrite(a.force))?;
+    export::write_animated(&rig, &set, &a.output, Overwrite::from_force(a.force))?;
     files.push(a.output.clone());
     if let Some(range) = frames.filter(|_| write_chunk) {
         let header = ChunkHeader {
@@ -178,7 +159,12 @@ pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
             triangles: run.triangles.clone(),
             origin: chunk::origin_to_plain(&run.origin),
         };
-        chunk::write(&chunk_file, &header, &run.frames, overwrite(a.force))?;
+        chunk::write(
+            &chunk_file,
+            &header,
+            &run.frames,
+            Overwrite::from_force(a.force),
+        )?;
         files.push(chunk_file.clone());
     }
     if let Some(dir) = &a.frames_dir {
@@ -187,7 +173,7 @@ pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
             &rig,
             &set,
             dir,
-            overwrite(a.force),
+            Overwrite::from_force(a.force),
             &|_| pb.inc(1),
         )?);
         pb.finish_and_clear();
@@ -200,12 +186,12 @@ pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
         files.extend(crate::pipeline::preview::write_previews(
             &run,
             dir,
-            overwrite(a.force),
+            Overwrite::from_force(a.force),
         )?);
     }
     if let Some(r) = &a.report {
         let json = serde_json::to_vec_pretty(&run.report)?;
-        atomic::write(r, &json, overwrite(a.force))?;
+        atomic::write(r, &json, Overwrite::from_force(a.force))?;
         files.push(r.clone());
     }
     Ok(Animated { run, files })
@@ -403,7 +389,7 @@ pub fn merge(a: MergeArgs, out: &Output) -> anyhow::Result<()> {
         origin: &origin,
         fps: joined.header.fps,
     };
-    export::write_animated(&rig, &set, &a.output, overwrite(a.force))?;
+    export::write_animated(&rig, &set, &a.output, Overwrite::from_force(a.force))?;
     let r = joined.header.range;
     out.json_result(
         &serde_json::json!({ "ok": true, "output": a.output, "frames": [r.start, r.end] }),

@@ -95,14 +95,8 @@ pub fn run(a: FitArgs, out: &Output) -> anyhow::Result<()> {
         "--gauss-newton must be at most 50, got {}",
         a.gauss_newton
     );
-    for p in std::iter::once(&a.output).chain(a.plot.as_ref()) {
-        if !a.force && p.exists() {
-            anyhow::bail!(
-                "{}: already exists; furrow does not overwrite files unless told to (pass --force)",
-                p.display()
-            );
-        }
-    }
+    let outputs: Vec<&PathBuf> = std::iter::once(&a.output).chain(a.plot.as_ref()).collect();
+    atomic::check_free(&outputs, Overwrite::from_force(a.force))?;
     let t0 = Instant::now();
     let rig = fio::load(&a.rig, &LoadOptions::default())?;
     out.note(&rig.face_reason);

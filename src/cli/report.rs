@@ -91,18 +91,9 @@ pub fn run(c: ReportCommand, out: &Output) -> anyhow::Result<()> {
 }
 
 fn check_free(paths: &[&Path], force: bool) -> anyhow::Result<Overwrite> {
-    if force {
-        return Ok(Overwrite::Replace);
-    }
-    for p in paths {
-        if p.exists() {
-            bail!(
-                "{}: already exists; furrow does not overwrite files unless told to (pass --force)",
-                p.display()
-            );
-        }
-    }
-    Ok(Overwrite::Refuse)
+    let ow = Overwrite::from_force(force);
+    crate::io::atomic::check_free(paths, ow)?;
+    Ok(ow)
 }
 
 fn rig_err(r: &TradeoffRun) -> f64 {

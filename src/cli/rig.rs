@@ -24,9 +24,7 @@ pub enum RigCommand {
 pub fn run(c: RigCommand, out: &Output) -> anyhow::Result<()> {
     match c {
         RigCommand::Generate { output, force } => {
-            if !force && output.exists() {
-                anyhow::bail!("{}: already exists; furrow does not overwrite files unless told to (pass --force)", output.display());
-            }
+            atomic::check_free(&[&output], Overwrite::from_force(force))?;
             let rig = crate::rig::face::generate();
             let bytes = crate::io::export::rig_glb("face", &rig.mesh, &rig.targets, &rig.keys)?;
             atomic::write(

@@ -39,21 +39,8 @@ pub fn run(a: SceneArgs, out: &Output) -> anyhow::Result<()> {
     });
     let glb = a.out.join(format!("{name}.glb"));
     let json = a.out.join(format!("{name}.json"));
-    let ow = if a.force {
-        Overwrite::Replace
-    } else {
-        Overwrite::Refuse
-    };
-    if !a.force {
-        for p in [&glb, &json] {
-            if p.exists() {
-                bail!(
-                    "{}: already exists; furrow does not overwrite files unless told to (pass --force)",
-                    p.display()
-                );
-            }
-        }
-    }
+    let ow = Overwrite::from_force(a.force);
+    atomic::check_free(&[&glb, &json], ow)?;
     let frames = scene.load.as_ref().map_or(0, |l| l.frames);
     let pb = out.progress(frames as u64, "simulating");
     let res = synthetic::run_scene(&scene, &|k, total| {

@@ -9,7 +9,6 @@ use crate::report::plot::{self, Chart, ContourChart, ContourSet, Series, Style};
 use crate::validate::dense::{self, DenseCase};
 use crate::validate::slab::SlabSettings;
 use crate::validate::wavelength::{self, bilayer};
-use anyhow::bail;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -49,16 +48,9 @@ pub fn run(c: ValidateCommand, out: &Output) -> anyhow::Result<()> {
 }
 
 fn check_outputs(paths: &[&Path], force: bool) -> anyhow::Result<Overwrite> {
-    if !force {
-        if let Some(p) = paths.iter().find(|p| p.exists()) {
-            bail!(
-                "{}: already exists; furrow does not overwrite files unless told to (pass --force)",
-                p.display()
-            );
-        }
-        return Ok(Overwrite::Refuse);
-    }
-    Ok(Overwrite::Replace)
+    let ow = Overwrite::from_force(force);
+    atomic::check_free(paths, ow)?;
+    Ok(ow)
 }
 
 /// Ratios E_x/E_q of the sweep.

@@ -13,14 +13,34 @@ pub enum Overwrite {
     Replace,
 }
 
+impl Overwrite {
+    /// `Replace` when the user passed `--force`, else `Refuse`.
+    pub fn from_force(force: bool) -> Self {
+        if force {
+            Overwrite::Replace
+        } else {
+            Overwrite::Refuse
+        }
+    }
+}
+
+/// With `Refuse`, fail (naming the file and `--force`) when any of `paths` exists: called
+/// before long work, so that a run never ends in a refusal after minutes of simulation.
+pub fn check_free<P: AsRef<Path>>(paths: &[P], overwrite: Overwrite) -> anyhow::Result<()> {
+    if overwrite == Overwrite::Refuse {
+        if let Some(p) = paths.iter().map(|p| p.as_ref()).find(|p| p.exists()) {
+            anyhow::bail!(
+                "{}: already exists; furrow does not overwrite files unless told to (pass --force)",
+                p.display()
+            );
+        }
+    }
+    Ok(())
+}
+
 /// Write `bytes` to `path` atomically (temporary file + rename). Parent folders are created.
 pub fn write(path: &Path, bytes: &[u8], overwrite: Overwrite) -> anyhow::Result<()> {
-    if overwrite == Overwrite::Refuse && path.exists() {
-        anyhow::bail!(
-            "{}: already exists; furrow does not overwrite files unless told to (pass --force)",
-            path.display()
-        );
-    }
+    check_free(&[path], overwrite)?;
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
         _ => PathBuf::from("."),

@@ -602,14 +602,7 @@ pub fn write_frames_dir(
     let paths: Vec<PathBuf> = (0..set.frames.len())
         .map(|k| dir.join(format!("frame_{k:05}.glb")))
         .collect();
-    if overwrite == Overwrite::Refuse {
-        if let Some(p) = paths.iter().find(|p| p.exists()) {
-            bail!(
-                "{}: already exists; furrow does not overwrite files unless told to (pass --force)",
-                p.display()
-            );
-        }
-    }
+    atomic::check_free(&paths, overwrite)?;
     for (k, p) in paths.iter().enumerate() {
         atomic::write(p, &frame_glb(rig, set, k)?, overwrite)?;
         on_frame(k);

@@ -5,7 +5,6 @@ use super::RunOutput;
 use crate::io::atomic::Overwrite;
 use crate::mesh::TriMesh;
 use crate::report::preview::{self, View};
-use anyhow::bail;
 use std::path::{Path, PathBuf};
 
 /// Most tiles on the contact sheet (frames are subsampled evenly beyond that).
@@ -49,14 +48,7 @@ pub fn write_previews(
         .map(|&k| dir.join(format!("frame_{:05}.png", out.report.frames[0] + k)))
         .collect();
     paths.push(dir.join("contact_sheet.png"));
-    if overwrite == Overwrite::Refuse {
-        if let Some(p) = paths.iter().find(|p| p.exists()) {
-            bail!(
-                "{}: already exists; furrow does not overwrite files unless told to (pass --force)",
-                p.display()
-            );
-        }
-    }
+    crate::io::atomic::check_free(&paths, overwrite)?;
     let mesh_at =
         |pos: &Vec<nalgebra::Vector3<f64>>| TriMesh::new(pos.clone(), out.triangles.clone());
     let smooth: Vec<TriMesh> = chosen.iter().map(|&k| mesh_at(&out.smooth[k])).collect();
