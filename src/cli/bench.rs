@@ -22,6 +22,32 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 1000)]
         elements: usize,
     },
+    /// The benchmark table: shell assembly and warm solve at several face counts (with the
+    /// growth exponent), one lattice step, the activation fit per frame and optionally the
+    /// whole demo; writes bench.csv and bench.md in DIR.
+    #[command(
+        after_help = "Example:\n  furrow bench suite --out out/bench\n  furrow bench suite --faces 2000,8000 --no-demo --out out/bench-quick"
+    )]
+    Suite {
+        /// Output folder (bench.csv, bench.md; the demo's files under demo/).
+        #[arg(long, default_value = "out/bench")]
+        out: std::path::PathBuf,
+        /// Face counts of the shell benchmarks, comma-separated.
+        #[arg(long, value_delimiter = ',', default_values_t = vec![2_000usize, 20_000, 80_000])]
+        faces: Vec<usize>,
+        /// Quadratic elements of the lattice benchmark.
+        #[arg(long, default_value_t = 1000)]
+        elements: usize,
+        /// Lattice cells of the activation-fit benchmark.
+        #[arg(long, default_value_t = 2000)]
+        cells: usize,
+        /// Leave out the whole-demo run.
+        #[arg(long)]
+        no_demo: bool,
+        /// Replace existing bench.csv / bench.md.
+        #[arg(long)]
+        force: bool,
+    },
     /// Activation fit: 52 muscles on a face lattice of about N cells, a 335-frame clip.
     #[command(after_help = "Example:\n  furrow bench fit\n  furrow bench fit --cells 2000 --json")]
     Fit {
@@ -69,6 +95,14 @@ pub fn run(c: BenchCommand, out: &Output) -> anyhow::Result<()> {
                 &crate::fem::bench::bench_lattice(elements)?,
             );
         }
+        BenchCommand::Suite {
+            out: dir,
+            faces,
+            elements,
+            cells,
+            no_demo,
+            force,
+        } => suite(&dir, faces, elements, cells, !no_demo, force, out)?,
         BenchCommand::Fit { cells, gn_frames } => {
             anyhow::ensure!(
                 (1..=1_000_000).contains(&cells),
@@ -85,5 +119,79 @@ pub fn run(c: BenchCommand, out: &Output) -> anyhow::Result<()> {
             );
         }
     }
+    Ok(())
+}
+
+/// `furrow bench suite`: run every benchmark in one process and write the table.
+fn suite(
+    dir: &std::path::Path,
+    faces: Vec<usize>,
+    elements: usize,
+    cells: usize,
+    demo: bool,
+    force: bool,
+    out: &Output,
+) -> anyhow::Result<()> {
+    use crate::io::atomic::{self, Overwrite};
+    use crate::report::benchmarks::{self, BenchRow, SuiteSettings};
+    anyhow::ensure!(!faces.is_empty(), "--faces needs at least one face count");
+    for &f in &faces {
+        anyhow::ensure!(
+            (50..=5_000_000).contains(&f),
+            "--faces values must be between 50 and 5,000,000, got {f}"
+        );
+    }
+    anyhow::ensure!(
+        (1..=1_000_000).contains(&elements),
+        "--elements must be between 1 and 1,000,000, got {elements}"
+    );
+    anyhow::ensure!(
+        (1..=1_000_000).contains(&cells),
+        "--cells must be between 1 and 1,000,000, got {cells}"
+    );
+    let (csv, md) = (dir.join("bench.csv"), dir.join("bench.md"));
+    let overwrite = Overwrite::from_force(force);
+    atomic::check_free(&[&csv, &md], overwrite)?;
+    let settings = SuiteSettings {
+        faces,
+        elements,
+        cells,
+    };
+    let total = settings.faces.len() as u64 * 2 + 2 + u64::from(demo);
+    let bar = out.progress(total, "benchmarks");
+    let mut rows = benchmarks::run_suite(&settings, |what| {
+        bar.set_message(what.to_string());
+        bar.inc(1);
+    })?;
+    if demo {
+        bar.set_message("whole demo");
+        bar.inc(1);
+        let demo_dir = dir.join("demo");
+        let args = super::demo::DemoArgs::for_benchmark(demo_dir.clone());
+        let frames = args.frame_count_hint();
+        let t = std::time::Instant::now();
+        super::demo::run(args, &Output::new(true, false))?;
+        rows.push(BenchRow {
+            benchmark: "demo".into(),
+            size: frames,
+            size_unit: "frames".into(),
+            metric: "wall_s".into(),
+            value: t.elapsed().as_secs_f64(),
+        });
+    }
+    bar.finish_and_clear();
+    let table = benchmarks::to_markdown(&rows);
+    atomic::write(&csv, benchmarks::to_csv(&rows).as_bytes(), overwrite)?;
+    atomic::write(&md, table.as_bytes(), overwrite)?;
+    out.json_result(&serde_json::json!({
+        "csv": csv, "markdown": md,
+        "rows": rows.iter().map(|r| serde_json::json!({
+            "benchmark": r.benchmark, "size": r.size, "size_unit": r.size_unit,
+            "metric": r.metric, "value": r.value,
+        })).collect::<Vec<_>>(),
+        "shell_solve_exponent": benchmarks::growth(&rows, "shell_solve", "total_s").map(|p| p.exponent),
+    }));
+    out.say(table);
+    out.say(format!("wrote {} and {}", csv.display(), md.display()));
     Ok(())
 }

@@ -25,6 +25,33 @@ pub struct DemoArgs {
     pub frames_dir: bool,
 }
 
+impl DemoArgs {
+    /// The demo's default arguments with outputs in `out` (for `furrow bench suite`).
+    pub fn for_benchmark(out: PathBuf) -> Self {
+        Self {
+            out,
+            fps: DEMO_FPS,
+            frames: DEMO_FRAMES.into(),
+            rig: None,
+            frames_dir: false,
+        }
+    }
+
+    /// Frames the demo simulates when its range is `:B` or `A:B` (0 when open-ended).
+    pub fn frame_count_hint(&self) -> usize {
+        let mut parts = self.frames.split(':');
+        let a: usize = parts
+            .next()
+            .and_then(|t| t.trim().parse().ok())
+            .unwrap_or(0);
+        let b: usize = parts
+            .next()
+            .and_then(|t| t.trim().parse().ok())
+            .unwrap_or(0);
+        b.saturating_sub(a)
+    }
+}
+
 /// The demo's frame rate (frames per second). Frames 1/30 s apart keep every skin solve a
 /// small step from its warm start; sparser sampling makes each solve cross wrinkle
 /// bifurcations and costs far more per frame than it saves in frames.

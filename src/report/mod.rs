@@ -5,6 +5,7 @@
 
 #![warn(missing_docs)]
 
+pub mod benchmarks;
 pub mod colormap;
 pub mod contour;
 pub mod fit;

@@ -68,6 +68,10 @@ pub struct KktSolver {
     shift: f64,
     delta: f64,
     factored: bool,
+    /// Dof coordinates (3 per vertex) for the nested-dissection ordering, if given.
+    positions: Option<Vec<f64>>,
+    /// Factorisation flops of the current symbolic analysis (decides sequential or parallel).
+    flops: f64,
     /// Number of symbolic analyses performed so far (to check reuse).
     pub symbolic_count: usize,
 }
@@ -100,6 +104,16 @@ impl KktSolver {
     /// An empty solver (no cached analysis).
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// Give the positions of the dofs (`x`, 3 per vertex, dof `d` belongs to vertex `d / 3`)
+    /// so that the next symbolic analysis orders the matrix by geometric nested dissection
+    /// ([`super::ordering`]) instead of AMD. Only read when the layout changes.
+    pub fn set_positions(&mut self, x: &[f64]) {
+        match &mut self.positions {
+            Some(p) if p.len() == x.len() => p.copy_from_slice(x),
+            _ => self.positions = Some(x.to_vec()),
+        }
     }
 
     /// Assemble and factorise the KKT matrix ([`KktSolver::assemble`] then
@@ -170,13 +184,27 @@ impl KktSolver {
             }
             let pattern = Pattern::new(n, &t)?;
             let a = pattern.assemble(&t)?;
+            drop(t);
+            let nd = match &self.positions {
+                Some(x) if x.len() == free_of.len() && x.len() % 3 == 0 => {
+                    Some(nd_permutation(&a, x, free_of, n_free, c))
+                }
+                _ => None,
+            };
+            let ordering = match &nd {
+                Some((fwd, inv)) => {
+                    SymmetricOrdering::Custom(faer::perm::PermRef::new_checked(fwd, inv, n))
+                }
+                None => SymmetricOrdering::Amd,
+            };
             let sym = factorize_symbolic_cholesky(
                 a.symbolic(),
                 Side::Lower,
-                SymmetricOrdering::Amd,
+                ordering,
                 CholeskySymbolicParams::default(),
             )
             .map_err(|e| SparseError::Build(format!("{e:?}")))?;
+            self.flops = factor_flops(&sym);
             let par = self.par();
             let req = sym
                 .factorize_numeric_ldlt_scratch::<f64>(par, Default::default())
@@ -210,6 +238,7 @@ impl KktSolver {
             self.symbolic = Some(sym);
             self.base = Some(a);
             self.fingerprint = Some(fp);
+            self.matrix = None;
             self.symbolic_count += 1;
             symbolic_s = t0.elapsed().as_secs_f64();
         }
@@ -237,10 +266,18 @@ impl KktSolver {
     /// Call repeatedly with growing shifts for inertia correction (no re-assembly).
     pub fn factor(&mut self, shift: f64) -> KktFactorInfo {
         let t1 = std::time::Instant::now();
-        let mut a = self
+        let base = self
             .base
-            .clone()
+            .as_ref()
             .expect("KktSolver::factor before assemble");
+        // The shifted matrix reuses its buffer across factorisations (values copied only).
+        let mut a = match self.matrix.take() {
+            Some(mut m) if m.val().len() == base.val().len() && m.col_ptr() == base.col_ptr() => {
+                m.val_mut().copy_from_slice(base.val());
+                m
+            }
+            _ => base.clone(),
+        };
         if shift != 0.0 {
             let v = a.val_mut();
             for &q in &self.diag_pos[..self.n_free] {
@@ -286,10 +323,13 @@ impl KktSolver {
         }
     }
 
-    /// Parallelism for faer: sequential below 20 000 unknowns (thread start-up and
-    /// synchronisation cost more than they save on small factors), rayon above.
+    /// Parallelism for faer: sequential below 10¹⁰ factorisation flops, rayon above. faer
+    /// parallelises inside the dense fronts; a shell's fronts are small and many, and there
+    /// the synchronisation costs more than it saves (measured on the benchmark sheet: at 20k
+    /// faces, 3.5·10⁹ flops, sequential 0.24 s against 0.45 s with two threads; at 80k faces,
+    /// 4·10¹⁰ flops, sequential 2.0 s against 1.6 s).
     fn par(&self) -> faer::Par {
-        if self.n_free + self.n_cons < 20_000 {
+        if self.flops < 1e10 {
             faer::Par::Seq
         } else {
             // A fixed task count, not the pool size: faer splits its work by this number,
@@ -349,6 +389,110 @@ impl KktSolver {
             ..Self::default()
         };
     }
+}
+
+/// Flops of a numeric factorisation with this symbolic structure (supernodal: Σ over
+/// supernodes of the dense front work; simplicial: Σ column counts squared).
+fn factor_flops(sym: &SymbolicCholesky<usize>) -> f64 {
+    match sym.raw() {
+        SymbolicCholeskyRaw::Simplicial(s) => {
+            let cp = s.col_ptr();
+            (0..sym.nrows())
+                .map(|k| ((cp[k + 1] - cp[k]) as f64).powi(2))
+                .sum()
+        }
+        SymbolicCholeskyRaw::Supernodal(s) => {
+            let (b, e, cpv) = (s.supernode_begin(), s.supernode_end(), s.col_ptr_for_val());
+            (0..s.n_supernodes())
+                .map(|sn| {
+                    let nc = (e[sn] - b[sn]) as f64;
+                    let below = (cpv[sn + 1] - cpv[sn]) as f64 / nc - nc;
+                    nc * nc * nc / 3.0 + nc * nc * below + nc * below * below
+                })
+                .sum()
+        }
+    }
+}
+
+/// Nested-dissection permutation (forward: new → old index, inverse) of the KKT matrix `a`
+/// whose first `n_free` rows are free dofs (`free_of` maps dofs to them, vertex = dof / 3,
+/// positions from `x`) and whose last rows are constraints, each placed at the weighted centre
+/// of the vertices it couples.
+fn nd_permutation(
+    a: &SparseColMat<usize, f64>,
+    x: &[f64],
+    free_of: &[usize],
+    n_free: usize,
+    c: &[(usize, usize, f64)],
+) -> (Vec<usize>, Vec<usize>) {
+    let n = a.nrows();
+    let n_cons = n - n_free;
+    // Nodes: vertices with a free dof (in vertex order), then constraint rows.
+    let mut vertex_of_free = vec![0usize; n_free];
+    for (d, &f) in free_of.iter().enumerate() {
+        if f != usize::MAX {
+            vertex_of_free[f] = d / 3;
+        }
+    }
+    let mut node_of_vertex = vec![usize::MAX; free_of.len() / 3];
+    let mut positions: Vec<[f64; 3]> = Vec::new();
+    let mut members: Vec<Vec<usize>> = Vec::new();
+    for f in 0..n_free {
+        let v = vertex_of_free[f];
+        if node_of_vertex[v] == usize::MAX {
+            node_of_vertex[v] = positions.len();
+            positions.push([x[3 * v], x[3 * v + 1], x[3 * v + 2]]);
+            members.push(Vec::new());
+        }
+        members[node_of_vertex[v]].push(f);
+    }
+    let nv = positions.len();
+    let mut centre = vec![[0.0; 3]; n_cons];
+    let mut weight = vec![0.0; n_cons];
+    for &(r, j, w) in c {
+        let v = vertex_of_free[j];
+        for k in 0..3 {
+            centre[r][k] += w.abs() * x[3 * v + k];
+        }
+        weight[r] += w.abs();
+    }
+    for r in 0..n_cons {
+        let w = if weight[r] > 0.0 { weight[r] } else { 1.0 };
+        positions.push(centre[r].map(|p| p / w));
+        members.push(vec![n_free + r]);
+    }
+    let node = |row: usize| {
+        if row < n_free {
+            node_of_vertex[vertex_of_free[row]]
+        } else {
+            nv + row - n_free
+        }
+    };
+    let mut neighbours = vec![Vec::new(); positions.len()];
+    let (cp, ri) = (a.col_ptr(), a.row_idx());
+    for col in 0..n {
+        let nc = node(col);
+        for &row in &ri[cp[col]..cp[col + 1]] {
+            let nr = node(row);
+            if nr != nc {
+                neighbours[nc].push(nr);
+            }
+        }
+    }
+    for l in &mut neighbours {
+        l.sort_unstable();
+        l.dedup();
+    }
+    let order = super::ordering::nested_dissection(&positions, &neighbours, 16);
+    let fwd: Vec<usize> = order
+        .iter()
+        .flat_map(|&nd| members[nd].iter().copied())
+        .collect();
+    let mut inv = vec![0usize; n];
+    for (i, &o) in fwd.iter().enumerate() {
+        inv[o] = i;
+    }
+    (fwd, inv)
 }
 
 /// Euclidean norm.

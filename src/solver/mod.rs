@@ -2,6 +2,7 @@
 
 pub mod kkt;
 pub mod linesearch;
+pub mod ordering;
 pub mod statics;
 pub mod status;
 

@@ -214,7 +214,14 @@ impl StaticSolver {
     /// Assemble the regularised KKT matrix from the current Hessian triplets (free dofs of
     /// `s`, `nc` constraint rows, row scale γ); returns the symbolic-analysis time (s), zero
     /// when the cached analysis was reused.
-    fn assemble_kkt(&mut self, s: &Setup, nc: usize, gamma: f64) -> Result<f64, SolverError> {
+    fn assemble_kkt(
+        &mut self,
+        s: &Setup,
+        nc: usize,
+        gamma: f64,
+        x: &[f64],
+    ) -> Result<f64, SolverError> {
+        self.kkt.set_positions(x);
         Ok(self.kkt.assemble(
             &s.free_of,
             s.free.len(),
@@ -354,7 +361,7 @@ impl StaticSolver {
         self.hessian(e, x, false);
         let gamma = self.gamma_for(&s);
         let nc = p.constraints.rows;
-        let sym_s = self.assemble_kkt(&s, nc, gamma)?;
+        let sym_s = self.assemble_kkt(&s, nc, gamma, x)?;
         let mut info = self.kkt.factor(0.0);
         info.symbolic_s = sym_s;
         Ok(info)
@@ -423,7 +430,7 @@ impl StaticSolver {
                 .zip(&p.constraints.rhs)
                 .map(|(a, b)| -gamma * (a - b)),
         );
-        let sym_s = self.assemble_kkt(s, nc, gamma)?;
+        let sym_s = self.assemble_kkt(s, nc, gamma, x)?;
         rep.symbolic_s += sym_s;
         rep.factor_s += sym_s;
         rep.assembly_s += t.elapsed().as_secs_f64() - sym_s;
@@ -565,7 +572,7 @@ impl StaticSolver {
                         have_hessian = Some(project);
                     }
                     let t = Instant::now();
-                    let sym_s = self.assemble_kkt(&s, nc, gamma)?;
+                    let sym_s = self.assemble_kkt(&s, nc, gamma, x)?;
                     rep.symbolic_s += sym_s;
                     rep.factor_s += sym_s;
                     rep.assembly_s += t.elapsed().as_secs_f64() - sym_s;
