@@ -267,3 +267,404 @@ fn cylinder_bending_per_half_is_d_of_h_over_2r2() {
         assert!(err.abs() < 0.01, "error {err}");
     }
 }
+
+/// A flat rectangular rig `[0, lx] × [0, ly]` (z = 0, facing +z), `nx × ny` squares split in
+/// two, with one blend shape compressing it uniformly along x towards x = lx/2 by `strain`,
+/// animated from 0 to 1 over `seconds`; optional extra per-vertex attribute. GLB bytes.
+fn strip_rig(lx: f64, ly: f64, nx: usize, ny: usize, strain: f64, seconds: f64) -> Vec<u8> {
+    use furrow::io::model::{MorphTarget, WeightKeys};
+    use furrow::mesh::TriMesh;
+    use nalgebra::Vector3;
+    let mut pos = Vec::new();
+    for j in 0..=ny {
+        for i in 0..=nx {
+            pos.push(Vector3::new(
+                lx * i as f64 / nx as f64,
+                ly * j as f64 / ny as f64,
+                0.0,
+            ));
+        }
+    }
+    let id = |i: usize, j: usize| j * (nx + 1) + i;
+    let mut tris = Vec::new();
+    for j in 0..ny {
+        for i in 0..nx {
+            tris.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+            tris.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+        }
+    }
+    let deltas = pos
+        .iter()
+        .map(|p| Vector3::new((0.5 * lx - p.x) * strain, 0.0, 0.0))
+        .collect();
+    let keys = WeightKeys {
+        times: vec![0.0, seconds],
+        weights: vec![vec![0.0], vec![1.0]],
+    };
+    let target = MorphTarget {
+        name: "squeeze".into(),
+        positions: deltas,
+        normals: None,
+    };
+    furrow::io::export::rig_glb("strip", &TriMesh::new(pos, tris), &[target], &keys).unwrap()
+}
+
+/// Wrinkle height (wrinkled − blend-shape z, m) along x at the skin vertices within `tol` of
+/// the line y = `y`, last frame.
+fn profile(out: &furrow::pipeline::RunOutput, y: f64, tol: f64) -> Vec<(f64, f64)> {
+    let last = out.frames.len() - 1;
+    out.frames[last]
+        .iter()
+        .zip(&out.smooth[last])
+        .filter(|(_, q)| (q.y - y).abs() < tol)
+        .map(|(p, q)| (q.x, p.z - q.z))
+        .collect()
+}
+
+/// Two regions on a compressed strip: the lower half 0.5 mm thick, the upper half 1 mm
+/// (`[[skin.regions]]` boxes). λ ∝ h, so the thick half must wrinkle at about twice the
+/// wavelength of the thin half: the measured ratio must lie within 25 % of h2/h1 = 2.
+///
+/// Ignored: it fails today. The constraint clusters have ONE width σ for the whole skin
+/// (that of the thinnest skin), and in the embedded method σ, not the shell alone, sets the
+/// wavelength: measured 8.27 mm (thin) and 8.77 mm (thick), ratio 1.06. It needs per-cluster
+/// σ ∝ local λ (a per-vertex σ in `coupling::clusters` and an `EmbeddedShell` constructor
+/// that takes the per-face thickness), outside this branch's files. It also takes about 70 s
+/// in the test profile. Run with `cargo test --release --test thickness -- --ignored`.
+#[test]
+#[ignore = "needs per-cluster σ in coupling::clusters (today both halves wrinkle at the thinnest skin's σ); ~70 s"]
+fn thicker_region_wrinkles_at_the_longer_wavelength() {
+    use furrow::io::load::{load_bytes, LoadOptions};
+    use furrow::pipeline::{self, RunOptions};
+    let (lx, ly) = (0.12, 0.06);
+    let (h1, h2) = (0.5e-3, 1.0e-3);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("strip.glb");
+    let bytes = strip_rig(lx, ly, 48, 24, 0.1, 0.3);
+    std::fs::write(&path, &bytes).unwrap();
+    let rig = load_bytes(&path, &bytes, &LoadOptions::default()).unwrap();
+    let scene = furrow::scene::Scene::parse(
+        &format!(
+            "[skin]\nthickness = {h1}\n\
+             [[skin.regions]]\nmin = [-1.0, {}, -1.0]\nmax = [1.0, 1.0, 1.0]\nthickness = {h2}\n",
+            0.5 * ly
+        ),
+        "two-regions.toml",
+    )
+    .unwrap();
+    let opts = RunOptions {
+        scene,
+        scene_path: None,
+        fps: 30.0,
+        frames: None,
+    };
+    let out = pipeline::run(&rig, &opts, &|_, _, _| {}).unwrap();
+    let m = &out.report.materials;
+    println!("materials: {m}");
+    assert_eq!(m["skin_thickness_m"]["min"], h1);
+    assert_eq!(m["skin_thickness_m"]["max"], h2);
+    let lam_max = m["wavelength_m"]["max"].as_f64().unwrap();
+    let lam_min = m["wavelength_m"]["min"].as_f64().unwrap();
+    assert!((lam_max / lam_min - h2 / h1).abs() < 1e-9);
+    for f in &out.report.per_frame {
+        println!(
+            "frame {}: {:?}",
+            f.frame,
+            f.shell.as_ref().map(|s| (&s.status, s.iterations))
+        );
+    }
+    let tol = 0.3e-3;
+    // Rows of vertices (y on the 1.25 mm grid) a quarter of the height from each edge.
+    let (p_thin, p_thick) = (profile(&out, 0.25 * ly, tol), profile(&out, 0.75 * ly, tol));
+    if let Ok(d) = std::env::var("FURROW_THICKNESS_DUMP") {
+        let txt = |p: &[(f64, f64)]| {
+            p.iter()
+                .map(|(x, z)| format!("{x} {z}\n"))
+                .collect::<String>()
+        };
+        std::fs::write(format!("{d}/thin.txt"), txt(&p_thin)).unwrap();
+        std::fs::write(format!("{d}/thick.txt"), txt(&p_thick)).unwrap();
+    }
+    let thin = furrow::validate::measure::wavelength(&p_thin);
+    let thick = furrow::validate::measure::wavelength(&p_thick);
+    println!(
+        "λ theory: thin {:.2} mm, thick {:.2} mm",
+        lam_min * 1e3,
+        lam_max * 1e3
+    );
+    println!("measured thin {thin:?}\nmeasured thick {thick:?}");
+    let (thin, thick) = (
+        thin.expect("thin half wrinkles"),
+        thick.expect("thick half wrinkles"),
+    );
+    let ratio = thick.wavelength / thin.wavelength;
+    println!("ratio {ratio:.3} (h ratio {:.1})", h2 / h1);
+    assert!((ratio / (h2 / h1) - 1.0).abs() < 0.25, "ratio {ratio}");
+}
+
+/// Add a vertex attribute `name` (f32 values, `ty` "SCALAR"/"VEC2"/…) to primitive 0 of mesh 0
+/// of a GLB: appends a buffer view and an accessor to the BIN chunk and the JSON.
+fn add_attribute(glb: &[u8], name: &str, ty: &str, values: &[f32]) -> Vec<u8> {
+    let u32_at = |o: usize| u32::from_le_bytes(glb[o..o + 4].try_into().unwrap()) as usize;
+    let jlen = u32_at(12);
+    let mut json: serde_json::Value = serde_json::from_slice(&glb[20..20 + jlen]).unwrap();
+    let blen = u32_at(20 + jlen);
+    let mut bin = glb[28 + jlen..28 + jlen + blen].to_vec();
+    while bin.len() % 4 != 0 {
+        bin.push(0);
+    }
+    let offset = bin.len();
+    bin.extend(values.iter().flat_map(|v| v.to_le_bytes()));
+    let comps = match ty {
+        "SCALAR" => 1,
+        "VEC2" => 2,
+        _ => 3,
+    };
+    let views = json["bufferViews"].as_array_mut().unwrap();
+    views.push(
+        serde_json::json!({ "buffer": 0, "byteOffset": offset, "byteLength": 4 * values.len() }),
+    );
+    let view = views.len() - 1;
+    let accs = json["accessors"].as_array_mut().unwrap();
+    accs.push(serde_json::json!({
+        "bufferView": view, "componentType": 5126, "count": values.len() / comps, "type": ty
+    }));
+    let acc = accs.len() - 1;
+    json["meshes"][0]["primitives"][0]["attributes"][name] = acc.into();
+    json["buffers"][0]["byteLength"] = bin.len().into();
+    let mut jbytes = serde_json::to_vec(&json).unwrap();
+    while jbytes.len() % 4 != 0 {
+        jbytes.push(b' ');
+    }
+    let mut out = Vec::new();
+    out.extend_from_slice(b"glTF");
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&((12 + 8 + jbytes.len() + 8 + bin.len()) as u32).to_le_bytes());
+    out.extend_from_slice(&(jbytes.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"JSON");
+    out.extend_from_slice(&jbytes);
+    out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"BIN\0");
+    out.extend_from_slice(&bin);
+    out
+}
+
+/// A small strip rig (0.04 × 0.02 m, 8 × 4 squares) at `path` with the given extra attributes.
+fn small_rig(path: &std::path::Path, attrs: &[(&str, &str, Vec<f32>)]) -> furrow::io::load::Rig {
+    let mut bytes = strip_rig(0.04, 0.02, 8, 4, 0.1, 0.3);
+    for (name, ty, v) in attrs {
+        bytes = add_attribute(&bytes, name, ty, v);
+    }
+    std::fs::write(path, &bytes).unwrap();
+    furrow::io::load::load(path, &Default::default()).unwrap()
+}
+
+fn skin_section(toml_text: &str) -> furrow::scene::SkinSection {
+    furrow::scene::Scene::parse(toml_text, "t.toml")
+        .unwrap()
+        .skin
+}
+
+/// `skin.thickness_attribute`: faces take the mean of their vertices' values (metres);
+/// regions apply on top; a missing, non-scalar or non-positive attribute is an error naming
+/// the file and the mesh.
+#[test]
+fn thickness_attribute_gives_face_means_and_errors_name_the_file() {
+    use furrow::scene::thickness::rig_face_thickness;
+    let dir = tempfile::tempdir().unwrap();
+    // Vertex (i, j) of the 9 × 5 grid: h = 0.2 mm + 0.1 mm · i.
+    let hv: Vec<f32> = (0..5)
+        .flat_map(|_j| (0..9).map(|i| 2e-4 + 1e-4 * i as f32))
+        .collect();
+    let path = dir.path().join("attr.glb");
+    let rig = small_rig(&path, &[("_THICKNESS", "SCALAR", hv.clone())]);
+    let skin = skin_section("[skin]\nthickness_attribute = \"_THICKNESS\"\n");
+    let h = rig_face_thickness(&rig, &skin, 1e-3, None).unwrap();
+    let face = rig.face();
+    assert_eq!(h.len(), face.triangles.len());
+    for (t, tri) in face.triangles.iter().enumerate() {
+        let want = tri.iter().map(|&v| hv[v] as f64).sum::<f64>() / 3.0;
+        assert!(
+            (h[t] - want).abs() < 1e-12,
+            "triangle {t}: {} vs {want}",
+            h[t]
+        );
+    }
+    // A sphere region on top: triangles whose centroid is within 5 mm of (0.01, 0.01) get 3 mm.
+    let skin = skin_section(
+        "[skin]\nthickness_attribute = \"_THICKNESS\"\n\
+         [[skin.regions]]\ncentre = [0.01, 0.01, 0.0]\nradius = 0.005\nthickness = 0.003\n",
+    );
+    let h2 = rig_face_thickness(&rig, &skin, 1e-3, None).unwrap();
+    let mut inside = 0;
+    for (t, tri) in face.triangles.iter().enumerate() {
+        let c = tri
+            .iter()
+            .map(|&v| face.positions[v])
+            .sum::<nalgebra::Vector3<f64>>()
+            / 3.0;
+        let r = ((c.x - 0.01).powi(2) + (c.y - 0.01).powi(2)).sqrt();
+        if r <= 0.005 {
+            inside += 1;
+            assert_eq!(h2[t], 0.003);
+        } else {
+            assert_eq!(h2[t], h[t]);
+        }
+    }
+    assert!(inside >= 4, "{inside} triangles in the sphere");
+    // Errors.
+    let msg = |rig: &furrow::io::load::Rig, text: &str| {
+        format!(
+            "{:#}",
+            rig_face_thickness(rig, &skin_section(text), 1e-3, None).unwrap_err()
+        )
+    };
+    let e = msg(&rig, "[skin]\nthickness_attribute = \"_MISSING\"\n");
+    println!("{e}");
+    assert!(
+        e.contains("attr.glb") && e.contains("strip") && e.contains("_MISSING"),
+        "{e}"
+    );
+    let p2 = dir.path().join("vec2.glb");
+    let rig2 = small_rig(
+        &p2,
+        &[("_THICKNESS", "VEC2", [hv.clone(), hv.clone()].concat())],
+    );
+    let e = msg(&rig2, "[skin]\nthickness_attribute = \"_THICKNESS\"\n");
+    println!("{e}");
+    assert!(e.contains("vec2.glb") && e.contains("SCALAR"), "{e}");
+    let mut bad = hv.clone();
+    bad[10] = -1e-4;
+    let p3 = dir.path().join("negative.glb");
+    let rig3 = small_rig(&p3, &[("_THICKNESS", "SCALAR", bad)]);
+    let e = msg(&rig3, "[skin]\nthickness_attribute = \"_THICKNESS\"\n");
+    println!("{e}");
+    assert!(e.contains("negative.glb") && e.contains("vertex 10"), "{e}");
+    let mut huge = hv;
+    huge[3] = 5.0;
+    let p4 = dir.path().join("huge.glb");
+    let rig4 = small_rig(&p4, &[("_THICKNESS", "SCALAR", huge)]);
+    let e = msg(&rig4, "[skin]\nthickness_attribute = \"_THICKNESS\"\n");
+    println!("{e}");
+    assert!(e.contains("huge.glb") && e.contains("metres"), "{e}");
+}
+
+/// `skin.thickness_texture`: a 4 × 1 grey PNG (0, 1/3, 2/3, 1 from left to right) sampled at
+/// TEXCOORD_0 = (x / 0.04, 0.5) maps grey g to min + g (max − min); faces take the mean of
+/// their vertices' samples. No TEXCOORD_0, or an unreadable image, is an error naming the file.
+#[test]
+fn thickness_texture_is_sampled_at_texcoords_and_errors_name_the_file() {
+    use furrow::scene::thickness::{rig_face_thickness, GreyImage};
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("h.png");
+    let img = image::GrayImage::from_raw(4, 1, vec![0, 85, 170, 255]).unwrap();
+    img.save(&png).unwrap();
+    let grey = GreyImage::load(&png).unwrap();
+    let uv: Vec<f32> = (0..5)
+        .flat_map(|_j| (0..9).flat_map(|i| [i as f32 / 8.0, 0.5]))
+        .collect();
+    let path = dir.path().join("tex.glb");
+    let rig = small_rig(&path, &[("TEXCOORD_0", "VEC2", uv.clone())]);
+    let (lo, hi) = (2e-4, 1e-3);
+    let text = format!(
+        "[skin]\nthickness_texture = {{ path = \"{}\", min = {lo}, max = {hi} }}\n",
+        png.display()
+    );
+    let h = rig_face_thickness(&rig, &skin_section(&text), 1e-3, None).unwrap();
+    let face = rig.face();
+    let mut range = (f64::INFINITY, 0.0f64);
+    for (t, tri) in face.triangles.iter().enumerate() {
+        let want = tri
+            .iter()
+            .map(|&v| lo + grey.sample(uv[2 * v] as f64, 0.5).clamp(0.0, 1.0) * (hi - lo))
+            .sum::<f64>()
+            / 3.0;
+        assert!((h[t] - want).abs() < 1e-15, "triangle {t}");
+        range = (range.0.min(h[t]), range.1.max(h[t]));
+    }
+    // Pixel centres at u = 1/8 (grey 0) and 3/8 (1/3): a vertex at u = 0.25 reads 1/6.
+    assert!((grey.sample(0.25, 0.5) - 85.0 / 255.0 / 2.0).abs() < 1e-6);
+    println!(
+        "texture thickness range {:.3} – {:.3} mm",
+        range.0 * 1e3,
+        range.1 * 1e3
+    );
+    assert!(range.0 < range.1);
+    // Errors.
+    let plain = dir.path().join("plain.glb");
+    let rig_no_uv = small_rig(&plain, &[]);
+    let e = format!(
+        "{:#}",
+        rig_face_thickness(&rig_no_uv, &skin_section(&text), 1e-3, None).unwrap_err()
+    );
+    println!("{e}");
+    assert!(e.contains("plain.glb") && e.contains("TEXCOORD_0"), "{e}");
+    let missing = dir.path().join("nope.png");
+    let text2 = format!(
+        "[skin]\nthickness_texture = {{ path = \"{}\", min = {lo}, max = {hi} }}\n",
+        missing.display()
+    );
+    let e = format!(
+        "{:#}",
+        rig_face_thickness(&rig, &skin_section(&text2), 1e-3, None).unwrap_err()
+    );
+    println!("{e}");
+    assert!(e.contains("nope.png"), "{e}");
+    // Scene-level checks: both sources at once, an inverted range.
+    let e = format!(
+        "{:#}",
+        furrow::scene::Scene::parse(
+            &format!(
+                "[skin]\nthickness_attribute = \"_T\"\n{}",
+                text.trim_start_matches("[skin]\n")
+            ),
+            "both.toml"
+        )
+        .unwrap_err()
+    );
+    assert!(e.contains("not both"), "{e}");
+    let e = format!(
+        "{:#}",
+        furrow::scene::Scene::parse(
+            "[skin]\nthickness_texture = { path = \"h.png\", min = 0.002, max = 0.001 }\n",
+            "inv.toml"
+        )
+        .unwrap_err()
+    );
+    assert!(
+        e.contains("thickness_texture") && e.contains("inv.toml"),
+        "{e}"
+    );
+}
+
+/// The pipeline on a small strip with a thick region: the report's materials carry the
+/// thickness range and the λ range (λ ∝ h), and the run uses the thinnest skin's λ.
+#[test]
+fn pipeline_reports_thickness_and_wavelength_ranges() {
+    use furrow::pipeline::{self, frames::FrameRange, RunOptions};
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("strip.glb");
+    let rig = small_rig(&path, &[]);
+    let scene = furrow::scene::Scene::parse(
+        "[skin]\nthickness = 0.002\n[[skin.regions]]\nmin = [0.0, 0.01, -1.0]\nmax = [1.0, 1.0, 1.0]\nthickness = 0.004\n",
+        "r.toml",
+    )
+    .unwrap();
+    let opts = RunOptions {
+        scene,
+        scene_path: None,
+        fps: 30.0,
+        frames: Some(FrameRange::all(1)),
+    };
+    let out = pipeline::run(&rig, &opts, &|_, _, _| {}).unwrap();
+    let m = &out.report.materials;
+    println!("{m}; λ used {:.2} mm", out.report.wavelength_m * 1e3);
+    assert_eq!(m["skin_thickness_m"]["min"], 0.002);
+    assert_eq!(m["skin_thickness_m"]["max"], 0.004);
+    let (l0, l1) = (
+        m["wavelength_m"]["min"].as_f64().unwrap(),
+        m["wavelength_m"]["max"].as_f64().unwrap(),
+    );
+    assert!((l1 / l0 - 2.0).abs() < 1e-12);
+    assert_eq!(out.report.wavelength_m, l0);
+}
