@@ -253,7 +253,7 @@ pub fn face_thickness(
                 .map_or(base, |r| r.thickness)
         })
         .collect();
-    if let Some(&big) = h.iter().find(|&&x| !(x < model_size)) {
+    if let Some(&big) = h.iter().find(|&&x| x.is_nan() || x >= model_size) {
         bail!(
             "a skin thickness of {big} m is not below the face's size ({model_size:.4} m): thicknesses are in metres"
         );
