@@ -669,4 +669,12 @@ fn pipeline_reports_thickness_and_wavelength_ranges() {
     );
     assert!((l1 / l0 - 2.0).abs() < 1e-12);
     assert_eq!(out.report.wavelength_m, l0);
+    assert!(
+        out.report
+            .warnings
+            .iter()
+            .any(|w| w.contains("one width σ")),
+        "{:?}",
+        out.report.warnings
+    );
 }

@@ -273,6 +273,16 @@ pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<R
         progress,
     )?;
     let sigma = setup.sigma;
+    if h_max > h_min && setup.shell.is_some() {
+        warnings.push(format!(
+            "skin thickness varies from {:.3} to {:.3} mm (λ {:.2} to {:.2} mm); the constraint clusters use one width σ = {:.2} mm from the thinnest skin, so thicker regions wrinkle at close to the thin skin's wavelength (per-cluster σ is not implemented)",
+            h_min * 1e3,
+            h_max * 1e3,
+            lambda * 1e3,
+            lambda_max * 1e3,
+            sigma * 1e3
+        ));
+    }
 
     // The frame loop.
     let dynamics = scene.dynamics.enabled.unwrap_or(animated);
