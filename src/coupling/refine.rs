@@ -207,6 +207,26 @@ pub fn refine_for_wavelength(
     })
 }
 
+/// Per-triangle values (e.g. skin thickness, m) carried from the unrefined mesh to the
+/// refined one: each level of [`subdivide`] replaces triangle t by triangles 4t..4t+3, so a
+/// refined triangle f inherits the value of original triangle f / 4^levels. Fails when
+/// `values` does not hold one value per original triangle.
+pub fn carry_face_values(refined: &Refined, values: &[f64]) -> anyhow::Result<Vec<f64>> {
+    let per = 4usize.pow(refined.report.levels as u32);
+    if values.len() * per != refined.mesh.triangles.len() {
+        bail!(
+            "{} per-triangle values for a mesh of {} triangles refined {} level(s) ({} triangles)",
+            values.len(),
+            refined.mesh.triangles.len() / per,
+            refined.report.levels,
+            refined.mesh.triangles.len()
+        );
+    }
+    Ok((0..refined.mesh.triangles.len())
+        .map(|f| values[f / per])
+        .collect())
+}
+
 /// Material points of the refined vertices in `lattice`, whose `vertex_points` embed the
 /// original mesh: each new vertex goes into the element of one of its original vertices
 /// (the one whose cell contains it, else the nearest), so superimposed elements (upper and
@@ -259,6 +279,42 @@ mod tests {
     use crate::lattice::LatticeSettings;
     use crate::mesh::topology::Topology;
     use crate::shell::sheet::equilateral_sheet;
+
+    /// Two levels: each refined triangle's value is its original ancestor's, checked
+    /// geometrically (the refined centroid lies inside the ancestor triangle); a list of the
+    /// wrong length is refused.
+    #[test]
+    fn face_values_follow_their_ancestor_triangle() {
+        let m = equilateral_sheet(4, 3, 1e-3).mesh;
+        let r = refine_for_wavelength(&m, 1.6e-3, &RefineSettings::default()).unwrap();
+        assert_eq!(r.report.levels, 2);
+        let vals: Vec<f64> = (0..m.triangles.len()).map(|t| t as f64).collect();
+        let carried = carry_face_values(&r, &vals).unwrap();
+        for (f, tri) in r.mesh.triangles.iter().enumerate() {
+            let c = tri
+                .iter()
+                .map(|&v| r.mesh.positions[v])
+                .sum::<nalgebra::Vector3<f64>>()
+                / 3.0;
+            let [a, b, d] = m.triangles[carried[f] as usize].map(|v| m.positions[v]);
+            // Barycentric coordinates of c in the ancestor (all > 0 inside).
+            let area =
+                |p: nalgebra::Vector3<f64>,
+                 q: nalgebra::Vector3<f64>,
+                 s: nalgebra::Vector3<f64>| { (q - p).cross(&(s - p)).z };
+            let tot = area(a, b, d);
+            let l = [
+                area(c, b, d) / tot,
+                area(a, c, d) / tot,
+                area(a, b, c) / tot,
+            ];
+            assert!(
+                l.iter().all(|&x| x > 0.0),
+                "refined {f} outside ancestor: {l:?}"
+            );
+        }
+        assert!(carry_face_values(&r, &vals[1..]).is_err());
+    }
 
     /// Every refined vertex sits at the weighted sum of its origins, weights sum to one.
     fn check_origin(mesh0: &TriMesh, r: &Refined) {

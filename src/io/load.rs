@@ -55,6 +55,13 @@ impl Rig {
         }
     }
 
+    /// Per-vertex attribute `name` of the face (its vertex order), e.g. `TEXCOORD_0` or a
+    /// custom `_THICKNESS`; the error names the file, the mesh and the primitive without it.
+    pub fn face_attribute(&self, name: &str) -> GltfResult<mesh::VertexAttribute> {
+        let reader = AccessorReader::new(&self.path, &self.container);
+        mesh::read_attribute(&self.path, &reader, &self.container.json, self.face(), name)
+    }
+
     /// The blended face (world, m) for one weight vector: base + Σ w_t Δ_t.
     pub fn blend(&self, weights: &[f64]) -> Vec<Vector3<f64>> {
         let f = self.face();

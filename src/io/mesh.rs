@@ -351,3 +351,84 @@ pub fn extract(
         skipped_primitives: skipped,
     })
 }
+
+/// A per-vertex attribute of a mesh instance, read in the instance's vertex order
+/// (primitives concatenated as in [`extract`]): `components` values per vertex, raw (no
+/// space transform; normalised integers are mapped to [0, 1] / [−1, 1] as glTF says).
+#[derive(Debug, Clone, PartialEq)]
+pub struct VertexAttribute {
+    /// Values per vertex (1 for SCALAR, 2 for VEC2, …).
+    pub components: usize,
+    /// `components` × vertex count values.
+    pub data: Vec<f64>,
+    /// Whether every accessor holds 32-bit floats (componentType 5126).
+    pub float: bool,
+}
+
+/// Read attribute `name` (e.g. `TEXCOORD_0` or a custom `_THICKNESS`) of every triangle
+/// primitive of `instance` from the file it was extracted from. Fails, naming the file, the
+/// mesh and the primitive, when a primitive lacks it or has a different count or type.
+pub fn read_attribute(
+    path: &Path,
+    reader: &AccessorReader,
+    json: &serde_json::Value,
+    instance: &MeshInstance,
+    name: &str,
+) -> GltfResult<VertexAttribute> {
+    let mesh = instance.mesh;
+    let what = format!("mesh {mesh} ('{}')", instance.name);
+    let prims = json["meshes"][mesh]["primitives"]
+        .as_array()
+        .map(|a| a.as_slice())
+        .unwrap_or(&[]);
+    let mut out = VertexAttribute {
+        components: 0,
+        data: Vec::new(),
+        float: true,
+    };
+    for (pi, p) in prims.iter().enumerate() {
+        let mode = p["mode"].as_u64().unwrap_or(4);
+        if !(4..=6).contains(&mode) {
+            continue;
+        }
+        let a = usize_of(&p["attributes"][name]).ok_or_else(|| {
+            GltfError::new(
+                path,
+                format!("{what} primitive {pi} has no vertex attribute {name}"),
+            )
+        })?;
+        let d = reader.read(a)?;
+        let count = usize_of(&p["attributes"]["POSITION"])
+            .and_then(|pa| usize_of(&json["accessors"][pa]["count"]))
+            .unwrap_or(d.count);
+        if d.count != count {
+            return Err(GltfError::new(
+                path,
+                format!(
+                    "{what} primitive {pi}: {name} (accessor {a}) has {} values for {count} vertices",
+                    d.count
+                ),
+            ));
+        }
+        if out.components != 0 && out.components != d.components {
+            return Err(GltfError::new(
+                path,
+                format!("{what}: {name} has a different type in primitive {pi}"),
+            ));
+        }
+        out.components = d.components;
+        out.float &= json["accessors"][a]["componentType"].as_u64() == Some(5126);
+        out.data.extend(d.data);
+    }
+    if out.data.len() != out.components * instance.positions.len() {
+        return Err(GltfError::new(
+            path,
+            format!(
+                "{what}: {name} covers {} of its {} vertices",
+                out.data.len() / out.components.max(1),
+                instance.positions.len()
+            ),
+        ));
+    }
+    Ok(out)
+}

@@ -210,14 +210,40 @@ pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<R
     }
     let animated = rig.track.is_some() && weights.len() > 1;
     let materials = scene.materials()?;
-    let lambda = Bilayer {
-        thickness: materials.skin.thickness,
-        skin_modulus: materials.skin.young,
-        skin_poisson: materials.skin.poisson,
-        interior_modulus: materials.interior.young,
-        interior_poisson: materials.interior.poisson,
-    }
-    .critical_wavelength();
+    // Skin thickness per loaded face triangle when the scene varies it (regions, attribute,
+    // texture); the refinement and the clusters use the thinnest skin's λ (the shortest
+    // wrinkles, the most demanding), λ ∝ h.
+    let face_thickness = if crate::scene::thickness::varies(&scene.skin) {
+        Some(crate::scene::thickness::rig_face_thickness(
+            rig,
+            &scene.skin,
+            materials.skin.thickness,
+            None,
+        )?)
+    } else {
+        None
+    };
+    let (h_min, h_max) = face_thickness.as_deref().map_or(
+        (materials.skin.thickness, materials.skin.thickness),
+        |h| {
+            h.iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &x| {
+                    (lo.min(x), hi.max(x))
+                })
+        },
+    );
+    let wavelength_of = |h: f64| {
+        Bilayer {
+            thickness: h,
+            skin_modulus: materials.skin.young,
+            skin_poisson: materials.skin.poisson,
+            interior_modulus: materials.interior.young,
+            interior_poisson: materials.interior.poisson,
+        }
+        .critical_wavelength()
+    };
+    let lambda = wavelength_of(h_min);
+    let lambda_max = wavelength_of(h_max);
     let face = rig.face();
     if !scene.skin.meshes.is_empty() && !scene.skin.meshes.contains(&face.name) {
         bail!(
@@ -237,8 +263,26 @@ pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<R
         ),
         0.0,
     ));
-    let mut setup = build(rig, scene, lambda, &mut stages, &mut warnings, progress)?;
+    let mut setup = build(
+        rig,
+        scene,
+        lambda,
+        face_thickness.as_deref(),
+        &mut stages,
+        &mut warnings,
+        progress,
+    )?;
     let sigma = setup.sigma;
+    if h_max > h_min && setup.shell.is_some() {
+        warnings.push(format!(
+            "skin thickness varies from {:.3} to {:.3} mm (λ {:.2} to {:.2} mm); the constraint clusters use one width σ = {:.2} mm from the thinnest skin, so thicker regions wrinkle at close to the thin skin's wavelength (per-cluster σ is not implemented)",
+            h_min * 1e3,
+            h_max * 1e3,
+            lambda * 1e3,
+            lambda_max * 1e3,
+            sigma * 1e3
+        ));
+    }
 
     // The frame loop.
     let dynamics = scene.dynamics.enabled.unwrap_or(animated);
@@ -533,7 +577,12 @@ pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<R
         face: face.name.clone(),
         fps: opts.fps,
         frames: [range.start, range.end],
-        materials: serde_json::json!({ "skin": materials.skin, "interior": materials.interior }),
+        materials: serde_json::json!({
+            "skin": materials.skin,
+            "interior": materials.interior,
+            "skin_thickness_m": { "min": h_min, "max": h_max },
+            "wavelength_m": { "min": lambda, "max": lambda_max },
+        }),
         wavelength_m: lambda,
         sigma_m: sigma,
         sizes,
@@ -631,6 +680,7 @@ fn build(
     rig: &Rig,
     scene: &Scene,
     lambda: f64,
+    face_thickness: Option<&[f64]>,
     stages: &mut Vec<StagePlan>,
     warnings: &mut Vec<String>,
     progress: Progress,
@@ -733,6 +783,25 @@ fn build(
             ),
         ));
     }
+    // Thickness per refined triangle: loaded triangles → welded ones (the weld keeps the
+    // loaded order and drops collapsed triangles) → their refined children.
+    let refined_thickness = match face_thickness {
+        Some(h) => {
+            let w = &welded.of_loaded;
+            let per_welded: Vec<f64> = face
+                .triangles
+                .iter()
+                .zip(h)
+                .filter(|(t, _)| {
+                    let [a, b, c] = t.map(|v| w[v]);
+                    a != b && b != c && a != c
+                })
+                .map(|(_, &x)| x)
+                .collect();
+            Some(refine::carry_face_values(&refined, &per_welded)?)
+        }
+        None => None,
+    };
     let points = refine::embed_refined(&lattice, &refined)?;
     let mut rows: Vec<Vec<(usize, f64)>> = vec![Vec::new(); points.len()];
     for (v, n, w) in refine::embedding_triplets(&lattice, &points) {
@@ -825,7 +894,7 @@ fn build(
             energy_merit: true,
             ..StaticSettings::default()
         };
-        let skin = EmbeddedShell::new(
+        let mut skin = EmbeddedShell::new(
             sub,
             scene.skin.material()?,
             emb,
@@ -834,6 +903,17 @@ fn build(
             settings,
         )
         .with_context(|| format!("{path}: setting up the skin"))?;
+        if let Some(h) = &refined_thickness {
+            // The skin's own thickness per simulated triangle (σ above stays that of the
+            // thinnest skin: one cluster width for the whole skin).
+            let sub_h: Vec<f64> = sim_tris.iter().map(|&t| h[t]).collect();
+            skin.shell = crate::shell::Shell::with_thickness(
+                skin.shell.rest.clone(),
+                skin.shell.material,
+                sub_h,
+            )
+            .with_context(|| format!("{path}: setting up the skin thickness"))?;
+        }
         let st = skin.cluster_stats();
         stages.push(StagePlan::ran(
             "clusters",

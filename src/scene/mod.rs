@@ -7,12 +7,14 @@
 //! fall back to a default), and every value is checked with a message naming the key.
 
 pub mod materials;
+pub mod thickness;
 
 use crate::fem::Material;
 use crate::shell::ShellMaterial;
 use anyhow::{bail, Context};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
+pub use thickness::{ThicknessRegion, ThicknessTexture};
 
 /// A whole scene file (see the README for every key and its unit).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
@@ -48,8 +50,18 @@ pub struct SkinSection {
     pub young: Option<f64>,
     /// Poisson's ratio ν_x, overrides the preset.
     pub poisson: Option<f64>,
-    /// Uniform thickness h (m), overrides the preset.
+    /// Uniform thickness h (m), overrides the preset; the skin's thickness wherever no
+    /// attribute, texture or region gives another.
     pub thickness: Option<f64>,
+    /// Regions of another thickness (`[[skin.regions]]`, boxes or spheres in model metres,
+    /// each with its `thickness` in m): a triangle whose centroid lies in one takes its
+    /// thickness; later regions win. Applied on top of the attribute or texture.
+    pub regions: Vec<ThicknessRegion>,
+    /// Name of a per-vertex float glTF attribute of the face holding the thickness (m), e.g.
+    /// `_THICKNESS`; a triangle takes the mean of its vertices'.
+    pub thickness_attribute: Option<String>,
+    /// A grey texture sampled at TEXCOORD_0 giving the thickness (grey 0..1 → min..max m).
+    pub thickness_texture: Option<ThicknessTexture>,
     /// Most subdivision levels the skin may be refined by to hold enough vertices per
     /// wavelength (default 2).
     pub refine_limit: Option<usize>,
@@ -264,7 +276,14 @@ impl Scene {
     pub fn load(path: &Path) -> anyhow::Result<Scene> {
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("{}: cannot read the scene file", path.display()))?;
-        Self::parse(&text, &path.display().to_string())
+        let mut scene = Self::parse(&text, &path.display().to_string())?;
+        // A relative texture path is taken from the scene file's folder.
+        if let (Some(t), Some(dir)) = (scene.skin.thickness_texture.as_mut(), path.parent()) {
+            if Path::new(&t.path).is_relative() {
+                t.path = dir.join(&t.path).display().to_string();
+            }
+        }
+        Ok(scene)
     }
 
     /// The materials after presets and overrides.
@@ -281,6 +300,20 @@ impl Scene {
         let s = &self.skin;
         for (i, b) in s.mask.iter().enumerate() {
             check_box(&format!("skin.mask[{i}]"), b.min, b.max)?;
+        }
+        for (i, r) in s.regions.iter().enumerate() {
+            r.validate(&format!("skin.regions[{i}]"))?;
+        }
+        if s.thickness_attribute.is_some() && s.thickness_texture.is_some() {
+            bail!("give `skin.thickness_attribute` or `skin.thickness_texture`, not both");
+        }
+        if let Some(a) = &s.thickness_attribute {
+            if a.is_empty() {
+                bail!("`skin.thickness_attribute` is empty: name a per-vertex float attribute such as \"_THICKNESS\"");
+            }
+        }
+        if let Some(t) = &s.thickness_texture {
+            t.validate()?;
         }
         if let Some(n) = s.refine_limit {
             if n > 4 {
@@ -341,6 +374,9 @@ impl Scene {
             bail!("`solver.*_iterations` must be at least 1");
         }
         if let Some(g) = &self.geometry {
+            if thickness::varies(s) || g.skins.iter().any(thickness::varies) {
+                bail!("`skin.regions`, `skin.thickness_attribute` and `skin.thickness_texture` apply to rigs; a synthetic scene gives each copy its own `[[geometry.skins]]` thickness");
+            }
             if !["slab", "cushion", "cube"].contains(&g.kind.as_str()) {
                 bail!(
                     "`geometry.kind` must be slab, cushion or cube, got \"{}\"",

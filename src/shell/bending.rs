@@ -13,6 +13,19 @@
 //! Hinge energies depend on the mesh: on meshes far from equilateral the calibration is only
 //! approximate, so the skin should be meshed with near-equilateral triangles.
 //!
+//! Varying thickness ([`BendingEnergy::with_thickness`]): each hinge takes the rigidity
+//! D_e = (A₁ D(h₁) + A₂ D(h₂)) / (A₁ + A₂), the area-weighted mean of D over its two
+//! triangles, i.e. a mean of h³ (not of h, then cubed). Why: the hinge energy stands for
+//! ∫ ½ D κ² dA over its share of the two triangles (a third of each), with the curvature κ
+//! taken constant over that region (the discrete-shells assumption); an integral of an
+//! energy density is additive over the two halves, so the rigidities add weighted by area.
+//! Cubing the mean thickness would understate the thicker side ((h₁+h₂)/2)³ <
+//! (h₁³+h₂³)/2. (Only hinges that straddle a thickness step are affected; when a moment,
+//! not a curvature, is what crosses the step, the halves act in series and the harmonic mean
+//! would be exact; that difference is confined to that one row of hinges.) When both faces
+//! have the same thickness, D_e is that face's D exactly, so a uniform skin gives
+//! bit-identical values to [`BendingEnergy::new`].
+//!
 //! The gradient of θ is the classical closed form (Bridson et al. 2003, Grinspun et al.);
 //! the Hessian of θ is its exact derivative computed by forward-mode dual numbers on that
 //! closed form (12 directional passes), which the finite-difference tests check.
@@ -247,20 +260,45 @@ pub fn hinge_element(
 pub struct BendingEnergy {
     /// Hinges with their rest data.
     pub hinges: Vec<HingeElement>,
-    /// Bending rigidity D (N·m).
+    /// Bending rigidity D (N·m) at the material's reference thickness.
     pub rigidity: f64,
     n_dofs: usize,
 }
 
 impl BendingEnergy {
-    /// Bending of `rest` (rest angles from its shape) with `material`.
+    /// Bending of `rest` (rest angles from its shape) with `material` (uniform thickness).
     pub fn new(rest: &TriMesh, topo: &Topology, material: &ShellMaterial) -> anyhow::Result<Self> {
+        let h = vec![material.thickness; rest.triangles.len()];
+        Self::with_thickness(rest, topo, material, &h)
+    }
+
+    /// Bending of `rest` with `material`, triangle t of thickness `thickness[t]` (m); each
+    /// hinge uses the area-weighted mean of D = E h³ / (12 (1 − ν²)) of its two triangles
+    /// (module notes). Fails on a thickness list of the wrong length or a non-positive value.
+    pub fn with_thickness(
+        rest: &TriMesh,
+        topo: &Topology,
+        material: &ShellMaterial,
+        thickness: &[f64],
+    ) -> anyhow::Result<Self> {
         material.validate()?;
+        super::membrane::check_thickness(thickness, rest.triangles.len())?;
         let d = material.bending_rigidity();
+        let face_d: Vec<f64> = thickness
+            .iter()
+            .map(|&h| {
+                ShellMaterial {
+                    thickness: h,
+                    ..*material
+                }
+                .bending_rigidity()
+            })
+            .collect();
         let p = &rest.positions;
         let mut hinges = Vec::with_capacity(topo.hinges.len());
         for h in &topo.hinges {
-            let area = rest.triangle_area(h.tris[0]) + rest.triangle_area(h.tris[1]);
+            let (a0, a1) = (rest.triangle_area(h.tris[0]), rest.triangle_area(h.tris[1]));
+            let area = a0 + a1;
             let el2 = (p[h.v[1]] - p[h.v[0]]).norm_squared();
             if area.is_nan() || area <= 0.0 {
                 anyhow::bail!(
@@ -270,9 +308,15 @@ impl BendingEnergy {
             }
             let xs = h.v.map(|i| [p[i].x, p[i].y, p[i].z]);
             let (theta, _) = hinge_angle(xs);
+            let (d0, d1) = (face_d[h.tris[0]], face_d[h.tris[1]]);
+            let de = if d0 == d1 {
+                d0
+            } else {
+                (a0 * d0 + a1 * d1) / area
+            };
             hinges.push(HingeElement {
                 v: h.v,
-                k: 0.5 * d * el2 / area,
+                k: 0.5 * de * el2 / area,
                 rest_angle: theta,
             });
         }

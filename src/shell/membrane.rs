@@ -5,6 +5,10 @@
 //! own 2D frame), Green strain E = ½ (FᵀF − I), energy
 //! W = A [ μh E:E + ½ λh (tr E)² ], μ = E_x / (2(1+ν)), λ = E_x ν / (1 − ν²) (plane stress),
 //! so that uniaxial stress gives Young's modulus and biaxial strain gives E_x h / (1 − ν²).
+//!
+//! The thickness may vary per triangle ([`MembraneEnergy::with_thickness`]): each element
+//! then uses μ h_t and λ h_t of its own thickness h_t (the stiffness of a plane-stress sheet
+//! is linear in h). A uniform thickness gives bit-identical values to [`MembraneEnergy::new`].
 
 use super::material::ShellMaterial;
 use super::psd::project_psd;
@@ -29,10 +33,13 @@ pub struct MembraneElement {
 pub struct MembraneEnergy {
     /// Elements with their rest data.
     pub elements: Vec<MembraneElement>,
-    /// μ h (N/m).
+    /// μ h at the material's reference thickness (N/m).
     pub mu_h: f64,
-    /// λ h (N/m), plane stress.
+    /// λ h at the material's reference thickness (N/m), plane stress.
     pub lambda_h: f64,
+    /// Per element (μ h_t, λ h_t) at its own thickness h_t (N/m); all equal to
+    /// (`mu_h`, `lambda_h`) for a uniform skin.
+    pub element_lame: Vec<(f64, f64)>,
     n_dofs: usize,
 }
 
@@ -167,10 +174,35 @@ pub fn membrane_element(
 }
 
 impl MembraneEnergy {
-    /// Membrane of `rest` with `material`. Fails on a degenerate triangle (names it).
+    /// Membrane of `rest` with `material` (uniform thickness). Fails on a degenerate triangle
+    /// (names it).
     pub fn new(rest: &TriMesh, material: &ShellMaterial) -> anyhow::Result<Self> {
+        let h = vec![material.thickness; rest.triangles.len()];
+        Self::with_thickness(rest, material, &h)
+    }
+
+    /// Membrane of `rest` with `material`, triangle t of thickness `thickness[t]` (m; the
+    /// material's own thickness is then only the reference for `mu_h`, `lambda_h`). Fails on
+    /// a degenerate triangle, a thickness list of the wrong length, or a thickness that is not
+    /// a positive finite number of metres (names the triangle).
+    pub fn with_thickness(
+        rest: &TriMesh,
+        material: &ShellMaterial,
+        thickness: &[f64],
+    ) -> anyhow::Result<Self> {
         material.validate()?;
+        check_thickness(thickness, rest.triangles.len())?;
         let (mu_h, lambda_h) = material.lame_times_thickness();
+        let element_lame = thickness
+            .iter()
+            .map(|&h| {
+                ShellMaterial {
+                    thickness: h,
+                    ..*material
+                }
+                .lame_times_thickness()
+            })
+            .collect();
         let mut elements = Vec::with_capacity(rest.triangles.len());
         for (t, &v) in rest.triangles.iter().enumerate() {
             let p = v.map(|i| rest.positions[i]);
@@ -186,6 +218,7 @@ impl MembraneEnergy {
             elements,
             mu_h,
             lambda_h,
+            element_lame,
             n_dofs: 3 * rest.positions.len(),
         })
     }
@@ -194,6 +227,26 @@ impl MembraneEnergy {
     pub fn triplet_count(&self) -> usize {
         81 * self.elements.len()
     }
+}
+
+/// Check a per-triangle thickness list (m): one positive finite value per triangle.
+pub fn check_thickness(thickness: &[f64], triangles: usize) -> anyhow::Result<()> {
+    if thickness.len() != triangles {
+        anyhow::bail!(
+            "skin thickness: {} per-triangle values for {triangles} triangles",
+            thickness.len()
+        );
+    }
+    if let Some((t, h)) = thickness
+        .iter()
+        .enumerate()
+        .find(|(_, h)| !(h.is_finite() && **h > 0.0))
+    {
+        anyhow::bail!(
+            "skin thickness of triangle {t} is {h}; it must be a positive number of metres"
+        );
+    }
+    Ok(())
 }
 
 fn gather3(x: &[f64], v: [usize; 3]) -> [[f64; 3]; 3] {
@@ -234,14 +287,14 @@ impl Energy for MembraneEnergy {
                 };
                 hb.par_chunks_mut(81)
                     .zip(gchunks.into_par_iter())
-                    .zip(self.elements.par_iter())
-                    .map(|((tr, g), el)| {
+                    .zip(self.elements.par_iter().zip(self.element_lame.par_iter()))
+                    .map(|((tr, g), (el, &(mu_h, lambda_h)))| {
                         let mut he = [0.0; 81];
                         let e = membrane_element(
                             el,
                             gather3(x, el.v),
-                            self.mu_h,
-                            self.lambda_h,
+                            mu_h,
+                            lambda_h,
                             g,
                             Some(&mut he),
                         );
@@ -265,16 +318,9 @@ impl Energy for MembraneEnergy {
             }
             (None, true) => gbuf
                 .par_iter_mut()
-                .zip(self.elements.par_iter())
-                .map(|(g, el)| {
-                    membrane_element(
-                        el,
-                        gather3(x, el.v),
-                        self.mu_h,
-                        self.lambda_h,
-                        Some(g),
-                        None,
-                    )
+                .zip(self.elements.par_iter().zip(self.element_lame.par_iter()))
+                .map(|(g, (el, &(mu_h, lambda_h)))| {
+                    membrane_element(el, gather3(x, el.v), mu_h, lambda_h, Some(g), None)
                 })
                 .collect::<Vec<f64>>()
                 .iter()
@@ -282,8 +328,9 @@ impl Energy for MembraneEnergy {
             (None, false) => self
                 .elements
                 .par_iter()
-                .map(|el| {
-                    membrane_element(el, gather3(x, el.v), self.mu_h, self.lambda_h, None, None)
+                .zip(self.element_lame.par_iter())
+                .map(|(el, &(mu_h, lambda_h))| {
+                    membrane_element(el, gather3(x, el.v), mu_h, lambda_h, None, None)
                 })
                 .collect::<Vec<f64>>()
                 .iter()

@@ -13,8 +13,11 @@ use crate::mesh::TriMesh;
 pub struct Shell {
     /// Rest (stress-free) mesh, positions in metres.
     pub rest: TriMesh,
-    /// Material constants.
+    /// Material constants (its `thickness` is the reference; see `thickness`).
     pub material: ShellMaterial,
+    /// Thickness of each rest triangle h_t (m); all equal to `material.thickness` for a
+    /// uniform skin.
+    pub thickness: Vec<f64>,
     /// Edges and hinges of the rest mesh.
     pub topology: Topology,
     /// Stretch and shear part.
@@ -27,17 +30,41 @@ impl Shell {
     /// Build a shell at rest in `rest`. Fails with a message naming the bad material field,
     /// a non-manifold / inconsistently wound edge, or a zero-area triangle.
     pub fn new(rest: TriMesh, material: ShellMaterial) -> anyhow::Result<Self> {
+        let h = vec![material.thickness; rest.triangles.len()];
+        Self::with_thickness(rest, material, h)
+    }
+
+    /// Build a shell whose triangle t has thickness `per_face_h[t]` (m): membrane stiffness
+    /// ∝ h_t per triangle, hinge rigidity the area-weighted mean of h³ of its two triangles
+    /// (see [`crate::shell::bending`]). With every value equal to `material.thickness` this is
+    /// [`Shell::new`], bit for bit. Fails as `new`, or on a thickness list of the wrong
+    /// length or with a value that is not a positive number of metres.
+    pub fn with_thickness(
+        rest: TriMesh,
+        material: ShellMaterial,
+        per_face_h: Vec<f64>,
+    ) -> anyhow::Result<Self> {
         material.validate()?;
         let topology = Topology::new(&rest)?;
-        let membrane = MembraneEnergy::new(&rest, &material)?;
-        let bending = BendingEnergy::new(&rest, &topology, &material)?;
+        let membrane = MembraneEnergy::with_thickness(&rest, &material, &per_face_h)?;
+        let bending = BendingEnergy::with_thickness(&rest, &topology, &material, &per_face_h)?;
         Ok(Self {
             rest,
             material,
+            thickness: per_face_h,
             topology,
             membrane,
             bending,
         })
+    }
+
+    /// Thinnest and thickest triangle (m).
+    pub fn thickness_range(&self) -> (f64, f64) {
+        self.thickness
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &h| {
+                (lo.min(h), hi.max(h))
+            })
     }
 
     /// Number of Hessian triplets one evaluation emits (fixed order: membrane, then bending).
