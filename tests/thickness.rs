@@ -325,16 +325,11 @@ fn profile(out: &furrow::pipeline::RunOutput, y: f64, tol: f64) -> Vec<(f64, f64
 /// (`[[skin.regions]]` boxes). λ ∝ h, so the thick half must wrinkle at about twice the
 /// wavelength of the thin half: the measured ratio must lie within 25 % of h2/h1 = 2.
 ///
-/// Ignored: it fails today. The constraint clusters have ONE width σ for the whole skin
-/// (that of the thinnest skin), and in the embedded method σ, not the shell alone, sets the
-/// wavelength: measured 8.21 mm (thin) and 8.96 mm (thick), ratio 1.09. With per-cluster
-/// σ ∝ local h (a prototype: `Clusters::build_varying` with each cluster's σ that of its
-/// centre vertex, farthest-point sampling until every vertex v is within σ(v) of a centre,
-/// and `EmbeddedShell::set_clusters`; files outside this branch) it measured 9.34 mm and
-/// 18.87 mm, ratio 2.02, in 19 s (test profile). Run with
-/// `cargo test --test thickness -- --ignored`.
+/// The constraint clusters widen with the local thickness (σ ∝ λ ∝ h,
+/// `EmbeddedShell::set_thickness`); with one σ for the whole skin (that of the thinnest) the
+/// halves measured 8.21 and 8.96 mm, ratio 1.09: in the embedded method σ, not the shell
+/// alone, sets the wavelength.
 #[test]
-#[ignore = "needs per-cluster σ in coupling::clusters (today both halves wrinkle at the thinnest skin's σ)"]
 fn thicker_region_wrinkles_at_the_longer_wavelength() {
     use furrow::io::load::{load_bytes, LoadOptions};
     use furrow::pipeline::{self, RunOptions};
@@ -673,7 +668,7 @@ fn pipeline_reports_thickness_and_wavelength_ranges() {
         out.report
             .warnings
             .iter()
-            .any(|w| w.contains("one width σ")),
+            .any(|w| w.contains("clusters widen with the thickness")),
         "{:?}",
         out.report.warnings
     );

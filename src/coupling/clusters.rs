@@ -14,7 +14,7 @@ use std::collections::BinaryHeap;
 /// Clusters and the sparse constraint matrix H (one row per cluster, per coordinate).
 #[derive(Debug, Clone)]
 pub struct Clusters {
-    /// Gaussian width σ (m).
+    /// Gaussian width σ (m); with widths varying over the skin, the smallest one.
     pub sigma: f64,
     /// Centre vertex of each cluster.
     pub centres: Vec<usize>,
@@ -117,10 +117,36 @@ impl Clusters {
                 "cluster width σ must be a positive length in metres, got {sigma}"
             ));
         }
+        Self::build_varying(mesh, &vec![sigma; mesh.positions.len()])
+    }
+
+    /// Clusters whose width varies over the skin: `sigma_of[v]` (m) is the width wanted at
+    /// vertex v — proportional to the local critical wavelength, which grows with the local
+    /// skin thickness (λ ∝ h). Farthest-point sampling runs on the distance measured in local
+    /// widths, d(v)/σ(v), and stops when every vertex is within its own σ of a centre; each
+    /// cluster takes the σ of its centre for its Gaussian weights and its 2σ reach. With a
+    /// constant σ this is [`Clusters::build`].
+    pub fn build_varying(mesh: &TriMesh, sigma_of: &[f64]) -> Result<Self, String> {
         let n = mesh.positions.len();
         if n == 0 {
             return Err("the skin mesh has no vertices".into());
         }
+        if sigma_of.len() != n {
+            return Err(format!(
+                "cluster widths: {} values for {n} vertices",
+                sigma_of.len()
+            ));
+        }
+        if let Some((v, s)) = sigma_of
+            .iter()
+            .enumerate()
+            .find(|(_, s)| !(s.is_finite() && **s > 0.0))
+        {
+            return Err(format!(
+                "cluster width σ must be a positive length in metres, got {s} at vertex {v}"
+            ));
+        }
+        let sigma = sigma_of.iter().copied().fold(f64::INFINITY, f64::min);
         let adj = adjacency(mesh);
         // Farthest-point sampling: `near[v]` is the edge-path distance to the nearest centre.
         let mut near = vec![f64::INFINITY; n];
@@ -137,11 +163,18 @@ impl Clusters {
             };
             dijkstra(&adj, next, bound, &mut near, true);
             let (far, d) =
-                near.iter().enumerate().fold(
-                    (0, -1.0),
-                    |(bi, bd), (i, &d)| if d > bd { (i, d) } else { (bi, bd) },
-                );
-            if d <= sigma {
+                near.iter()
+                    .zip(sigma_of)
+                    .enumerate()
+                    .fold((0, -1.0), |(bi, bd), (i, (&d, &s))| {
+                        let d = d / s;
+                        if d > bd {
+                            (i, d)
+                        } else {
+                            (bi, bd)
+                        }
+                    });
+            if d <= 1.0 {
                 break;
             }
             next = far;
@@ -149,6 +182,7 @@ impl Clusters {
         let mut entries = Vec::new();
         let mut scratch = vec![f64::INFINITY; n];
         for (c, &centre) in centres.iter().enumerate() {
+            let sigma = sigma_of[centre];
             let reached = dijkstra(&adj, centre, 2.0 * sigma, &mut scratch, false);
             let w: Vec<f64> = reached
                 .iter()

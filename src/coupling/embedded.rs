@@ -207,6 +207,54 @@ impl EmbeddedShell {
         })
     }
 
+    /// Give the skin a thickness per triangle (`per_face_h`, m; the shell's membrane and
+    /// bending stiffness follow it) and widen the clusters where it is thicker: the critical
+    /// wavelength grows in proportion to the thickness (λ ∝ h), and so does the cluster width
+    /// that places wrinkles at λ, so σ(v) = σ_thin · h(v) / h_min, with σ_thin the width
+    /// for the thinnest skin (the one given to [`EmbeddedShell::new`]) and h(v) the mean
+    /// thickness of the triangles around vertex v. Call before the first solve.
+    pub fn set_thickness(&mut self, per_face_h: Vec<f64>) -> anyhow::Result<()> {
+        let rest = self.shell.rest.clone();
+        let shell = Shell::with_thickness(rest, self.shell.material, per_face_h)?;
+        let h_min = shell.thickness_range().0;
+        let n = shell.rest.positions.len();
+        let (mut sum, mut count) = (vec![0.0; n], vec![0usize; n]);
+        for (t, tri) in shell.rest.triangles.iter().enumerate() {
+            for &v in tri {
+                sum[v] += shell.thickness[t];
+                count[v] += 1;
+            }
+        }
+        let sigma_thin = self.clusters.sigma;
+        let widths: Vec<f64> = sum
+            .iter()
+            .zip(&count)
+            .map(|(&h, &c)| {
+                if c == 0 {
+                    sigma_thin
+                } else {
+                    sigma_thin * h / (c as f64 * h_min)
+                }
+            })
+            .collect();
+        let clusters =
+            Clusters::build_varying(&shell.rest, &widths).map_err(|e| anyhow!("clusters: {e}"))?;
+        let mut entries = Vec::with_capacity(3 * clusters.entries.len());
+        for &(c, v, w) in &clusters.entries {
+            for a in 0..3 {
+                entries.push((3 * c + a, 3 * v + a, w));
+            }
+        }
+        self.problem.constraints = LinearConstraints {
+            rows: 3 * clusters.len(),
+            entries,
+            rhs: vec![0.0; 3 * clusters.len()],
+        };
+        self.clusters = clusters;
+        self.shell = shell;
+        Ok(())
+    }
+
     /// Number of skin vertices.
     pub fn vertex_count(&self) -> usize {
         self.rows.len()

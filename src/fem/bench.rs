@@ -7,8 +7,8 @@ use crate::mesh::TriMesh;
 use nalgebra::Vector3;
 use std::time::Instant;
 
-/// Closed box mesh [0, a]³ with each face split into m × m quads (outward normals).
-fn cube_mesh(a: f64, m: usize) -> TriMesh {
+/// Closed box mesh [0, a]³ (a in m) with each face split into m × m quads (outward normals).
+pub fn cube_mesh(a: f64, m: usize) -> TriMesh {
     let mut pos = Vec::new();
     let mut tris = Vec::new();
     let frames: [(usize, f64, Vector3<f64>, Vector3<f64>); 6] = [

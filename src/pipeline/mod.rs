@@ -275,7 +275,7 @@ pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<R
     let sigma = setup.sigma;
     if h_max > h_min && setup.shell.is_some() {
         warnings.push(format!(
-            "skin thickness varies from {:.3} to {:.3} mm (λ {:.2} to {:.2} mm); the constraint clusters use one width σ = {:.2} mm from the thinnest skin, so thicker regions wrinkle at close to the thin skin's wavelength (per-cluster σ is not implemented)",
+            "skin thickness varies from {:.3} to {:.3} mm (λ {:.2} to {:.2} mm); the skin is refined for the thinnest skin and the constraint clusters widen with the thickness (σ = {:.2} mm where thinnest)",
             h_min * 1e3,
             h_max * 1e3,
             lambda * 1e3,
@@ -904,15 +904,11 @@ fn build(
         )
         .with_context(|| format!("{path}: setting up the skin"))?;
         if let Some(h) = &refined_thickness {
-            // The skin's own thickness per simulated triangle (σ above stays that of the
-            // thinnest skin: one cluster width for the whole skin).
+            // The skin's own thickness per simulated triangle; the clusters widen with it
+            // (σ ∝ λ ∝ h, from σ of the thinnest skin above).
             let sub_h: Vec<f64> = sim_tris.iter().map(|&t| h[t]).collect();
-            skin.shell = crate::shell::Shell::with_thickness(
-                skin.shell.rest.clone(),
-                skin.shell.material,
-                sub_h,
-            )
-            .with_context(|| format!("{path}: setting up the skin thickness"))?;
+            skin.set_thickness(sub_h)
+                .with_context(|| format!("{path}: setting up the skin thickness"))?;
         }
         let st = skin.cluster_stats();
         stages.push(StagePlan::ran(
