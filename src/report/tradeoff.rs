@@ -923,13 +923,12 @@ mod tests {
         assert_eq!(p[1].setting, "reference");
     }
 
+    /// Wrinkled positions, smooth positions and triangles of a test surface.
+    type Wrinkled = (Vec<Vector3<f64>>, Vec<Vector3<f64>>, Vec<[usize; 3]>);
+
     /// A flat grid (z = 0, x in [0, 4), y in [0, 2)) with a wrinkle w = A sin(2π x / λ + φ)
     /// along its normal: (wrinkled, smooth, triangles).
-    fn wrinkled_grid(
-        a: f64,
-        lambda: f64,
-        phi: f64,
-    ) -> (Vec<Vector3<f64>>, Vec<Vector3<f64>>, Vec<[usize; 3]>) {
+    fn wrinkled_grid(a: f64, lambda: f64, phi: f64) -> Wrinkled {
         let (nx, ny, h) = (80, 40, 0.05);
         let mut smooth = Vec::new();
         for j in 0..ny {
