@@ -102,6 +102,48 @@ fn env<T: std::str::FromStr>(k: &str, d: T) -> T {
         .unwrap_or(d)
 }
 
+/// The cell faces and the prescribed bend have known answers: with every node prescribed
+/// (bend > 0), the faces sit at the affine image x_c + (1 − ε)(i · cell − x_c) for both
+/// orders (quadratic B-splines reproduce affine fields), and the trilinear embedded surface
+/// along the middle row is the linear interpolation between faces of depth + A sin(2π X / P)
+/// (X the rest position), to round-off.
+#[test]
+fn faces_and_bent_surface_match_the_prescribed_interior() {
+    use furrow::validate::slab::run_slab;
+    for order in [ElementOrder::Trilinear, ElementOrder::Quadratic] {
+        let mut s = slab(order, 7);
+        s.length = 4.0;
+        s.steps = 3;
+        s.bend = 0.1;
+        s.bend_period = 2.0;
+        let r = run_slab(&s).unwrap();
+        let eps = *r.strains.last().unwrap();
+        let xc = 0.5 * r.length;
+        assert_eq!(r.faces.len(), 8);
+        for (i, f) in r.faces.iter().enumerate() {
+            let want = xc + (1.0 - eps) * (i as f64 * r.cell - xc);
+            assert!(
+                (f - want).abs() < 1e-9 * r.length,
+                "{order:?} face {i}: {f} vs {want}"
+            );
+        }
+        if order == ElementOrder::Trilinear {
+            let (amp, period) = (s.bend * r.predicted, s.bend_period * r.predicted);
+            let depth = s.depth_cells as f64 * r.cell;
+            let z = |x: f64| depth + amp * (2.0 * std::f64::consts::PI * x / period).sin();
+            let mut worst = 0.0f64;
+            for v in &r.row {
+                let k = ((v.rest_x / r.cell).floor() as usize).min(6);
+                let t = v.rest_x / r.cell - k as f64;
+                let want = (1.0 - t) * z(k as f64 * r.cell) + t * z((k + 1) as f64 * r.cell);
+                worst = worst.max((v.surface_z - want).abs());
+            }
+            println!("trilinear bent surface: largest deviation {worst:.2e} m (bend {amp:.2e} m)");
+            assert!(worst < 1e-9 * r.length, "{worst}");
+        }
+    }
+}
+
 /// Exploration (not a check): prints crest statistics for settings from the environment
 /// (CELLS, SEEDS, RATIO, LEN, DEPTH, SIGMA, COMP, NOISE, BEND, PERIOD).
 #[test]

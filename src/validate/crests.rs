@@ -153,8 +153,9 @@ pub struct CrestRun {
 /// phases).
 pub const CELLS: [usize; 4] = [6, 7, 9, 11];
 
-/// The slab of the crest check: [`SlabSettings::new`] for latex-like skin on a 1000× softer
-/// interior (h = 0.3 mm, λ ≈ 6.1 mm), with `cells` cells along and element `order`.
+/// The slab of the crest check: [`SlabSettings::new`] for a skin 1000× stiffer than the
+/// interior (h = 0.3 mm, equal Poisson ratios 0.45, λ ≈ 13.1 mm), with `cells` cells along
+/// and element `order`.
 pub fn slab_settings(order: ElementOrder, cells: usize) -> SlabSettings {
     let mut s = SlabSettings::new(super::wavelength::bilayer(1000.0, 0.3e-3));
     s.cells_along = cells;
