@@ -108,6 +108,8 @@ fn tradeoff_csv_has_the_columns_and_a_pareto_front() {
         "rms_m",
         "max_m",
         "wavelength_error",
+        "amplitude_error",
+        "phase_free_error",
         "pareto",
     ] {
         assert!(header.contains(&col), "column {col} missing: {header:?}");
@@ -121,25 +123,31 @@ fn tradeoff_csv_has_the_columns_and_a_pareto_front() {
                 r.case, r.knob, r.value, r.status
             );
             assert!(r.wall_s > 0.0 && r.rms_m.is_finite() && r.max_m >= r.rms_m);
+            assert!(
+                r.amplitude_error.is_finite()
+                    && r.amplitude_error >= 0.0
+                    && r.phase_free_error >= r.amplitude_error,
+                "{} {} = {}: amplitude error {}, phase-free error {}",
+                r.case,
+                r.knob,
+                r.value,
+                r.amplitude_error,
+                r.phase_free_error
+            );
         }
         let reference = set.iter().find(|r| r.is_reference).unwrap();
         assert!(
-            reference.rms_m < 1e-12,
-            "reference error {}",
-            reference.rms_m
+            reference.rms_m < 1e-12 && reference.phase_free_error < 1e-12,
+            "reference errors {} {}",
+            reference.rms_m,
+            reference.phase_free_error
         );
         assert!(set.iter().any(|r| r.is_default));
         let front: Vec<_> = set.iter().filter(|r| r.pareto).collect();
         assert!(!front.is_empty());
         assert!(front.iter().all(|r| !r.is_reference));
-        // Nothing off the front beats a front point on both time and error.
-        let err = |r: &tradeoff::TradeoffRun| {
-            if r.case == "slab" {
-                r.wavelength_error.unwrap()
-            } else {
-                r.rms_m
-            }
-        };
+        // Nothing off the front beats a front point on both time and the phase-free error.
+        let err = |r: &tradeoff::TradeoffRun| r.phase_free_error;
         for r in set.iter().filter(|r| !r.pareto && !r.is_reference) {
             assert!(
                 front

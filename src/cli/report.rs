@@ -96,13 +96,16 @@ fn check_free(paths: &[&Path], force: bool) -> anyhow::Result<Overwrite> {
     Ok(ow)
 }
 
-fn rig_err(r: &TradeoffRun) -> f64 {
-    r.rms_m
+/// The error the Pareto front and the picks use: phase-free (see [`tradeoff`]).
+fn phase_free(r: &TradeoffRun) -> f64 {
+    r.phase_free_error
 }
 
-fn slab_err(r: &TradeoffRun) -> f64 {
-    r.wavelength_error.unwrap_or(f64::NAN)
-}
+/// Preview pick: the fastest run whose phase-free error is at most this (relative): the
+/// wrinkles are there, at a size within a third of the finest run's.
+const PREVIEW_TOL: f64 = 0.3;
+/// Final pick: the fastest run within this phase-free error (relative).
+const FINAL_TOL: f64 = 0.1;
 
 fn run_tradeoff(a: TradeoffArgs, out: &Output) -> anyhow::Result<()> {
     if !(a.fps.is_finite() && a.fps > 0.0 && a.fps <= 1000.0) {
@@ -144,13 +147,13 @@ fn run_tradeoff(a: TradeoffArgs, out: &Output) -> anyhow::Result<()> {
     })
     .with_context(|| format!("{rig_name}: the tradeoff sweep"))?;
     pb.finish_and_clear();
-    // Rig tolerances from the wrinkles themselves: the default run's wrinkle RMS.
     let amp = rows
         .iter()
         .find(|r| r.is_default)
         .map_or(f64::NAN, |r| r.wrinkle_m);
     let rig_rows = rows.clone();
-    let mut picks_rig = tradeoff::picks(&rig_rows, rig_err, 0.5 * amp, 0.1 * amp, "m");
+    let mut picks_rig =
+        tradeoff::picks(&rig_rows, phase_free, PREVIEW_TOL, FINAL_TOL, "(relative)");
     let mut picks_slab: Vec<Pick> = Vec::new();
     if !a.no_slab {
         let pb = out.progress(1, "slab sweep");
@@ -160,22 +163,22 @@ fn run_tradeoff(a: TradeoffArgs, out: &Output) -> anyhow::Result<()> {
         })
         .context("the slab sweep")?;
         pb.finish_and_clear();
-        picks_slab = tradeoff::picks(&slab, slab_err, 0.15, 0.05, "(relative)");
+        picks_slab = tradeoff::picks(&slab, phase_free, PREVIEW_TOL, FINAL_TOL, "(relative)");
         tradeoff::write_chart(
             &slab_png,
             &slab,
-            "validation slab: wavelength error against wall time",
-            "|λ measured / λ formula − 1|",
-            slab_err,
+            "validation slab: phase-free error against wall time",
+            "max(|A/A_ref − 1|, |λ/λ_ref − 1|)",
+            phase_free,
         )?;
         rows.extend(slab);
     }
     tradeoff::write_chart(
         &rig_png,
         &rig_rows,
-        &format!("{rig_name}: surface error against wall time"),
-        "RMS distance to the finest run (m)",
-        rig_err,
+        &format!("{rig_name}: wrinkle amplitude error against wall time"),
+        "relative error of the per-region wrinkle RMS",
+        phase_free,
     )?;
     atomic::write(&csv, tradeoff::to_csv(&rows).as_bytes(), ow)?;
     for p in &mut picks_rig {
@@ -197,12 +200,12 @@ fn run_tradeoff(a: TradeoffArgs, out: &Output) -> anyhow::Result<()> {
     atomic::write(&json, &serde_json::to_vec_pretty(&doc)?, ow)?;
     out.json_result(&doc);
     out.say(format!(
-        "{:<6} {:<30} {:>10} {:>9} {:>11} {:>11} {:>9}  status",
-        "case", "setting", "value", "wall s", "RMS m", "max m", "λ err"
+        "{:<6} {:<30} {:>10} {:>9} {:>11} {:>11} {:>9} {:>9} {:>9}  status",
+        "case", "setting", "value", "wall s", "RMS m", "max m", "λ err", "amp err", "pf err"
     ));
     for r in &rows {
         out.say(format!(
-            "{:<6} {:<30} {:>10} {:>9.2} {:>11.3e} {:>11.3e} {:>9}  {}{}",
+            "{:<6} {:<30} {:>10} {:>9.2} {:>11.3e} {:>11.3e} {:>9} {:>8.1}% {:>8.1}%  {}{}",
             r.case,
             r.knob,
             if r.value.is_finite() {
@@ -215,12 +218,18 @@ fn run_tradeoff(a: TradeoffArgs, out: &Output) -> anyhow::Result<()> {
             r.max_m,
             r.wavelength_error
                 .map_or(String::new(), |e| format!("{:.1} %", e * 100.0)),
+            100.0 * r.amplitude_error,
+            100.0 * r.phase_free_error,
             if r.pareto { "pareto " } else { "" },
             r.status
         ));
     }
     out.say(format!(
-        "wrinkle RMS of the default rig run: {amp:.3e} m; preview ≤ 50 %, final ≤ 10 % of it"
+        "wrinkle RMS of the default rig run: {amp:.3e} m; picks by the phase-free error (pf: rig, \
+         per-region wrinkle amplitude; slab, amplitude and wavelength) against the finest run: \
+         preview ≤ {:.0} %, final ≤ {:.0} %",
+        100.0 * PREVIEW_TOL,
+        100.0 * FINAL_TOL
     ));
     for p in &all_picks {
         out.say(format!(

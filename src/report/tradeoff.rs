@@ -12,8 +12,15 @@
 //!
 //! Wrinkling is a bifurcation: two discretisations may settle on wrinkles of the same
 //! wavelength but another phase, so the surface error of a run is bounded by about twice the
-//! wrinkle amplitude even when it is "right". The slab's wavelength error does not have this
-//! ambiguity, which is why both are reported.
+//! wrinkle amplitude even when it is "right". The Pareto front and the picks therefore use a
+//! phase-free error (the surface distances stay in the CSV):
+//! - rig: the wrinkle field w = (wrinkled − blend-shape surface) · n along the blend-shape
+//!   surface's normal, its RMS per region (cubes of side 2 λ over the blend-shape surface,
+//!   per frame; a region two wavelengths wide holds whole wrinkles, so its RMS does not depend
+//!   on where the crests fall), and the relative L2 difference of that amplitude map from the
+//!   reference's ([`amplitude_map`], [`amplitude_error`]);
+//! - slab: the larger of the relative differences of the last frame's wrinkle amplitude and
+//!   measured wavelength from the reference's.
 
 use crate::io::load::{load_bytes, LoadOptions, Rig};
 use crate::io::model::{MorphTarget, WeightKeys};
@@ -154,6 +161,14 @@ pub struct TradeoffRun {
     pub predicted_wavelength_m: Option<f64>,
     /// Slab: |measured / predicted − 1| (dimensionless; 1 when no wrinkles were found).
     pub wavelength_error: Option<f64>,
+    /// Phase-free amplitude error against the reference (dimensionless): rig, the relative
+    /// L2 difference of the per-region wrinkle RMS maps ([`amplitude_error`]); slab,
+    /// |A / A_ref − 1| of the last frame's sine-fit amplitude (1 when either has no wrinkle).
+    pub amplitude_error: f64,
+    /// The phase-free error the Pareto front and the picks use (dimensionless): rig, the
+    /// amplitude error; slab, max(amplitude error, |λ / λ_ref − 1|) with λ the measured
+    /// wavelengths (1 when either has no wrinkle).
+    pub phase_free_error: f64,
     /// Frames (or slab frames) in which a solver did not converge.
     pub frames_not_converged: usize,
     /// On the Pareto front of (wall time, error) among the non-reference runs of its case.
@@ -163,7 +178,7 @@ pub struct TradeoffRun {
 }
 
 /// The CSV header written by [`write_csv`].
-pub const CSV_HEADER: &str = "case,knob,value,default,reference,wall_s,rms_m,max_m,wrinkle_m,measured_wavelength_m,predicted_wavelength_m,wavelength_error,frames_not_converged,pareto,status";
+pub const CSV_HEADER: &str = "case,knob,value,default,reference,wall_s,rms_m,max_m,wrinkle_m,measured_wavelength_m,predicted_wavelength_m,wavelength_error,amplitude_error,phase_free_error,frames_not_converged,pareto,status";
 
 /// How big a sweep to run.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -396,6 +411,8 @@ pub fn rig_sweep(
             anyhow::bail!("the reference (finest) run failed, nothing to measure against: {e:#}")
         }
     };
+    let region = region_size(reference);
+    let ref_map = amplitude_map(reference, region);
     let mut rows = Vec::new();
     for (s, (wall, r)) in set.iter().zip(&outputs) {
         let mut row = blank_row("rig", s, *wall);
@@ -408,13 +425,15 @@ pub fn rig_sweep(
                 row.rms_m = e.rms();
                 row.max_m = e.max;
                 row.wrinkle_m = wrinkle_rms(out);
+                row.amplitude_error = amplitude_error(&amplitude_map(out, region), &ref_map);
+                row.phase_free_error = row.amplitude_error;
                 row.frames_not_converged = out.report.totals.frames_not_converged;
             }
             Err(e) => row.status = format!("{e:#}"),
         }
         rows.push(row);
     }
-    mark_pareto(&mut rows, |r| r.rms_m);
+    mark_pareto(&mut rows, |r| r.phase_free_error);
     Ok(rows)
 }
 
@@ -432,6 +451,8 @@ fn blank_row(case: &str, s: &Setting, wall: f64) -> TradeoffRun {
         measured_wavelength_m: None,
         predicted_wavelength_m: None,
         wavelength_error: None,
+        amplitude_error: f64::NAN,
+        phase_free_error: f64::NAN,
         frames_not_converged: 0,
         pareto: false,
         status: "ok".into(),
@@ -493,6 +514,7 @@ pub fn slab_sweep(
             "the reference (finest) slab run failed, nothing to measure against: {e:#}"
         ),
     };
+    let ref_copy = &reference.copies[0];
     let mut rows = Vec::new();
     for (s, (wall, r)) in set.iter().zip(&outputs) {
         let mut row = blank_row("slab", s, *wall);
@@ -513,12 +535,17 @@ pub fn slab_sweep(
                         .map_or(1.0, |m| (m / c.predicted_wavelength_m - 1.0).abs()),
                 );
                 row.frames_not_converged = c.frames_not_converged;
+                row.amplitude_error = relative_change(c.amplitude_m, ref_copy.amplitude_m);
+                row.phase_free_error = row.amplitude_error.max(relative_change(
+                    c.measured_wavelength_m,
+                    ref_copy.measured_wavelength_m,
+                ));
             }
             Err(e) => row.status = format!("{e:#}"),
         }
         rows.push(row);
     }
-    mark_pareto(&mut rows, |r| r.wavelength_error.unwrap_or(f64::NAN));
+    mark_pareto(&mut rows, |r| r.phase_free_error);
     Ok(rows)
 }
 
@@ -532,7 +559,7 @@ pub fn to_csv(rows: &[TradeoffRun]) -> String {
     s.push('\n');
     for r in rows {
         s.push_str(&format!(
-            "{},{},{},{},{},{:.4},{:.6e},{:.6e},{:.6e},{},{},{},{},{},\"{}\"\n",
+            "{},{},{},{},{},{:.4},{:.6e},{:.6e},{:.6e},{},{},{},{:.6e},{:.6e},{},{},\"{}\"\n",
             r.case,
             r.knob,
             if r.value.is_finite() {
@@ -549,6 +576,8 @@ pub fn to_csv(rows: &[TradeoffRun]) -> String {
             opt(r.measured_wavelength_m),
             opt(r.predicted_wavelength_m),
             opt(r.wavelength_error),
+            r.amplitude_error,
+            r.phase_free_error,
             r.frames_not_converged,
             r.pareto,
             r.status
@@ -690,6 +719,125 @@ pub fn wrinkle_rms(out: &pipeline::RunOutput) -> f64 {
     }
 }
 
+/// |a / b − 1| of two optional positive measurements (a wrinkle amplitude or wavelength, m);
+/// 1 when either is missing or not positive (no wrinkle counts as entirely wrong), 0 when
+/// both are missing (neither run wrinkled).
+pub fn relative_change(a: Option<f64>, b: Option<f64>) -> f64 {
+    match (a, b) {
+        (Some(a), Some(b)) if a > 0.0 && b > 0.0 => (a / b - 1.0).abs(),
+        (None, None) => 0.0,
+        _ => 1.0,
+    }
+}
+
+/// Side (m) of the regions of [`amplitude_map`] for a run: two critical wavelengths of its
+/// report, so each region holds whole wrinkles; when no skin was simulated (λ not finite),
+/// an eighth of the largest extent of the first blend-shape frame.
+pub fn region_size(out: &pipeline::RunOutput) -> f64 {
+    let lambda = out.report.wavelength_m;
+    if lambda.is_finite() && lambda > 0.0 {
+        return 2.0 * lambda;
+    }
+    let Some(first) = out.smooth.first() else {
+        return 1.0;
+    };
+    let (mut lo, mut hi) = (
+        Vector3::repeat(f64::INFINITY),
+        Vector3::repeat(f64::NEG_INFINITY),
+    );
+    for p in first {
+        lo = lo.inf(p);
+        hi = hi.sup(p);
+    }
+    let extent = (hi - lo).max();
+    if extent.is_finite() && extent > 0.0 {
+        extent / 8.0
+    } else {
+        1.0
+    }
+}
+
+/// Wrinkle amplitude per region and frame: for each written frame, a map from a region
+/// (cube of side `region` m, indexed by the floor of the blend-shape position / `region`) to
+/// (Σ w² (m²), vertex count), with w = (wrinkled − blend-shape position) · n the wrinkle
+/// height along the blend-shape surface's unit vertex normal n.
+#[derive(Debug, Clone)]
+pub struct AmplitudeMap {
+    /// Region side (m).
+    pub region: f64,
+    /// Per frame: region → (Σ w² in m², vertices).
+    pub frames: Vec<HashMap<[i64; 3], (f64, usize)>>,
+}
+
+impl AmplitudeMap {
+    /// Build from per-frame wrinkled and blend-shape positions (m) of the same vertices and
+    /// the triangles that give the normals.
+    pub fn new(
+        frames: &[Vec<Vector3<f64>>],
+        smooth: &[Vec<Vector3<f64>>],
+        triangles: &[[usize; 3]],
+        region: f64,
+    ) -> Self {
+        let topo = TriMesh {
+            positions: Vec::new(),
+            triangles: triangles.to_vec(),
+        };
+        let maps = frames
+            .iter()
+            .zip(smooth)
+            .map(|(f, g)| {
+                let normals = topo.vertex_normals_of(g);
+                let mut m: HashMap<[i64; 3], (f64, usize)> = HashMap::new();
+                for ((p, q), n) in f.iter().zip(g).zip(&normals) {
+                    let w = (p - q).dot(n);
+                    let e = m.entry(key(q, region)).or_insert((0.0, 0));
+                    e.0 += w * w;
+                    e.1 += 1;
+                }
+                m
+            })
+            .collect();
+        Self {
+            region,
+            frames: maps,
+        }
+    }
+}
+
+/// The [`AmplitudeMap`] of a rig run with regions of side `region` (m).
+pub fn amplitude_map(out: &pipeline::RunOutput, region: f64) -> AmplitudeMap {
+    AmplitudeMap::new(&out.frames, &out.smooth, &out.triangles, region)
+}
+
+/// Phase-free relative error of a run's wrinkle amplitude map against the reference's:
+/// √(Σ n_ref (a − a_ref)² / Σ n_ref a_ref²) over frames and the reference's regions, with a
+/// the region's RMS wrinkle height (m) and n_ref the reference's vertex count there (so
+/// regions weigh by their size whatever the run's resolution). A region the run lacks counts
+/// as a = 0. Dimensionless: 0 for the same amplitudes wherever the crests are, 1 for no
+/// wrinkles; 0 when the reference has no wrinkles and neither has the run.
+pub fn amplitude_error(run: &AmplitudeMap, reference: &AmplitudeMap) -> f64 {
+    let (mut num, mut den) = (0.0, 0.0);
+    for (k, rf) in reference.frames.iter().enumerate() {
+        let empty = HashMap::new();
+        let rn = run.frames.get(k).unwrap_or(&empty);
+        for (key, &(sq, n)) in rf {
+            let a_ref = (sq / n as f64).sqrt();
+            let a = rn
+                .get(key)
+                .map_or(0.0, |&(s, m)| (s / m.max(1) as f64).sqrt());
+            num += n as f64 * (a - a_ref).powi(2);
+            den += n as f64 * a_ref * a_ref;
+        }
+    }
+    if den > 0.0 {
+        (num / den).sqrt()
+    } else if num > 0.0 {
+        1.0
+    } else {
+        0.0
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -773,5 +921,66 @@ mod tests {
         assert_eq!(p[1].setting, "c = 1");
         let p = picks(&rows, |r| r.rms_m, 1e-3, 1e-9, "m");
         assert_eq!(p[1].setting, "reference");
+    }
+
+    /// Wrinkled positions, smooth positions and triangles of a test surface.
+    type Wrinkled = (Vec<Vector3<f64>>, Vec<Vector3<f64>>, Vec<[usize; 3]>);
+
+    /// A flat grid (z = 0, x in [0, 4), y in [0, 2)) with a wrinkle w = A sin(2π x / λ + φ)
+    /// along its normal: (wrinkled, smooth, triangles).
+    fn wrinkled_grid(a: f64, lambda: f64, phi: f64) -> Wrinkled {
+        let (nx, ny, h) = (80, 40, 0.05);
+        let mut smooth = Vec::new();
+        for j in 0..ny {
+            for i in 0..nx {
+                smooth.push(Vector3::new(i as f64 * h, j as f64 * h, 0.0));
+            }
+        }
+        let id = |i: usize, j: usize| j * nx + i;
+        let mut tris = Vec::new();
+        for j in 0..ny - 1 {
+            for i in 0..nx - 1 {
+                tris.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+                tris.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+            }
+        }
+        let wrinkled = smooth
+            .iter()
+            .map(|p| p + Vector3::z() * a * (2.0 * std::f64::consts::PI * p.x / lambda + phi).sin())
+            .collect();
+        (wrinkled, smooth, tris)
+    }
+
+    /// The amplitude error is phase-free: wrinkles shifted by a quarter wavelength (whose
+    /// surface distance is as large as the wrinkles) score ~0; regions of 2.5 wavelengths
+    /// bound the phase dependence of a region's mean square by 1/(4π · 2.5) ≈ 3 %; a 20 %
+    /// larger amplitude scores 0.2; no wrinkles score 1.
+    #[test]
+    fn amplitude_error_ignores_the_phase_and_sees_the_size() {
+        let map = |a: f64, lambda: f64, phi: f64| {
+            let (w, s, t) = wrinkled_grid(a, lambda, phi);
+            AmplitudeMap::new(&[w], &[s], &t, 2.0)
+        };
+        let a = 0.01;
+        for lambda in [1.0, 0.8] {
+            let reference = map(a, lambda, 0.0);
+            let shifted = amplitude_error(&map(a, lambda, 0.5 * std::f64::consts::PI), &reference);
+            assert!(shifted < 0.05, "λ = {lambda}: shifted error {shifted}");
+            let bigger = amplitude_error(&map(1.2 * a, lambda, 0.3), &reference);
+            assert!(
+                (bigger - 0.2).abs() < 0.03,
+                "λ = {lambda}: 1.2 A gives {bigger}"
+            );
+            let none = amplitude_error(&map(0.0, lambda, 0.0), &reference);
+            assert!((none - 1.0).abs() < 1e-12, "no wrinkles give {none}");
+            assert!(amplitude_error(&reference, &reference) < 1e-12);
+        }
+        // Regions of whole periods with whole sample counts: exactly phase-free.
+        let e = amplitude_error(&map(a, 1.0, 1.0), &map(a, 1.0, 0.0));
+        assert!(e < 1e-9, "{e}");
+        assert_eq!(relative_change(Some(2.0), Some(1.0)), 1.0);
+        assert_eq!(relative_change(None, Some(1.0)), 1.0);
+        assert_eq!(relative_change(None, None), 0.0);
+        assert!((relative_change(Some(0.9), Some(1.0)) - 0.1).abs() < 1e-12);
     }
 }

@@ -185,6 +185,41 @@ pub fn wavelength_with(profile: &[(f64, f64)], opts: &MeasureOptions) -> Option<
     })
 }
 
+/// The height profile `(position (m), height (m))` minus its moving average of width `width`
+/// (m): the exact mean of the piecewise linear profile over `[s − width/2, s + width/2]`. A
+/// sinusoid of period `width` passes unchanged (its mean over one period is zero), while
+/// linear trends and variations much slower than `width` are removed. Samples are sorted by
+/// position (non-finite ones and duplicate positions after the first dropped); samples whose
+/// window does not fit inside the profile are dropped. Empty when fewer than 2 samples
+/// remain or `width` is not positive.
+pub fn detrend_moving_average(profile: &[(f64, f64)], width: f64) -> Vec<(f64, f64)> {
+    let mut p: Vec<(f64, f64)> = profile
+        .iter()
+        .copied()
+        .filter(|(s, z)| s.is_finite() && z.is_finite())
+        .collect();
+    p.sort_by(|a, b| a.0.total_cmp(&b.0));
+    p.dedup_by(|b, a| a.0 == b.0);
+    if p.len() < 2 || !(width.is_finite() && width > 0.0) {
+        return Vec::new();
+    }
+    let s: Vec<f64> = p.iter().map(|v| v.0).collect();
+    let z: Vec<f64> = p.iter().map(|v| v.1).collect();
+    let (s0, s1) = (s[0], s[s.len() - 1]);
+    let half = 0.5 * width;
+    let cum = cumulative(&s, &z);
+    s.iter()
+        .zip(&z)
+        .filter(|(&si, _)| si - half >= s0 && si + half <= s1)
+        .map(|(&si, &zi)| {
+            let mean = (integral_at(&s, &z, &cum, si + half)
+                - integral_at(&s, &z, &cum, si - half))
+                / width;
+            (si, zi - mean)
+        })
+        .collect()
+}
+
 /// Residual of a least-squares polynomial of `degree` in the position (normalised to [-1, 1]).
 fn polynomial_residual(s: &[f64], z: &[f64], degree: usize) -> Vec<f64> {
     let (s0, s1) = (s[0], s[s.len() - 1]);

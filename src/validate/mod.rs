@@ -2,6 +2,7 @@
 //! wavelength it produces against the film-on-substrate formula, wavelength measurement,
 //! and a dense reference simulation.
 
+pub mod crests;
 pub mod dense;
 pub mod measure;
 pub mod slab;

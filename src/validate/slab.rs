@@ -75,6 +75,16 @@ pub struct SlabSettings {
     pub noise: f64,
     /// Seed of the symmetry-breaking noise.
     pub seed: u64,
+    /// Amplitude, in λ, of a prescribed smooth transverse bend of the interior, z ↦ z +
+    /// bend · λ · sin(2π x / (bend_period · λ)) applied to every lattice node by its rest x.
+    /// When positive the whole interior is held (every node prescribed: a kinematic base),
+    /// so the embedded surface is the element interpolation of a smooth curve: C⁰ with
+    /// kinks at the cell faces for trilinear elements, C¹ for quadratic B-splines. 0 = flat.
+    #[serde(default)]
+    pub bend: f64,
+    /// Period of the bend, in λ (used when `bend` > 0).
+    #[serde(default)]
+    pub bend_period: f64,
 }
 
 impl SlabSettings {
@@ -97,6 +107,8 @@ impl SlabSettings {
             onset: 1.5,
             noise: 1e-3,
             seed: 1,
+            bend: 0.0,
+            bend_period: 4.0,
         }
     }
 
@@ -129,6 +141,15 @@ impl SlabSettings {
             );
         }
         pos(self.onset, "onset")?;
+        if !(self.bend.is_finite() && self.bend >= 0.0) {
+            bail!(
+                "slab setting `bend` must be ≥ 0 (wavelengths), got {}",
+                self.bend
+            );
+        }
+        if self.bend > 0.0 {
+            pos(self.bend_period, "bend_period")?;
+        }
         if self.cells_along == 0 || self.depth_cells == 0 || self.steps == 0 {
             bail!("slab settings `cells_along`, `depth_cells` and `steps` must be at least 1");
         }
@@ -168,12 +189,35 @@ pub struct SlabResult {
     pub converged: bool,
     /// Wall-clock seconds of the whole run.
     pub seconds: f64,
+    /// Lattice cell size (m) at rest.
+    pub cell: f64,
+    /// Deformed x positions (m) of the lattice's cell faces x = i · cell (i = 0 ..=
+    /// cells_along) on the slab's top surface along the sheet's middle row, i.e. the
+    /// element boundaries in the frame of `profile`, ordered by x.
+    pub faces: Vec<f64>,
+    /// The middle row of the sheet, ordered by deformed x: the same samples as `profile`
+    /// with the rest position and the embedded surface's height.
+    pub row: Vec<RowSample>,
     /// Final skin positions (m), for export and inspection.
     #[serde(skip)]
     pub skin: Vec<Vector3<f64>>,
     /// The skin's rest mesh.
     #[serde(skip)]
     pub mesh: TriMesh,
+}
+
+/// One skin vertex of the sheet's middle row after the last load step.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct RowSample {
+    /// Rest x position (m) of the vertex.
+    pub rest_x: f64,
+    /// Deformed x position (m) of the vertex.
+    pub x: f64,
+    /// Skin height z (m) of the vertex.
+    pub z: f64,
+    /// Height (m) of the embedded surface B q at the vertex; `z − surface_z` is the
+    /// `profile` height w.
+    pub surface_z: f64,
 }
 
 /// A regular block lattice of `dims` cubic cells of edge `cell` (m) from `origin`, one volume
@@ -341,8 +385,15 @@ pub fn run_slab(s: &SlabSettings) -> anyhow::Result<SlabResult> {
     ];
     for (n, g) in lattice.grid.iter().enumerate() {
         let layers = k - 1; // nodes that shape the boundary face
-        if g[0] < layers || g[0] >= nn[0] - layers || g[2] < layers {
+        if g[0] < layers || g[0] >= nn[0] - layers || g[2] < layers || s.bend > 0.0 {
             pinned[n] = true;
+        }
+    }
+    if s.bend > 0.0 {
+        let (amp, period) = (s.bend * lambda, s.bend_period * lambda);
+        for n in 0..lattice.node_count() {
+            let x = lattice.rest[n].x;
+            q[3 * n + 2] += amp * (2.0 * std::f64::consts::PI * x / period).sin();
         }
     }
     // Loading ramp (geometric), starting just past the buckling strain at λ.
@@ -398,11 +449,29 @@ pub fn run_slab(s: &SlabSettings) -> anyhow::Result<SlabResult> {
     let bq = skin.embedded_positions(&be.q);
     let x = skin.x();
     let mid = &sheet.rows[ny / 2];
-    let mut profile: Vec<(f64, f64)> = mid
+    let mut row: Vec<RowSample> = mid
         .iter()
-        .map(|&v| (x[3 * v], x[3 * v + 2] - bq[v].z))
+        .map(|&v| RowSample {
+            rest_x: mesh.positions[v].x,
+            x: x[3 * v],
+            z: x[3 * v + 2],
+            surface_z: bq[v].z,
+        })
         .collect();
-    profile.sort_by(|a, b| a.0.total_cmp(&b.0));
+    row.sort_by(|a, b| a.x.total_cmp(&b.x));
+    let profile: Vec<(f64, f64)> = row.iter().map(|r| (r.x, r.z - r.surface_z)).collect();
+    // Element boundaries on the top surface, mapped by the interior's final displacement.
+    let y_mid = mesh.positions[mid[mid.len() / 2]].y;
+    let faces: Vec<f64> = (0..=s.cells_along)
+        .map(|i| {
+            let p = Vector3::new(i as f64 * cell, y_mid, depth);
+            let mp = locate_in_block(&lattice, &p);
+            let sh = shape(lattice.order, mp.xi);
+            (0..sh.n)
+                .map(|a| sh.val[a] * be.q[3 * lattice.elements[mp.element].nodes[a]])
+                .sum()
+        })
+        .collect();
     let skin_pos = (0..mesh.positions.len())
         .map(|v| Vector3::new(x[3 * v], x[3 * v + 1], x[3 * v + 2]))
         .collect();
@@ -418,6 +487,9 @@ pub fn run_slab(s: &SlabSettings) -> anyhow::Result<SlabResult> {
         rounds,
         converged,
         seconds: t0.elapsed().as_secs_f64(),
+        cell,
+        faces,
+        row,
         skin: skin_pos,
         mesh,
     })

@@ -1,0 +1,340 @@
+//! Where the wrinkle crests fall relative to the lattice's element grid: the check that
+//! trilinear elements lock the wrinkles to element boundaries and quadratic B-spline
+//! elements do not (issue 5).
+//!
+//! Measurement, on the compressed slab ([`super::slab`]):
+//! 1. the wrinkle wavelength λ_m of the skin's height profile ([`super::measure::wavelength`]);
+//! 2. the profile minus its moving average of width λ_m
+//!    ([`super::measure::detrend_moving_average`]), which keeps the wrinkle and removes the
+//!    slow bend;
+//! 3. crests: samples higher than both neighbours and above half the detrended RMS·√2 (a
+//!    sinusoid's amplitude), refined by the vertex of the parabola through the three
+//!    samples, and kept only in the central part of the slab (`margin` of the span dropped
+//!    at each end, where the pinned ends disturb the pattern);
+//! 4. the phase of each crest within its cell, u = (x − x_face,k) / (x_face,k+1 − x_face,k) ∈
+//!    [0, 1), with the faces' deformed positions ([`super::slab::SlabResult::faces`]), so u = 0
+//!    is an element boundary and u = ½ a cell centre.
+//!
+//! Statistics of N phases (circular, angle θ = 2π u):
+//! - the mean resultant length R = |Σ e^{iθ}| / N: 1 when every crest sits at the same phase,
+//!   ~1/√N for uniform phases (E[R²] = 1/N; Rayleigh: P(R ≥ r) ≈ e^{−N r²});
+//! - the boundary alignment V = Σ cos θ / N: +1 when every crest is on a boundary, −1 at cell
+//!   centres, 0 on average for uniform phases with standard deviation 1/√(2N) (so √(2N) V is
+//!   a z-score of locking to boundaries);
+//! - the fraction of crests within `band` cells of a boundary (2 · band for uniform phases).
+
+use super::measure;
+use super::slab::{run_slab, SlabResult, SlabSettings};
+use crate::lattice::ElementOrder;
+use std::f64::consts::PI;
+
+/// Crest positions (m, along the compression axis) of a height profile `(position (m),
+/// height (m))` with wrinkles of wavelength `wavelength` (m): local maxima of the profile
+/// minus its moving average of width `wavelength`, higher than half the detrended RMS · √2,
+/// refined by parabolic interpolation, within `[lo, hi]` (m).
+pub fn crest_positions(profile: &[(f64, f64)], wavelength: f64, lo: f64, hi: f64) -> Vec<f64> {
+    let r = measure::detrend_moving_average(profile, wavelength);
+    if r.len() < 3 {
+        return Vec::new();
+    }
+    let rms = (r.iter().map(|v| v.1 * v.1).sum::<f64>() / r.len() as f64).sqrt();
+    let threshold = 0.5 * std::f64::consts::SQRT_2 * rms;
+    let mut out = Vec::new();
+    for w in r.windows(3) {
+        let [(s0, z0), (s1, z1), (s2, z2)] = [w[0], w[1], w[2]];
+        if !(z1 > z0 && z1 >= z2 && z1 > threshold) {
+            continue;
+        }
+        // Vertex of the parabola through the three samples (non-uniform spacing).
+        let d0 = (z1 - z0) / (s1 - s0);
+        let d1 = (z2 - z1) / (s2 - s1);
+        let curv = (d1 - d0) / (s2 - s0); // half the second derivative
+        let x = if curv < 0.0 {
+            (0.5 * (s0 + s1) - d0 / (2.0 * curv)).clamp(s0, s2)
+        } else {
+            s1
+        };
+        if x >= lo && x <= hi {
+            out.push(x);
+        }
+    }
+    out
+}
+
+/// Phase u ∈ [0, 1) of position `x` (m) within its cell, given the cells' face positions
+/// `faces` (m, increasing): u = 0 on a face (an element boundary), ½ at the cell centre.
+/// `None` outside `[faces[0], faces[last])`.
+pub fn cell_phase(x: f64, faces: &[f64]) -> Option<f64> {
+    if faces.len() < 2 || !(x >= faces[0] && x < faces[faces.len() - 1]) {
+        return None;
+    }
+    let k = faces.partition_point(|&f| f <= x) - 1;
+    let u = (x - faces[k]) / (faces[k + 1] - faces[k]);
+    Some(u.clamp(0.0, 1.0) % 1.0)
+}
+
+/// Circular statistics of crest phases (see the module documentation).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct PhaseStats {
+    /// Number of phases N.
+    pub count: usize,
+    /// Mean resultant length R ∈ [0, 1] of θ = 2π u (1 = all at one phase).
+    pub resultant: f64,
+    /// Mean phase (in cells, [0, 1)) of the resultant; meaningless when R is small.
+    pub mean_phase: f64,
+    /// Boundary alignment V = mean cos 2π u ∈ [−1, 1] (+1 = all on element boundaries).
+    pub alignment: f64,
+    /// √(2N) V: standard normal for uniform phases, large when locked to boundaries.
+    pub alignment_z: f64,
+    /// Rayleigh test p-value e^{−N R²} (small = not uniform), approximate for N ≳ 10.
+    pub rayleigh_p: f64,
+    /// Fraction of phases within `band` cells of a boundary (2 · band for uniform phases).
+    pub near_boundary: f64,
+    /// The band (cells) used for `near_boundary`.
+    pub band: f64,
+}
+
+/// Statistics of phases `u` (cells, in [0, 1)); `band` (cells, < ½) for the near-boundary
+/// fraction. All NaN (and count 0) for no phases.
+pub fn phase_stats(u: &[f64], band: f64) -> PhaseStats {
+    let n = u.len() as f64;
+    let (c, s) = u.iter().fold((0.0, 0.0), |(c, s), &v| {
+        (c + (2.0 * PI * v).cos(), s + (2.0 * PI * v).sin())
+    });
+    let (c, s) = (c / n, s / n);
+    let resultant = c.hypot(s);
+    let near = u.iter().filter(|&&v| v.min(1.0 - v) < band).count() as f64 / n;
+    PhaseStats {
+        count: u.len(),
+        resultant,
+        mean_phase: (s.atan2(c) / (2.0 * PI)).rem_euclid(1.0),
+        alignment: c,
+        alignment_z: (2.0 * n).sqrt() * c,
+        rayleigh_p: (-n * resultant * resultant).exp(),
+        near_boundary: near,
+        band,
+    }
+}
+
+/// Crests of one slab run.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct CrestRun {
+    /// Element order of the lattice.
+    pub order: ElementOrder,
+    /// Lattice cells along the slab.
+    pub cells_along: usize,
+    /// Rest cell size (m).
+    pub cell: f64,
+    /// Predicted critical wavelength λ (m).
+    pub predicted: f64,
+    /// Measured wavelength (m) (NaN when no wrinkle was measured).
+    pub measured: f64,
+    /// Measured λ over the deformed mean cell size (dimensionless).
+    pub lambda_over_cell: f64,
+    /// Crest positions (m, deformed x).
+    pub crests: Vec<f64>,
+    /// Phase of each crest in its cell (cells, [0, 1)).
+    pub phases: Vec<f64>,
+    /// Phases (cells) of the crests of the skin's absolute height z instead of its height w
+    /// above the embedded surface (the same where the embedded surface is flat).
+    pub height_phases: Vec<f64>,
+    /// How much of the wrinkle the interior follows: RMS of the embedded surface's height
+    /// B q over RMS of the skin's height w above it, both detrended by the moving average of
+    /// width λ_m along the middle row (dimensionless; 0 = the interior stays smooth).
+    pub surface_ratio: f64,
+    /// Whether every shell statics converged.
+    pub converged: bool,
+    /// Wall-clock seconds of the slab run.
+    pub seconds: f64,
+}
+
+/// Cells along the default 8 λ slab of the crest check: λ/cell ≈ 0.78, 0.91, 1.17, 1.42
+/// (coarse lattices, non-commensurate ratios so that crests ignoring the grid sample all
+/// phases).
+pub const CELLS: [usize; 4] = [6, 7, 9, 11];
+
+/// The slab of the crest check: [`SlabSettings::new`] for a skin 1000× stiffer than the
+/// interior (h = 0.3 mm, equal Poisson ratios 0.45, λ ≈ 13.1 mm), with `cells` cells along
+/// and element `order`.
+pub fn slab_settings(order: ElementOrder, cells: usize) -> SlabSettings {
+    let mut s = SlabSettings::new(super::wavelength::bilayer(1000.0, 0.3e-3));
+    s.cells_along = cells;
+    s.order = order;
+    s
+}
+
+/// Run [`slab_settings`] for every order and cell count (orders outer); `progress` is called
+/// with the number of runs done.
+pub fn sweep(
+    orders: &[ElementOrder],
+    cells: &[usize],
+    progress: &dyn Fn(usize),
+) -> anyhow::Result<Vec<CrestRun>> {
+    let mut out = Vec::new();
+    for &o in orders {
+        for &c in cells {
+            out.push(run_crests(&slab_settings(o, c))?);
+            progress(out.len());
+        }
+    }
+    Ok(out)
+}
+
+/// Fraction of the profile's span ignored at each end when collecting crests.
+pub const MARGIN: f64 = 0.1;
+
+/// Crests and their cell phases of a finished slab run (`margin`: fraction of the span
+/// dropped at each end). The wavelength used for detrending is the measured one, or the
+/// predicted one when no wrinkle was measured.
+pub fn crests_of(r: &SlabResult, margin: f64) -> (f64, Vec<f64>, Vec<f64>) {
+    let measured = measure::wavelength(&r.profile)
+        .map(|m| m.wavelength)
+        .unwrap_or(f64::NAN);
+    let lambda = if measured.is_finite() {
+        measured
+    } else {
+        r.predicted
+    };
+    let (s0, s1) = match (r.profile.first(), r.profile.last()) {
+        (Some(a), Some(b)) => (a.0, b.0),
+        _ => return (measured, Vec::new(), Vec::new()),
+    };
+    let m = margin * (s1 - s0);
+    let crests = crest_positions(&r.profile, lambda, s0 + m, s1 - m);
+    let phases = crests
+        .iter()
+        .filter_map(|&x| cell_phase(x, &r.faces))
+        .collect();
+    (measured, crests, phases)
+}
+
+/// RMS of the detrended embedded-surface height over RMS of the detrended skin height w
+/// along the middle row (moving average of width `wavelength`, m).
+fn surface_ratio(r: &SlabResult, wavelength: f64) -> f64 {
+    let rms = |p: Vec<(f64, f64)>| {
+        let d = measure::detrend_moving_average(&p, wavelength);
+        (d.iter().map(|v| v.1 * v.1).sum::<f64>() / d.len().max(1) as f64).sqrt()
+    };
+    let surface = rms(r.row.iter().map(|s| (s.x, s.surface_z)).collect());
+    let skin = rms(r.profile.clone());
+    surface / skin
+}
+
+/// Run one slab and find where its crests fall in the element grid.
+pub fn run_crests(s: &SlabSettings) -> anyhow::Result<CrestRun> {
+    let r = run_slab(s)?;
+    let (measured, crests, phases) = crests_of(&r, MARGIN);
+    let z = SlabResult {
+        profile: r.row.iter().map(|s| (s.x, s.z)).collect(),
+        ..r.clone()
+    };
+    let (_, _, height_phases) = crests_of(&z, MARGIN);
+    let mean_cell = match (r.faces.first(), r.faces.last()) {
+        (Some(a), Some(b)) if r.faces.len() > 1 => (b - a) / (r.faces.len() - 1) as f64,
+        _ => f64::NAN,
+    };
+    Ok(CrestRun {
+        order: s.order,
+        cells_along: s.cells_along,
+        cell: r.cell,
+        predicted: r.predicted,
+        measured,
+        lambda_over_cell: measured / mean_cell,
+        surface_ratio: surface_ratio(
+            &r,
+            if measured.is_finite() {
+                measured
+            } else {
+                r.predicted
+            },
+        ),
+        crests,
+        phases,
+        height_phases,
+        converged: r.converged,
+        seconds: r.seconds,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A sinusoid on a quadratic trend, sampled unevenly: the crests come back at the
+    /// sinusoid's maxima to a small fraction of the sample spacing.
+    #[test]
+    fn crests_of_a_sinusoid_on_a_trend() {
+        let lambda = 1.0;
+        let phase = 0.3;
+        let profile: Vec<(f64, f64)> = (0..=200)
+            .map(|i| {
+                let s = i as f64 * 0.05 + 0.004 * ((i * 7) % 5) as f64;
+                let z = (2.0 * PI * (s - phase) / lambda).cos() + 0.02 * (s - 5.0).powi(2);
+                (s, z)
+            })
+            .collect();
+        let c = crest_positions(&profile, lambda, 1.0, 9.0);
+        // Crests at phase + k λ inside [1, 9]: 1.3, 2.3, ..., 8.3.
+        assert_eq!(c.len(), 8, "{c:?}");
+        for (k, x) in c.iter().enumerate() {
+            let want = 1.3 + k as f64;
+            assert!((x - want).abs() < 0.01, "crest {x} vs {want}");
+        }
+    }
+
+    #[test]
+    fn phase_within_cell() {
+        let faces = [0.0, 1.0, 2.5, 3.0];
+        assert_eq!(cell_phase(0.25, &faces), Some(0.25));
+        assert_eq!(cell_phase(1.75, &faces), Some(0.5));
+        assert_eq!(cell_phase(2.5, &faces), Some(0.0));
+        assert_eq!(cell_phase(3.0, &faces), None);
+        assert_eq!(cell_phase(-0.1, &faces), None);
+    }
+
+    /// Known answers: all phases on boundaries give R = V = 1; phases spread evenly give
+    /// R = V = 0; all at cell centres give R = 1, V = −1.
+    #[test]
+    fn phase_statistics_known_answers() {
+        let locked = [0.0, 0.02, 0.98, 0.0];
+        let s = phase_stats(&locked, 0.1);
+        assert!(s.resultant > 0.99 && s.alignment > 0.99);
+        assert_eq!(s.near_boundary, 1.0);
+        let even: Vec<f64> = (0..10).map(|i| i as f64 / 10.0).collect();
+        let s = phase_stats(&even, 0.15);
+        assert!(s.resultant < 1e-12 && s.alignment.abs() < 1e-12);
+        // u = 0, 0.1 and 0.9 are within 0.15 of a boundary: 3 of 10.
+        assert!((s.near_boundary - 0.3).abs() < 1e-12);
+        let centre = [0.5; 5];
+        let s = phase_stats(&centre, 0.1);
+        assert!((s.resultant - 1.0).abs() < 1e-12 && (s.alignment + 1.0).abs() < 1e-12);
+        assert!((s.mean_phase - 0.5).abs() < 1e-12);
+        assert_eq!(s.near_boundary, 0.0);
+    }
+
+    /// The null model: N uniform pseudo-random phases give E[R²] = 1/N and a standard normal
+    /// √(2N) V; over 400 draws of N = 20 the means match to sampling error.
+    #[test]
+    fn null_model_of_uniform_phases() {
+        let mut state = 12345u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (draws, n) = (400, 20);
+        let (mut r2, mut z2) = (0.0, 0.0);
+        for _ in 0..draws {
+            let u: Vec<f64> = (0..n).map(|_| next()).collect();
+            let s = phase_stats(&u, 0.1);
+            r2 += s.resultant.powi(2) * n as f64;
+            z2 += s.alignment_z.powi(2);
+        }
+        // N R² is exponential with mean 1 and z² is χ²₁ (mean 1, sd √2): with 400 draws the
+        // means have standard errors 0.05 and 0.07.
+        let (r2, z2) = (r2 / draws as f64, z2 / draws as f64);
+        assert!((r2 - 1.0).abs() < 0.2, "mean N R² = {r2}");
+        assert!((z2 - 1.0).abs() < 0.25, "mean z² = {z2}");
+    }
+}
