@@ -185,11 +185,19 @@ fn axis_range(
         if hi / lo < 1.0 + 1e-9 {
             return Ok((lo / 2.0, hi * 2.0));
         }
-        if !pad {
-            return Ok((lo, hi));
+        let (lo, hi) = if pad {
+            let f = (hi / lo).powf(0.05);
+            (lo / f, hi * f)
+        } else {
+            (lo, hi)
+        };
+        // A logarithmic axis is labelled at its powers of ten (and their multiples between
+        // them): reach down to the power of ten below when the range holds none, so the axis
+        // is never left without numbers.
+        if lo.log10().floor() == hi.log10().floor() {
+            return Ok((10f64.powf(lo.log10().floor()), hi));
         }
-        let f = (hi / lo).powf(0.05);
-        Ok((lo / f, hi * f))
+        Ok((lo, hi))
     } else {
         let span = hi - lo;
         if span <= 1e-12 * lo.abs().max(hi.abs()) || span == 0.0 {
@@ -609,4 +617,21 @@ pub fn render_contour_chart(chart: &ContourChart, size: (u32, u32)) -> Result<Rg
 pub fn contour_chart(path: &Path, chart: &ContourChart) -> Result<()> {
     let img = render_contour_chart(chart, DEFAULT_SIZE)?;
     write_png(path, &img)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::axis_range;
+
+    /// A log axis whose data hold no power of ten reaches down to the one below (so it gets
+    /// labels); one that holds a power of ten keeps its padded range.
+    #[test]
+    fn log_axis_range_always_holds_a_power_of_ten() {
+        let (lo, hi) = axis_range([0.11, 0.33].into_iter(), true, false, "y").unwrap();
+        assert_eq!((lo, hi), (0.1, 0.33));
+        let (lo, hi) = axis_range([9.0, 90.0].into_iter(), true, false, "x").unwrap();
+        assert_eq!((lo, hi), (9.0, 90.0));
+        let (lo, _) = axis_range([2.0, 3.0].into_iter(), true, true, "x").unwrap();
+        assert_eq!(lo, 1.0);
+    }
 }

@@ -339,7 +339,9 @@ impl KktSolver {
     /// parallelises inside the dense fronts; a shell's fronts are small and many, and there
     /// the synchronisation costs more than it saves (measured on the benchmark sheet: at 20k
     /// faces, 3.5·10⁹ flops, sequential 0.24 s against 0.45 s with two threads; at 80k faces,
-    /// 4·10¹⁰ flops, sequential 2.0 s against 1.6 s).
+    /// 4·10¹⁰ flops, sequential 2.0 s against 1.6 s; the face rig's skin with its cluster
+    /// rows, 6·10⁹ flops: 20 frames of the demo took 83 s of skin solves sequential against
+    /// 100 s with two threads, measured one after the other).
     fn par(&self) -> faer::Par {
         if self.flops < 1e10 {
             faer::Par::Seq

@@ -7,10 +7,11 @@
 //! AMD; since every node here has a position (a vertex of the skin, or the centre of a cluster
 //! constraint), the separators are found by coordinate bisection: split the node set at the
 //! median of its longest bounding-box axis, take as separator the nodes of one half that touch
-//! the other, order the halves recursively and the separator last (George 1973). Measured on
-//! the benchmark sheet (`examples/probe_kkt.rs` history, see the README's benchmark table):
-//! 10 % fewer flops than AMD at 20k faces, a third less factorisation time at 80k, and half the
-//! symbolic analysis time.
+//! the other, order the halves recursively and the separator last (George 1973). On the
+//! benchmark sheet it needs about 10 % fewer flops than AMD at 20k faces and a third less
+//! factorisation time at 80k; the wide cluster rows of the coupling make its separators thick
+//! (9× AMD's flops on the face rig), so [`super::kkt::KktSolver`] analyses both orderings and
+//! keeps the cheaper one.
 //!
 //! The ordering is deterministic: ties on the median are broken by node index.
 
