@@ -69,11 +69,11 @@ fn profile_one_iteration() {
     let mut kkt = KktSolver::new();
     let gamma = 500.0;
     time("KKT build: pattern, AMD, symbolic, map", &mut || {
-        kkt.assemble(&free_of, nf, nc, &t, &cf, gamma, 1e-4 * gamma)
+        kkt.assemble(&free_of, nf, nc, &t, &cf, gamma, 1e-4 * gamma, None)
             .unwrap();
     });
     time("KKT assemble (scatter, pattern reused)", &mut || {
-        kkt.assemble(&free_of, nf, nc, &t, &cf, gamma, 1e-4 * gamma)
+        kkt.assemble(&free_of, nf, nc, &t, &cf, gamma, 1e-4 * gamma, None)
             .unwrap();
     });
     let mut info = None;

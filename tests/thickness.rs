@@ -270,43 +270,15 @@ fn cylinder_bending_per_half_is_d_of_h_over_2r2() {
 
 /// A flat rectangular rig `[0, lx] × [0, ly]` (z = 0, facing +z), `nx × ny` squares split in
 /// two, with one blend shape compressing it uniformly along x towards x = lx/2 by `strain`,
-/// animated from 0 to 1 over `seconds`; optional extra per-vertex attribute. GLB bytes.
+/// animated from 0 to 1 over `seconds`. GLB bytes.
 fn strip_rig(lx: f64, ly: f64, nx: usize, ny: usize, strain: f64, seconds: f64) -> Vec<u8> {
-    use furrow::io::model::{MorphTarget, WeightKeys};
-    use furrow::mesh::TriMesh;
-    use nalgebra::Vector3;
-    let mut pos = Vec::new();
-    for j in 0..=ny {
-        for i in 0..=nx {
-            pos.push(Vector3::new(
-                lx * i as f64 / nx as f64,
-                ly * j as f64 / ny as f64,
-                0.0,
-            ));
-        }
-    }
-    let id = |i: usize, j: usize| j * (nx + 1) + i;
-    let mut tris = Vec::new();
-    for j in 0..ny {
-        for i in 0..nx {
-            tris.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-            tris.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-        }
-    }
-    let deltas = pos
+    let mesh = common::grid_mesh(lx, ly, nx, ny);
+    let deltas = mesh
+        .positions
         .iter()
-        .map(|p| Vector3::new((0.5 * lx - p.x) * strain, 0.0, 0.0))
+        .map(|p| nalgebra::Vector3::new((0.5 * lx - p.x) * strain, 0.0, 0.0))
         .collect();
-    let keys = WeightKeys {
-        times: vec![0.0, seconds],
-        weights: vec![vec![0.0], vec![1.0]],
-    };
-    let target = MorphTarget {
-        name: "squeeze".into(),
-        positions: deltas,
-        normals: None,
-    };
-    furrow::io::export::rig_glb("strip", &TriMesh::new(pos, tris), &[target], &keys).unwrap()
+    common::squeeze_rig("strip", &mesh, deltas, seconds)
 }
 
 /// Wrinkle height (wrinkled − blend-shape z, m) along x at the skin vertices within `tol` of

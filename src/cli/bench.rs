@@ -167,13 +167,12 @@ fn suite(
         bar.set_message("whole demo");
         bar.inc(1);
         let demo_dir = dir.join("demo");
-        let args = super::demo::DemoArgs::for_benchmark(demo_dir.clone());
-        let frames = args.frame_count_hint();
+        let args = super::demo::DemoArgs::for_benchmark(demo_dir);
         let t = std::time::Instant::now();
-        super::demo::run(args, &Output::new(true, false))?;
+        let totals = super::demo::run_demo(args, &Output::new(true, false))?;
         rows.push(BenchRow {
             benchmark: "demo".into(),
-            size: frames,
+            size: totals.frames_written,
             size_unit: "frames".into(),
             metric: "wall_s".into(),
             value: t.elapsed().as_secs_f64(),

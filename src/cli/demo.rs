@@ -36,20 +36,6 @@ impl DemoArgs {
             frames_dir: false,
         }
     }
-
-    /// Frames the demo simulates when its range is `:B` or `A:B` (0 when open-ended).
-    pub fn frame_count_hint(&self) -> usize {
-        let mut parts = self.frames.split(':');
-        let a: usize = parts
-            .next()
-            .and_then(|t| t.trim().parse().ok())
-            .unwrap_or(0);
-        let b: usize = parts
-            .next()
-            .and_then(|t| t.trim().parse().ok())
-            .unwrap_or(0);
-        b.saturating_sub(a)
-    }
 }
 
 /// The demo's frame rate (frames per second). Frames 1/30 s apart keep every skin solve a
@@ -72,6 +58,11 @@ pub fn default_rig() -> PathBuf {
 
 /// Run the demo.
 pub fn run(a: DemoArgs, out: &Output) -> anyhow::Result<()> {
+    run_demo(a, out).map(|_| ())
+}
+
+/// Run the demo and return its run's totals (frames written, wall time, per-stage time).
+pub fn run_demo(a: DemoArgs, out: &Output) -> anyhow::Result<crate::pipeline::record::Totals> {
     let rig = a.rig.clone().unwrap_or_else(default_rig);
     if a.rig.is_none() && !rig.exists() {
         anyhow::bail!(
@@ -111,5 +102,5 @@ pub fn run(a: DemoArgs, out: &Output) -> anyhow::Result<()> {
         "wavelength_m": rep.wavelength_m,
     }));
     animate::say_summary(out, &done);
-    Ok(())
+    Ok(done.run.report.totals.clone())
 }

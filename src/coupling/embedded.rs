@@ -81,6 +81,22 @@ pub struct TwoStepReport {
     pub interior_s: f64,
 }
 
+/// The constraints H x = 0 of `clusters` on the skin's dofs: three rows per cluster (x, y, z
+/// of its weighted mean position); the right-hand side H B q is filled per frame.
+fn cluster_constraints(clusters: &Clusters) -> LinearConstraints {
+    let mut entries = Vec::with_capacity(3 * clusters.entries.len());
+    for &(c, v, w) in &clusters.entries {
+        for a in 0..3 {
+            entries.push((3 * c + a, 3 * v + a, w));
+        }
+    }
+    LinearConstraints {
+        rows: 3 * clusters.len(),
+        entries,
+        rhs: vec![0.0; 3 * clusters.len()],
+    }
+}
+
 impl EmbeddedShell {
     /// A skin at rest in `rest` made of `material`, embedded in a lattice of `nodes` nodes by
     /// the triplets (vertex, node, weight) of B, with constraint clusters of Gaussian width
@@ -175,19 +191,9 @@ impl EmbeddedShell {
             .flat_map(|p| [p.x, p.y, p.z])
             .collect();
         let shell = Shell::new(rest, material)?;
-        let mut entries = Vec::with_capacity(3 * clusters.entries.len());
-        for &(c, v, w) in &clusters.entries {
-            for a in 0..3 {
-                entries.push((3 * c + a, 3 * v + a, w));
-            }
-        }
         let problem = StaticProblem {
             pinned: Vec::new(),
-            constraints: LinearConstraints {
-                rows: 3 * clusters.len(),
-                entries,
-                rhs: vec![0.0; 3 * clusters.len()],
-            },
+            constraints: cluster_constraints(&clusters),
             forces: Vec::new(),
         };
         Ok(Self {
@@ -239,17 +245,7 @@ impl EmbeddedShell {
             .collect();
         let clusters =
             Clusters::build_varying(&shell.rest, &widths).map_err(|e| anyhow!("clusters: {e}"))?;
-        let mut entries = Vec::with_capacity(3 * clusters.entries.len());
-        for &(c, v, w) in &clusters.entries {
-            for a in 0..3 {
-                entries.push((3 * c + a, 3 * v + a, w));
-            }
-        }
-        self.problem.constraints = LinearConstraints {
-            rows: 3 * clusters.len(),
-            entries,
-            rhs: vec![0.0; 3 * clusters.len()],
-        };
+        self.problem.constraints = cluster_constraints(&clusters);
         self.clusters = clusters;
         self.shell = shell;
         Ok(())

@@ -68,8 +68,6 @@ pub struct KktSolver {
     shift: f64,
     delta: f64,
     factored: bool,
-    /// Dof coordinates (3 per vertex) for the nested-dissection ordering, if given.
-    positions: Option<Vec<f64>>,
     /// Factorisation flops of the current symbolic analysis (decides sequential or parallel).
     flops: f64,
     /// Whether the current analysis uses the nested-dissection ordering (else AMD).
@@ -108,16 +106,6 @@ impl KktSolver {
         Self::default()
     }
 
-    /// Give the positions of the dofs (`x`, 3 per vertex, dof `d` belongs to vertex `d / 3`)
-    /// so that the next symbolic analysis orders the matrix by geometric nested dissection
-    /// ([`super::ordering`]) instead of AMD. Only read when the layout changes.
-    pub fn set_positions(&mut self, x: &[f64]) {
-        match &mut self.positions {
-            Some(p) if p.len() == x.len() => p.copy_from_slice(x),
-            _ => self.positions = Some(x.to_vec()),
-        }
-    }
-
     /// Assemble and factorise the KKT matrix ([`KktSolver::assemble`] then
     /// [`KktSolver::factor`]) when `k` is already indexed by free dofs.
     #[allow(clippy::too_many_arguments)]
@@ -132,7 +120,7 @@ impl KktSolver {
         delta: f64,
     ) -> Result<KktFactorInfo, SparseError> {
         let identity: Vec<usize> = (0..n_free).collect();
-        let symbolic_s = self.assemble(&identity, n_free, n_cons, k, c, gamma, delta)?;
+        let symbolic_s = self.assemble(&identity, n_free, n_cons, k, c, gamma, delta, None)?;
         let mut info = self.factor(shift);
         info.symbolic_s = symbolic_s;
         Ok(info)
@@ -149,6 +137,9 @@ impl KktSolver {
     /// in the compressed values; later calls only scatter-add the values (one pass over
     /// the triplets, no sorting or copying). The layout check compares the sizes, the
     /// pinned set, the constraints and every 31st Hessian triplet index.
+    /// `positions` (the dofs' coordinates, 3 per vertex: dof `d` belongs to vertex `d / 3`),
+    /// when given, are read only by a new analysis: it then also tries the geometric
+    /// nested-dissection ordering ([`super::ordering`]) and keeps it if it is cheaper.
     /// Returns the seconds spent building (0 when reused).
     ///
     /// [`Energy`]: crate::math::Energy
@@ -162,6 +153,7 @@ impl KktSolver {
         c: &[(usize, usize, f64)],
         gamma: f64,
         delta: f64,
+        positions: Option<&[f64]>,
     ) -> Result<f64, SparseError> {
         let n = n_free + n_cons;
         let fp = layout_fingerprint(n, free_of, k, c);
@@ -203,7 +195,7 @@ impl KktSolver {
             // a bare sheet (about 10 % at 20k faces, more above), but the wide cluster rows
             // of the coupling join far-apart vertices and there AMD measured 9× fewer flops
             // (face rig: 6.0e9 against 5.2e10), so both are analysed and the cheaper kept.
-            if let Some(x) = &self.positions {
+            if let Some(x) = positions {
                 if x.len() == free_of.len() && x.len() % 3 == 0 {
                     let (fwd, inv) = nd_permutation(&a, x, free_of, n_free, c);
                     let nd = analyse(SymmetricOrdering::Custom(faer::perm::PermRef::new_checked(
@@ -621,10 +613,9 @@ mod ordering_tests {
         let rhs: Vec<f64> = (0..n + 1).map(|i| ((i * 7919) % 13) as f64 - 6.0).collect();
         let solve = |positions: bool| {
             let mut s = KktSolver::new();
-            if positions {
-                s.set_positions(&x);
-            }
-            s.assemble(&free_of, n, 1, &t, &c, 1.0, 1e-8).unwrap();
+            let geometry = positions.then_some(x.as_slice());
+            s.assemble(&free_of, n, 1, &t, &c, 1.0, 1e-8, geometry)
+                .unwrap();
             assert!(s.factor(0.0).inertia_ok);
             let mut r = rhs.clone();
             s.solve(&mut r, 3);

@@ -221,7 +221,6 @@ impl StaticSolver {
         gamma: f64,
         x: &[f64],
     ) -> Result<f64, SolverError> {
-        self.kkt.set_positions(x);
         Ok(self.kkt.assemble(
             &s.free_of,
             s.free.len(),
@@ -230,6 +229,7 @@ impl StaticSolver {
             &s.cfree,
             gamma,
             KKT_DELTA * gamma,
+            Some(x),
         )?)
     }
 

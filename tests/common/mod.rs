@@ -161,47 +161,41 @@ pub fn gltfpack(src: &Path, out: &Path) -> bool {
     true
 }
 
-/// A flat sheet rig (x, y in [0, size], z = 0, facing +z) of about `2·n²` triangles with one
-/// blend shape "squeeze" that compresses the left half along x by `strain` and stretches the
-/// right half by the same amount (the middle line stays), animated linearly from weight 0 at
-/// t = 0 to 1 at t = `seconds`. Returns GLB bytes.
+/// A flat rectangle `[0, lx] × [0, ly]` (z = 0, facing +z) of `nx × ny` squares, each split
+/// in two triangles.
 #[allow(dead_code)]
-pub fn sheet_rig(n: usize, size: f64, strain: f64, seconds: f64) -> Vec<u8> {
-    use furrow::io::model::{MorphTarget, WeightKeys};
-    use furrow::mesh::TriMesh;
-    use nalgebra::Vector3;
+pub fn grid_mesh(lx: f64, ly: f64, nx: usize, ny: usize) -> furrow::mesh::TriMesh {
     let mut pos = Vec::new();
-    for j in 0..=n {
-        for i in 0..=n {
-            pos.push(Vector3::new(
-                size * i as f64 / n as f64,
-                size * j as f64 / n as f64,
+    for j in 0..=ny {
+        for i in 0..=nx {
+            pos.push(nalgebra::Vector3::new(
+                lx * i as f64 / nx as f64,
+                ly * j as f64 / ny as f64,
                 0.0,
             ));
         }
     }
-    let id = |i: usize, j: usize| j * (n + 1) + i;
+    let id = |i: usize, j: usize| j * (nx + 1) + i;
     let mut tris = Vec::new();
-    for j in 0..n {
-        for i in 0..n {
+    for j in 0..ny {
+        for i in 0..nx {
             tris.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
             tris.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
         }
     }
-    let mid = size / 2.0;
-    // Left half: x ↦ mid − (mid − x)(1 − strain); right half: x ↦ mid + (x − mid)(1 + strain).
-    let deltas: Vec<Vector3<f64>> = pos
-        .iter()
-        .map(|p| {
-            let d = if p.x < mid {
-                (mid - p.x) * strain
-            } else {
-                (p.x - mid) * strain
-            };
-            Vector3::new(d, 0.0, 0.0)
-        })
-        .collect();
-    let mesh = TriMesh::new(pos, tris);
+    furrow::mesh::TriMesh::new(pos, tris)
+}
+
+/// A rig of `mesh` with one blend shape "squeeze" of per-vertex offsets `deltas` (m),
+/// animated linearly from weight 0 at t = 0 to 1 at t = `seconds`. Returns GLB bytes.
+#[allow(dead_code)]
+pub fn squeeze_rig(
+    name: &str,
+    mesh: &furrow::mesh::TriMesh,
+    deltas: Vec<nalgebra::Vector3<f64>>,
+    seconds: f64,
+) -> Vec<u8> {
+    use furrow::io::model::{MorphTarget, WeightKeys};
     let keys = WeightKeys {
         times: vec![0.0, seconds],
         weights: vec![vec![0.0], vec![1.0]],
@@ -211,5 +205,29 @@ pub fn sheet_rig(n: usize, size: f64, strain: f64, seconds: f64) -> Vec<u8> {
         positions: deltas,
         normals: None,
     };
-    furrow::io::export::rig_glb("sheet", &mesh, &[target], &keys).unwrap()
+    furrow::io::export::rig_glb(name, mesh, &[target], &keys).unwrap()
+}
+
+/// A flat sheet rig (x, y in [0, size], z = 0, facing +z) of about `2·n²` triangles with one
+/// blend shape "squeeze" that compresses the left half along x by `strain` and stretches the
+/// right half by the same amount (the middle line stays), animated linearly from weight 0 at
+/// t = 0 to 1 at t = `seconds`. Returns GLB bytes.
+#[allow(dead_code)]
+pub fn sheet_rig(n: usize, size: f64, strain: f64, seconds: f64) -> Vec<u8> {
+    let mesh = grid_mesh(size, size, n, n);
+    let mid = size / 2.0;
+    // Left half: x ↦ mid − (mid − x)(1 − strain); right half: x ↦ mid + (x − mid)(1 + strain).
+    let deltas = mesh
+        .positions
+        .iter()
+        .map(|p| {
+            let d = if p.x < mid {
+                (mid - p.x) * strain
+            } else {
+                (p.x - mid) * strain
+            };
+            nalgebra::Vector3::new(d, 0.0, 0.0)
+        })
+        .collect();
+    squeeze_rig("sheet", &mesh, deltas, seconds)
 }
