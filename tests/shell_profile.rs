@@ -86,5 +86,7 @@ fn profile_one_iteration() {
         info.unwrap()
     );
     let mut rhs = vec![1.0; nf + nc];
-    time("KKT solve + 3 refinements", &mut || kkt.solve(&mut rhs, 3));
+    time("KKT solve + 3 refinements", &mut || {
+        kkt.solve(&mut rhs, 3, 1e-15);
+    });
 }

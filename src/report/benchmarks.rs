@@ -120,6 +120,7 @@ pub fn shell_solve(faces: usize) -> anyhow::Result<Vec<BenchRow>> {
             ("vertices", "vertices"),
             ("newton_iterations", "newton_iterations"),
             ("factorizations", "factorizations"),
+            ("linear_solves", "linear_solves"),
             ("assembly_s", "assembly_s"),
             ("factorisation_s", "factorisation_s"),
             ("solve_s", "solve_s"),

@@ -356,9 +356,10 @@ impl KktSolver {
     }
 
     /// Solve the *unregularised* KKT system (τ kept, δ removed) for `rhs` in place, with
-    /// up to `refine` steps of iterative refinement (stopping early once the residual is at
-    /// round-off, 1e-15 of ‖rhs‖).
-    pub fn solve(&mut self, rhs: &mut [f64], refine: usize) {
+    /// up to `refine` steps of iterative refinement, stopping once the residual is below
+    /// `rel_tol` of ‖rhs‖ (or at round-off, 1e-15 of ‖rhs‖). Returns the linear solves with
+    /// the factor that were used (1 + refinement steps).
+    pub fn solve(&mut self, rhs: &mut [f64], refine: usize, rel_tol: f64) -> usize {
         assert!(
             self.factored,
             "KktSolver::solve before a successful factorize"
@@ -366,6 +367,7 @@ impl KktSolver {
         let b = rhs.to_vec();
         let b_norm = norm2(&b);
         self.raw_solve(rhs);
+        let mut solves = 1;
         for _ in 0..refine {
             // r = b − A x, A = A_reg + δ I on the constraint block.
             let ax = mul_vec(self.matrix.as_ref().expect("matrix"), rhs);
@@ -373,15 +375,16 @@ impl KktSolver {
             for i in self.n_free..self.n_free + self.n_cons {
                 r[i] -= self.delta * rhs[i];
             }
-            // Already at round-off: a further correction cannot improve the solution.
-            if norm2(&r) <= 1e-15 * b_norm {
+            if norm2(&r) <= rel_tol.max(1e-15) * b_norm {
                 break;
             }
             self.raw_solve(&mut r);
+            solves += 1;
             for (x, d) in rhs.iter_mut().zip(&r) {
                 *x += d;
             }
         }
+        solves
     }
 
     fn raw_solve(&mut self, rhs: &mut [f64]) {
@@ -554,7 +557,7 @@ mod tests {
             let info = s.factorize(3, 1, &k, &c, gamma, 0.0, 1e-8 * gamma).unwrap();
             assert!(info.inertia_ok, "{info:?}");
             let mut rhs = vec![0.0, 0.0, 0.0, gamma * 1.0];
-            s.solve(&mut rhs, 3);
+            s.solve(&mut rhs, 3, 1e-15);
             for (xi, ex) in rhs.iter().zip([4.0 / 7.0, 2.0 / 7.0, 1.0 / 7.0]) {
                 assert!((xi - ex).abs() < 1e-12, "{xi} vs {ex}");
             }
@@ -618,7 +621,7 @@ mod ordering_tests {
                 .unwrap();
             assert!(s.factor(0.0).inertia_ok);
             let mut r = rhs.clone();
-            s.solve(&mut r, 3);
+            s.solve(&mut r, 3, 1e-15);
             (r, s.analysis())
         };
         let (amd, (amd_flops, amd_nd)) = solve(false);

@@ -90,8 +90,13 @@ pub struct StaticSettings {
     /// Row balance γ of the KKT system (N/m); `None`: the mean diagonal of the first
     /// Hessian (of the order of E h for a shell).
     pub gamma: Option<f64>,
-    /// Iterative refinement steps per KKT solve.
+    /// Most iterative refinement steps per KKT solve (each one linear solve with the
+    /// factor); refinement removes the δ regularisation of the constraint block.
     pub refinement_steps: usize,
+    /// Relative residual ‖r‖/‖b‖ of the KKT solve at which refinement stops (inexact
+    /// Newton: the linear error adds this fraction of the current residual to the next one,
+    /// far below Newton's own contraction; the nonlinear tolerance is still met exactly).
+    pub linear_tolerance: f64,
     /// Maximum trial steps per line search.
     pub max_line_search: usize,
     /// Also accept steps that satisfy Armijo on the energy merit (the Lagrangian with the
@@ -109,6 +114,7 @@ impl Default for StaticSettings {
             hessian: HessianMode::Auto,
             gamma: None,
             refinement_steps: 3,
+            linear_tolerance: 1e-4,
             max_line_search: 30,
             energy_merit: false,
         }
@@ -150,6 +156,12 @@ impl StaticSettings {
                 )));
             }
         }
+        if !(self.linear_tolerance > 0.0 && self.linear_tolerance < 1.0) {
+            return Err(SolverError::Settings(format!(
+                "linear_tolerance = {} must be in (0, 1)",
+                self.linear_tolerance
+            )));
+        }
         if self.max_line_search == 0 {
             return Err(SolverError::Settings(
                 "max_line_search must be at least 1".into(),
@@ -173,6 +185,21 @@ pub struct StaticSolver {
     /// Final state of the previous solve and its pinned dofs (for the pinned-motion predictor).
     last_x: Vec<f64>,
     last_pinned: Vec<usize>,
+    /// Layout (free constraint entries, dofs) of the factorisation left by a converged
+    /// solve whose last factor passed the inertia test; the next solve's first direction
+    /// reuses that factor when its layout is the same (see [`StaticSolver::solve`]).
+    reusable_factor: Option<FactorLayout>,
+    /// The last numeric factorisation passed the inertia test.
+    factor_ok: bool,
+}
+
+/// What a factorisation was built for besides the Hessian: the free constraint entries, the
+/// dof count and γ.
+#[derive(PartialEq)]
+struct FactorLayout {
+    cfree: Vec<(usize, usize, f64)>,
+    dofs: usize,
+    gamma: f64,
 }
 
 struct Setup {
@@ -397,6 +424,7 @@ impl StaticSolver {
         x: &[f64],
         mu: &[f64],
         gamma: f64,
+        reuse_factor: &mut bool,
         rep: &mut SolveReport,
     ) -> Result<Option<(Vec<f64>, Vec<f64>, Vec<f64>, f64, f64)>, SolverError> {
         if self.last_x.len() != x.len() || self.last_pinned != p.pinned {
@@ -413,10 +441,15 @@ impl StaticSolver {
         if !moved {
             return Ok(None);
         }
+        // The predictor takes the previous solve's factor when it may; after it, Newton
+        // factorises afresh.
+        let reuse = std::mem::replace(reuse_factor, false);
         let (nf, nc) = (s.free.len(), p.constraints.rows);
         let t = Instant::now();
         let (r_prev, _) = self.residual(e, p, s, &x_prev, mu, gamma);
-        self.hessian(e, &x_prev, false);
+        if !reuse {
+            self.hessian(e, &x_prev, false);
+        }
         let mut rhs: Vec<f64> = r_prev[..nf].iter().map(|v| -v).collect();
         for &(row, col, v) in &self.trip {
             let fr = s.free_of[row];
@@ -430,18 +463,27 @@ impl StaticSolver {
                 .zip(&p.constraints.rhs)
                 .map(|(a, b)| -gamma * (a - b)),
         );
-        let sym_s = self.assemble_kkt(s, nc, gamma, x)?;
-        rep.symbolic_s += sym_s;
-        rep.factor_s += sym_s;
-        rep.assembly_s += t.elapsed().as_secs_f64() - sym_s;
-        let info = self.kkt.factor(0.0);
-        rep.factor_s += info.numeric_s;
-        rep.factorizations += 1;
-        if !info.inertia_ok {
-            return Ok(None);
+        if reuse {
+            rep.reused_factorizations += 1;
+        } else {
+            let sym_s = self.assemble_kkt(s, nc, gamma, x)?;
+            rep.symbolic_s += sym_s;
+            rep.factor_s += sym_s;
+            rep.assembly_s += t.elapsed().as_secs_f64() - sym_s;
+            let info = self.kkt.factor(0.0);
+            rep.factor_s += info.numeric_s;
+            rep.factorizations += 1;
+            self.factor_ok = info.inertia_ok;
+            if !info.inertia_ok {
+                return Ok(None);
+            }
         }
         let t = Instant::now();
-        self.kkt.solve(&mut rhs, self.settings.refinement_steps);
+        rep.linear_solves += self.kkt.solve(
+            &mut rhs,
+            self.settings.refinement_steps,
+            self.settings.linear_tolerance,
+        );
         rep.solve_s += t.elapsed().as_secs_f64();
         if rhs.iter().any(|v| !v.is_finite()) {
             return Ok(None);
@@ -481,6 +523,8 @@ impl StaticSolver {
             energy: f64::NAN,
             modified_hessian_steps: 0,
             factorizations: 0,
+            reused_factorizations: 0,
+            linear_solves: 0,
             assembly_s: 0.0,
             symbolic_s: 0.0,
             factor_s: 0.0,
@@ -499,6 +543,22 @@ impl StaticSolver {
             have_hessian = Some(false);
         }
         let gamma = self.gamma_for(&s);
+        // The first direction (the pinned-motion predictor, else the first Newton step)
+        // reuses the factorisation the previous converged solve ended with when the layout
+        // (free dofs, pinned set, constraint matrix, γ) is unchanged and no Hessian was
+        // evaluated since: that factor is of the Hessian at (nearly) the previous solution,
+        // which is where this solve starts, as one frame follows the last. Only the speed of
+        // the first step depends on it: the line search checks the step, later directions
+        // are factorised afresh, and a rejected reused step is retried with a fresh factor.
+        let mut reuse_factor = std::env::var("FURROW_NOREUSE").is_err()
+            && have_hessian.is_none()
+            && self.kkt.is_factored()
+            && self.last_pinned == p.pinned
+            && self
+                .reusable_factor
+                .take()
+                .is_some_and(|l| l.dofs == x.len() && l.gamma == gamma && l.cfree == s.cfree);
+        self.reusable_factor = None;
         let mut mu = std::mem::take(&mut self.multipliers);
         let t = Instant::now();
         let (mut r, mut energy) = self.residual(e, p, &s, x, &mu, gamma);
@@ -507,7 +567,7 @@ impl StaticSolver {
         let mut rn = norm(&r);
         rep.initial_residual = rn;
         if let Some((xp, mp, rp, ep, rnp)) =
-            self.pinned_predictor(e, p, &s, x, &mu, gamma, &mut rep)?
+            self.pinned_predictor(e, p, &s, x, &mu, gamma, &mut reuse_factor, &mut rep)?
         {
             if rnp.is_finite() && rnp < rn {
                 x.copy_from_slice(&xp);
@@ -561,6 +621,12 @@ impl StaticSolver {
                 }
             }
             let mut used = false;
+            let reused = std::mem::replace(&mut reuse_factor, false);
+            if reused {
+                modes.clear();
+                used = true;
+                rep.reused_factorizations += 1;
+            }
             let mut assembled: Option<bool> = None;
             for (k, &(project, shift)) in modes.iter().enumerate() {
                 let shift: f64 = shift;
@@ -581,6 +647,7 @@ impl StaticSolver {
                 let info = self.kkt.factor(shift * gamma);
                 rep.factor_s += info.numeric_s;
                 rep.factorizations += 1;
+                self.factor_ok = info.inertia_ok;
                 let last = k + 1 == modes.len();
                 if info.inertia_ok || (last && self.kkt.is_factored()) {
                     if k > 0 {
@@ -601,7 +668,9 @@ impl StaticSolver {
             let t = Instant::now();
             let mut step: Vec<f64> = r.iter().map(|v| -v).collect();
             // The multiplier block solves for μ⁺ directly: rhs is −γ(Cx − d) there.
-            self.kkt.solve(&mut step, st.refinement_steps);
+            rep.linear_solves +=
+                self.kkt
+                    .solve(&mut step, st.refinement_steps, st.linear_tolerance);
             rep.solve_s += t.elapsed().as_secs_f64();
             // rhs of the x block was −(∇E − f + γCᵀμ); the solution's multiplier part is
             // then μ⁺ − μ directly (the γCᵀμ term moved to the rhs).
@@ -687,6 +756,9 @@ impl StaticSolver {
                     energy = et;
                     rn = residual;
                 }
+                // A step from the reused factor that the line search rejects is retried from
+                // the same point with a fresh factorisation.
+                LineSearch::Failed if reused => {}
                 LineSearch::Failed => {
                     rep.status = SolveStatus::LineSearchFailed;
                     break;
@@ -704,6 +776,13 @@ impl StaticSolver {
         self.multipliers = mu;
         self.last_x = x.to_vec();
         self.last_pinned = p.pinned.clone();
+        if rep.status == SolveStatus::Converged && self.factor_ok && self.kkt.is_factored() {
+            self.reusable_factor = Some(FactorLayout {
+                cfree: s.cfree.clone(),
+                dofs: x.len(),
+                gamma,
+            });
+        }
         rep.total_s = t_start.elapsed().as_secs_f64();
         Ok(rep)
     }
@@ -775,7 +854,8 @@ mod tests {
     }
 
     /// Moving a pinned end of a linear spring chain: the pinned-motion predictor is the exact
-    /// answer (x_i = i/4 · x4), so the re-solve takes that one step and one factorisation.
+    /// answer (x_i = i/4 · x4), so the re-solve takes that one step, with the factorisation
+    /// the first solve ended with (the Hessian is constant) and no new one.
     #[test]
     fn pinned_motion_predictor_solves_a_linear_problem_in_one_step() {
         let p = StaticProblem {
@@ -794,7 +874,15 @@ mod tests {
         x[4] = 2.0;
         let rep = solver.solve(&Chain, &p, &mut x).unwrap();
         assert_eq!(rep.status, SolveStatus::Converged, "{rep:?}");
-        assert_eq!((rep.iterations, rep.factorizations), (1, 1), "{rep:?}");
+        assert_eq!(
+            (
+                rep.iterations,
+                rep.factorizations,
+                rep.reused_factorizations
+            ),
+            (1, 0, 1),
+            "{rep:?}"
+        );
         for (i, xi) in x.iter().enumerate() {
             assert!((xi - 0.5 * i as f64).abs() < 1e-12, "{x:?}");
         }
@@ -842,5 +930,113 @@ mod tests {
         assert!(solver.solve(&Quartic, &p, &mut short).is_err());
         let mut nan = vec![f64::NAN; 6];
         assert!(solver.solve(&Quartic, &p, &mut nan).is_err());
+    }
+
+    /// E = k Σ x_i⁴ / 4 over 6 dofs (the [`Quartic`] k times stiffer).
+    struct StiffQuartic(f64);
+    impl Energy for StiffQuartic {
+        fn dofs(&self) -> usize {
+            6
+        }
+        fn eval(
+            &self,
+            x: &[f64],
+            grad: Option<&mut [f64]>,
+            hess: Option<&mut Vec<(usize, usize, f64)>>,
+            _p: bool,
+        ) -> f64 {
+            let k = self.0;
+            if let Some(g) = grad {
+                for (gi, xi) in g.iter_mut().zip(x) {
+                    *gi += k * xi.powi(3);
+                }
+            }
+            if let Some(h) = hess {
+                for (i, xi) in x.iter().enumerate() {
+                    h.push((i, i, 3.0 * k * xi * xi));
+                }
+            }
+            k * x.iter().map(|v| v.powi(4) / 4.0).sum::<f64>()
+        }
+    }
+
+    /// The first direction of a solve may come from the previous solve's factor: the answer
+    /// must be the same as a fresh solver's (to the tolerance), when the constraint target
+    /// moves far (stale Hessian 3 against 12 at the answer) and even when the energy itself
+    /// changed between the solves (100× stiffer); a changed constraint matrix must not reuse.
+    #[test]
+    fn reused_first_factor_changes_only_the_path_not_the_answer() {
+        let base = StaticProblem {
+            pinned: vec![0],
+            constraints: LinearConstraints {
+                rows: 1,
+                entries: vec![(0, 1, 1.0), (0, 2, 1.0)],
+                rhs: vec![2.0],
+            },
+            forces: vec![0.0, 0.0, 0.0, 8.0, -1.0, 0.0],
+        };
+        let settings = StaticSettings {
+            tolerance: 1e-10,
+            gamma: Some(1.0),
+            ..Default::default()
+        };
+        let start = vec![0.5, 3.0, -0.5, 1.0, 1.0, 0.0];
+        let mut moved = base.clone();
+        moved.constraints.rhs[0] = -4.0;
+        // (energy, problem, exact answer, expected reused factorisations)
+        type Case = (Box<dyn Energy>, StaticProblem, [f64; 6], usize);
+        let cases: Vec<Case> = vec![
+            (
+                Box::new(Quartic),
+                moved.clone(),
+                [0.5, -2.0, -2.0, 2.0, -1.0, 0.0],
+                1,
+            ),
+            (
+                Box::new(StiffQuartic(100.0)),
+                base.clone(),
+                [0.5, 1.0, 1.0, 0.08f64.cbrt(), -(0.01f64.cbrt()), 0.0],
+                1,
+            ),
+            (
+                Box::new(Quartic),
+                StaticProblem {
+                    constraints: LinearConstraints {
+                        rows: 1,
+                        entries: vec![(0, 1, 1.0), (0, 2, 3.0)],
+                        rhs: vec![4.0],
+                    },
+                    ..base.clone()
+                },
+                // x1³ = μ, x2³ = 3μ → x2 = ∛3 x1, x1 (1 + 3∛3) = 4.
+                {
+                    let x1 = 4.0 / (1.0 + 3.0 * 3f64.cbrt());
+                    [0.5, x1, 3f64.cbrt() * x1, 2.0, -1.0, 0.0]
+                },
+                0,
+            ),
+        ];
+        for (k, (energy, problem, exact, reuses)) in cases.into_iter().enumerate() {
+            let mut warm = StaticSolver::new(settings).unwrap();
+            let mut x = start.clone();
+            assert!(warm.solve(&Quartic, &base, &mut x).unwrap().status == SolveStatus::Converged);
+            let rep = warm.solve(energy.as_ref(), &problem, &mut x).unwrap();
+            assert_eq!(rep.status, SolveStatus::Converged, "case {k}: {rep:?}");
+            assert_eq!(rep.reused_factorizations, reuses, "case {k}: {rep:?}");
+            let mut fresh = StaticSolver::new(settings).unwrap();
+            let mut y = start.clone();
+            let rep = fresh.solve(energy.as_ref(), &problem, &mut y).unwrap();
+            assert_eq!(rep.status, SolveStatus::Converged, "case {k}: {rep:?}");
+            for i in 0..6 {
+                assert!(
+                    (x[i] - exact[i]).abs() < 1e-8,
+                    "case {k}: {x:?} against {exact:?}"
+                );
+                assert!(
+                    (y[i] - exact[i]).abs() < 1e-8,
+                    "case {k}: {y:?} against {exact:?}"
+                );
+            }
+        }
     }
 }

@@ -46,6 +46,11 @@ pub struct SolveReport {
     pub modified_hessian_steps: usize,
     /// Numeric factorisations done (more than `iterations` when inertia correction retried).
     pub factorizations: usize,
+    /// Newton directions computed with the previous solve's factorisation instead of a new
+    /// one (the first direction of a warm-started solve, see `StaticSolver::solve`).
+    pub reused_factorizations: usize,
+    /// Linear solves with a factor (one per Newton direction plus its refinement steps).
+    pub linear_solves: usize,
     /// Seconds evaluating Hessians and assembling the KKT matrix.
     pub assembly_s: f64,
     /// Seconds in the symbolic analysis (first call, or when the pattern changes).
