@@ -56,6 +56,33 @@ pub fn cube_mesh(a: f64, m: usize) -> TriMesh {
 /// settings on the procedural face rig (`rig::face::generate()`, ~10k vertices), and
 /// `face_1cm_lattice_build_s` with 1 cm cells.
 pub fn bench_lattice(elements: usize) -> anyhow::Result<serde_json::Value> {
+    if std::env::var("FURROW_MICRO").is_ok() {
+        let n = ((elements as f64).cbrt().round() as usize).max(1);
+        let h = 0.02;
+        let mesh = cube_mesh(n as f64 * h, n);
+        let lat = Lattice::build(
+            &mesh,
+            &LatticeSettings {
+                cell_size: Some(h),
+                order: ElementOrder::Quadratic,
+                ..Default::default()
+            },
+        )?;
+        let int = Interior::new(&lat, &Material::default())?;
+        let pinned: Vec<bool> = lat.rest.iter().map(|p| p.z < h).collect();
+        let settings = StepSettings {
+            gravity: [0.0, 0.0, -super::GRAVITY],
+            max_newton: 1,
+            ..Default::default()
+        };
+        let mut be = BackwardEuler::new(int, lat.rest_flat(), pinned, settings)?;
+        let zero = vec![0.0; be.q.len()];
+        be.step(&zero, None)?;
+        for _ in 0..3 {
+            be.micro();
+        }
+        std::process::exit(0);
+    }
     let chol = bench_step(elements, LinearSolver::Cholesky, 20)?;
     let chol1 = bench_step(elements, LinearSolver::Cholesky, 1)?;
     let cg = bench_step(
@@ -153,6 +180,25 @@ fn bench_step(
     let rep = be.step(&zero, None)?;
     let step_s = t.elapsed().as_secs_f64();
     let iters = rep.iterations.max(1) as f64;
+    // Best of `repeats` further steps (robust against load from other processes).
+    let repeats = if matches!(solver, LinearSolver::ConjugateGradient { .. }) {
+        10
+    } else {
+        0
+    };
+    let mut best = [f64::INFINITY; 4];
+    for _ in 0..repeats {
+        let t = Instant::now();
+        let r = be.step(&zero, None)?;
+        let s = t.elapsed().as_secs_f64();
+        let it = r.iterations.max(1) as f64;
+        for (b, v) in best
+            .iter_mut()
+            .zip([s, r.assembly_s / it, r.solve_s / it, r.energy_s])
+        {
+            *b = b.min(v);
+        }
+    }
 
     Ok(serde_json::json!({
         "elements": lat.elements.len(),
@@ -169,6 +215,13 @@ fn bench_step(
         "step_per_iteration_s": step_s / iters,
         "cg_iterations": rep.cg_iterations,
         "energy_s": rep.energy_s,
+        "coarse_s": rep.coarse_s,
+        "best_step_s": best[0],
+        "best_assembly_s": best[1],
+        "best_solve_s": best[2],
+        "best_energy_s": best[3],
+        "first_step_coarse_s": first.coarse_s,
+        "first_step_cg_iterations": first.cg_iterations,
         "evaluations": rep.evaluations,
         "relative_residual": rep.relative_residual,
     }))

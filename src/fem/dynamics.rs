@@ -20,6 +20,7 @@
 //! CG multiplies by that lower triangle block by block and starts each time step from the
 //! previous step's first Newton direction, scaled to minimise the quadratic along it.
 
+use super::cg::{pcg, BlockCsr, Coarse};
 use super::interior::Interior;
 use super::FemError;
 use crate::math::sparse::SpdSolver;
@@ -168,6 +169,9 @@ pub struct SolveReport {
     pub energy_s: f64,
     /// Potential evaluations (with or without gradient).
     pub evaluations: usize,
+    /// Part of `solve_s` spent building and factorising CG's coarse correction (s); it is
+    /// rebuilt only when CG slows down (see [`BackwardEuler`]), so most steps spend none.
+    pub coarse_s: f64,
 }
 
 /// Compressed lower-triangle pattern over free DOFs with 3 × 3 node blocks.
@@ -189,6 +193,14 @@ struct System {
     /// FNV hash of the extra triplets' (row, column) layout last seen with this system.
     extra_hash: u64,
     mat: SparseColMat<usize, f64>,
+    /// The same matrix with both triangles in node-block rows (for CG), filled from `mat`.
+    bsr: BlockCsr,
+    /// For each block of `bsr` off the diagonal: the rank of the lower-triangle partner in
+    /// its column's `nbrs` list (block (a, b), a > b: rank of a in `nbrs[b]`; a < b: rank of
+    /// b in `nbrs[a]`).
+    bsr_rank: Vec<u32>,
+    /// Free node → node.
+    free_nodes: Vec<usize>,
 }
 
 const NONE: usize = usize::MAX;
@@ -272,6 +284,31 @@ impl System {
         let nnz = rows.len();
         let sym = SymbolicSparseColMat::new_checked(n, n, colptr.clone(), None, rows);
         let mat = SparseColMat::new(sym, vec![0.0; nnz]);
+        // Full block rows: lower partners (ascending b < a), the diagonal, then nbrs[a].
+        let mut lower: Vec<Vec<(u32, u32)>> = vec![Vec::new(); nfree];
+        for (b, l) in nbrs.iter().enumerate() {
+            for (r, &a) in l[1..].iter().enumerate() {
+                lower[a].push((b as u32, r as u32));
+            }
+        }
+        let mut rows_b: Vec<Vec<u32>> = Vec::with_capacity(nfree);
+        let mut bsr_rank = Vec::new();
+        for a in 0..nfree {
+            let mut row: Vec<u32> = Vec::new();
+            for &(b, r) in &lower[a] {
+                row.push(b);
+                bsr_rank.push(r);
+            }
+            row.push(a as u32);
+            bsr_rank.push(0);
+            for (r, &b) in nbrs[a][1..].iter().enumerate() {
+                row.push(b as u32);
+                bsr_rank.push(r as u32);
+            }
+            rows_b.push(row);
+        }
+        let bsr = BlockCsr::from_pattern(&rows_b);
+        let free_nodes = (0..interior.nodes).filter(|&n| free[n] != NONE).collect();
         Ok(Self {
             free,
             nfree,
@@ -283,7 +320,46 @@ impl System {
             extra_sig: extra.to_vec(),
             extra_hash: 0,
             mat,
+            bsr,
+            bsr_rank,
+            free_nodes,
         })
+    }
+
+    /// Copy the assembled lower-triangle matrix into the full node-block rows of `bsr`.
+    fn fill_bsr(&mut self) {
+        let cp = &self.colptr;
+        let cv = self.mat.val();
+        let rank = &self.bsr_rank;
+        let bsr = &mut self.bsr;
+        let (ptr, col) = (&bsr.ptr, &bsr.col);
+        let mut rows: Vec<&mut [f64]> = Vec::with_capacity(ptr.len() - 1);
+        let mut rest: &mut [f64] = &mut bsr.val;
+        for a in 0..ptr.len() - 1 {
+            let (head, tail) = rest.split_at_mut(9 * (ptr[a + 1] - ptr[a]));
+            rows.push(head);
+            rest = tail;
+        }
+        rows.into_par_iter().enumerate().for_each(|(a, out)| {
+            for k in ptr[a]..ptr[a + 1] {
+                let b = col[k] as usize;
+                let r = rank[k] as usize;
+                let o = &mut out[9 * (k - ptr[a])..9 * (k - ptr[a]) + 9];
+                for i in 0..3 {
+                    for j in 0..3 {
+                        o[3 * i + j] = if b < a {
+                            cv[cp[3 * b + j] + (3 - j) + 3 * r + i]
+                        } else if b > a {
+                            cv[cp[3 * a + i] + (3 - i) + 3 * r + j]
+                        } else if i >= j {
+                            cv[cp[3 * a + j] + i - j]
+                        } else {
+                            cv[cp[3 * a + i] + j - i]
+                        };
+                    }
+                }
+            }
+        });
     }
 
     /// Value index of entry (3·fa + i, 3·fb + j), fa ≥ fb, (i ≥ j when fa = fb).
@@ -393,6 +469,15 @@ impl System {
     }
 }
 
+/// Aggregate width of CG's coarse correction in cells (0: none). Temporary experiment
+/// switch read from FURROW_CG_COARSE.
+fn coarse_width() -> f64 {
+    std::env::var("FURROW_CG_COARSE")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(0.0)
+}
+
 /// Node triplets (a, b, value) summed into CSR form (row pointers, columns, values).
 fn node_csr(n: usize, mut t: Vec<(usize, usize, f64)>) -> (Vec<usize>, Vec<usize>, Vec<f64>) {
     t.sort_unstable_by_key(|&(a, b, _)| (a, b));
@@ -469,6 +554,10 @@ pub struct BackwardEuler {
     eval_clock: std::cell::Cell<(f64, usize)>,
     /// First Newton direction of the last time step (free DOFs, m), CG's warm start.
     last_direction: Option<Vec<f64>>,
+    /// CG's coarse correction (lagged: refactorised when CG slows down).
+    coarse: Option<Coarse>,
+    /// CG iterations of the first solve after the coarse factorisation, and solves since.
+    coarse_ref: Option<(usize, usize)>,
 }
 
 impl BackwardEuler {
@@ -509,7 +598,120 @@ impl BackwardEuler {
             solver: SpdSolver::new(),
             eval_clock: std::cell::Cell::new((0.0, 0)),
             last_direction: None,
+            coarse: None,
+            coarse_ref: None,
         })
+    }
+
+    /// TEMPORARY micro-benchmark (min over repeats, seconds) of the CG pieces at the state q.
+    pub fn micro(&mut self) {
+        let zero = vec![0.0; self.q.len()];
+        self.ensure_system(None).unwrap();
+        let y = self.q.clone();
+        let t = |f: &mut dyn FnMut(), n: usize| -> f64 {
+            let mut best = f64::INFINITY;
+            for _ in 0..n {
+                let s = Instant::now();
+                f();
+                best = best.min(s.elapsed().as_secs_f64());
+            }
+            best
+        };
+        let interior = &self.interior;
+        let rot = t(
+            &mut || {
+                let r: Vec<M3> = (0..interior.elements.len())
+                    .into_par_iter()
+                    .map(|e| interior.element_rotation(&y, e))
+                    .collect();
+                std::hint::black_box(r);
+            },
+            20,
+        );
+        let rotations: Vec<M3> = (0..interior.elements.len())
+            .map(|e| interior.element_rotation(&y, e))
+            .collect();
+        let h = self.settings.dt;
+        let sys = self.system.as_mut().unwrap();
+        let asm = t(
+            &mut || sys.assemble(interior, &rotations, 1.0, None, h * h, None),
+            20,
+        );
+        let fill = t(&mut || sys.fill_bsr(), 20);
+        let n = 3 * sys.nfree;
+        let x: Vec<f64> = (0..n).map(|i| ((i * 7919) % 1000) as f64 * 1e-3).collect();
+        let sysr = &*sys;
+        let mv_old = t(
+            &mut || {
+                std::hint::black_box(block_sym_mul(sysr, &x));
+            },
+            50,
+        );
+        let mut yv = vec![0.0; n];
+        let mv_new = t(
+            &mut || {
+                std::hint::black_box(sysr.bsr.mul(&x, &mut yv));
+            },
+            50,
+        );
+        let inv = sysr.bsr.diag_inverses();
+        let dinv = t(
+            &mut || {
+                std::hint::black_box(sysr.bsr.diag_inverses());
+            },
+            20,
+        );
+        let cg_old = t(
+            &mut || {
+                std::hint::black_box(legacy_pcg(sysr, &x, None, 1e-4, 35));
+            },
+            10,
+        );
+        let cg_new = t(
+            &mut || {
+                std::hint::black_box(pcg(&sysr.bsr, &inv, None, &x, None, 1e-4, 35));
+            },
+            10,
+        );
+        let mut op = super::matfree::ElementOperator::new(interior, &sysr.free);
+        op.update(interior, rotations.clone(), 1.0, h * h, None);
+        let mut y2 = vec![0.0; n];
+        op.mul(&x, &mut y2);
+        sysr.bsr.mul(&x, &mut yv);
+        let diff = y2.iter().zip(&yv).fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        let scale = yv.iter().fold(0.0f64, |m, a| m.max(a.abs()));
+        let mv_mf = t(
+            &mut || {
+                std::hint::black_box(op.mul(&x, &mut y2));
+            },
+            50,
+        );
+        let inv2 = op.diag_inverses();
+        let dinv_mf = t(
+            &mut || {
+                std::hint::black_box(op.diag_inverses());
+            },
+            20,
+        );
+        let cg_mf = t(
+            &mut || {
+                std::hint::black_box(pcg(&op, &inv2, None, &x, None, 1e-4, 35));
+            },
+            10,
+        );
+        eprintln!("MF diff {diff:.3e} of {scale:.3e} mv_mf {mv_mf:.6} dinv_mf {dinv_mf:.6} cg35_mf {cg_mf:.5}");
+        let mut g = vec![0.0; y.len()];
+        let en = t(
+            &mut || {
+                g.iter_mut().for_each(|v| *v = 0.0);
+                std::hint::black_box(interior.eval(&y, Some(&mut g), None, false));
+            },
+            10,
+        );
+        let _ = zero;
+        eprintln!(
+            "MICRO rot {rot:.5} asm {asm:.5} fill {fill:.5} mv_old {mv_old:.6} mv_new {mv_new:.6} dinv {dinv:.6} cg35_old {cg_old:.5} cg35_new {cg_new:.5} energy {en:.5}"
+        );
     }
 
     /// y ↦ M y (flat, with the configured mass matrix).
@@ -566,6 +768,8 @@ impl BackwardEuler {
             self.system = Some(System::new(&self.interior, &self.pinned, &sig)?);
             self.solver.reset();
             self.last_direction = None;
+            self.coarse = None;
+            self.coarse_ref = None;
         }
         if let Some(s) = self.system.as_mut() {
             s.extra_hash = hash;
@@ -773,6 +977,7 @@ impl BackwardEuler {
             cg_iterations: 0,
             energy_s: 0.0,
             evaluations: 0,
+            coarse_s: 0.0,
         };
         let cell = self.interior.cell_size;
         for _ in 0..self.settings.max_newton {
@@ -841,8 +1046,43 @@ impl BackwardEuler {
                     } else {
                         None
                     };
-                    let (x, it) = pcg(sys, &rhs, guess, rel_tol, max_iter);
+                    sys.fill_bsr();
+                    let inv = sys.bsr.diag_inverses();
+                    let width = coarse_width() * cell;
+                    if width > 0.0 && self.coarse_ref.is_none() {
+                        let tc = Instant::now();
+                        if self.coarse.is_none() {
+                            let pos: Vec<f64> = sys
+                                .free_nodes
+                                .iter()
+                                .flat_map(|&nd| [y[3 * nd], y[3 * nd + 1], y[3 * nd + 2]])
+                                .collect();
+                            self.coarse = Some(Coarse::new(&sys.bsr, &pos, width));
+                        }
+                        let c = self.coarse.as_mut().expect("built above");
+                        if c.factorize(&sys.bsr).is_err() {
+                            self.coarse = None;
+                        }
+                        report.coarse_s += tc.elapsed().as_secs_f64();
+                    }
+                    let coarse = if width > 0.0 { self.coarse.as_ref() } else { None };
+                    let (x, it) = if std::env::var("FURROW_CG_LEGACY").is_ok() {
+                        legacy_pcg(sys, &rhs, guess, rel_tol, max_iter)
+                    } else {
+                        pcg(&sys.bsr, &inv, coarse, &rhs, guess, rel_tol, max_iter)
+                    };
                     report.cg_iterations += it;
+                    // Lagged coarse factor: keep it while CG stays within 1.5× (+3) of the
+                    // iterations it took right after the factorisation, at most 50 solves.
+                    if self.coarse.is_some() {
+                        self.coarse_ref = match self.coarse_ref {
+                            None => Some((it, 1)),
+                            Some((r0, age)) if it <= (3 * r0 / 2).max(r0 + 3) && age < 50 => {
+                                Some((r0, age + 1))
+                            }
+                            Some(_) => None,
+                        };
+                    }
                     if inertia.is_some() && report.iterations == 0 {
                         self.last_direction = Some(x.clone());
                     }
@@ -995,7 +1235,7 @@ fn block_sym_mul(sys: &System, x: &[f64]) -> Vec<f64> {
 /// with node blocks (the layout of `System`). Returns the solution and the iterations.
 /// `guess` (when given, of length `b.len()`) is the starting point; it is dropped for zero
 /// when its residual exceeds ‖b‖.
-fn pcg(
+fn legacy_pcg(
     sys: &System,
     b: &[f64],
     guess: Option<&[f64]>,
