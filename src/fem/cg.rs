@@ -5,16 +5,11 @@
 //! output node of a product is computed on its own (no scatter, no per-thread accumulators).
 //! Every parallel loop works on a fixed split of the nodes and dot products add the
 //! per-chunk partial sums in chunk order: results have the same bits for any thread count.
-//!
-//! Preconditioners: 3 × 3 block Jacobi, optionally plus a coarse correction
-//! ([`Coarse`]): z = D⁻¹ r + P A_c⁻¹ Pᵀ r (additive two-level), P the rigid-body modes
-//! (3 translations, 3 infinitesimal rotations, orthonormalised) of aggregates of nearby
-//! nodes that are connected in the matrix graph (so superimposed, mechanically separate
-//! parts never share an aggregate), A_c = Pᵀ A P factorised by sparse Cholesky.
+//! The preconditioner is 3 × 3 block Jacobi. (A two-level additive correction with the
+//! rigid-body modes of 2 × 2 × 2-node aggregates cut the bench cube's 35 iterations only to
+//! 30 while its Galerkin matrix took 30–90 ms to build and factorise; it was removed.)
 
-use crate::math::sparse::{assemble, SparseError, SpdSolver};
 use rayon::prelude::*;
-use std::collections::HashMap;
 
 /// Nodes per chunk of every parallel loop (fixed: determinism across thread counts).
 const CHUNK_NODES: usize = 48;
@@ -135,274 +130,31 @@ impl BlockCsr {
     }
 }
 
-/// Two-level coarse space: orthonormal rigid-body modes of node aggregates, and the
-/// factorised Galerkin matrix A_c = Pᵀ A P.
-pub struct Coarse {
-    /// Aggregate of each node.
-    agg: Vec<u32>,
-    /// Nodes of each aggregate.
-    members: Vec<Vec<u32>>,
-    /// First coarse unknown of each aggregate (length aggregates + 1).
-    offset: Vec<usize>,
-    /// Per node: its 3 × k rows of P, stored as 6 modes × 3 components (mode-major).
-    basis: Vec<[f64; 18]>,
-    solver: SpdSolver,
-    factorised: bool,
-}
-
-impl Coarse {
-    /// Aggregate the nodes of `a` that lie in the same box of side `width` (m) at
-    /// `positions` (flat, m) and are connected through the blocks of `a` inside the box,
-    /// and build each aggregate's orthonormal rigid-body basis about its centroid.
-    pub fn new(a: &BlockCsr, positions: &[f64], width: f64) -> Self {
-        let n = a.nodes();
-        let key = |i: usize| {
-            [0, 1, 2].map(|d| (positions[3 * i + d] / width).floor() as i64)
-        };
-        // Connected components of the graph restricted to same-box edges (breadth first).
-        let mut agg = vec![u32::MAX; n];
-        let mut members: Vec<Vec<u32>> = Vec::new();
-        let keys: Vec<[i64; 3]> = (0..n).map(key).collect();
-        for s in 0..n {
-            if agg[s] != u32::MAX {
-                continue;
-            }
-            let id = members.len() as u32;
-            let mut list = vec![s as u32];
-            agg[s] = id;
-            let mut head = 0;
-            while head < list.len() {
-                let i = list[head] as usize;
-                head += 1;
-                for &j in &a.col[a.ptr[i]..a.ptr[i + 1]] {
-                    let j = j as usize;
-                    if agg[j] == u32::MAX && keys[j] == keys[i] {
-                        agg[j] = id;
-                        list.push(j as u32);
-                    }
-                }
-            }
-            list.sort_unstable();
-            members.push(list);
-        }
-        let mut basis = vec![[0.0; 18]; n];
-        let mut offset = Vec::with_capacity(members.len() + 1);
-        offset.push(0);
-        for m in &members {
-            let cnt = m.len() as f64;
-            let mut c = [0.0; 3];
-            for &i in m {
-                for d in 0..3 {
-                    c[d] += positions[3 * i as usize + d] / cnt;
-                }
-            }
-            // Candidate modes over the aggregate's 3m DOFs.
-            let dofs = 3 * m.len();
-            let mut modes: Vec<Vec<f64>> = Vec::with_capacity(6);
-            for t in 0..3 {
-                let mut v = vec![0.0; dofs];
-                for k in 0..m.len() {
-                    v[3 * k + t] = 1.0;
-                }
-                modes.push(v);
-            }
-            for axis in 0..3 {
-                let mut v = vec![0.0; dofs];
-                for (k, &i) in m.iter().enumerate() {
-                    let r = [0, 1, 2].map(|d| positions[3 * i as usize + d] - c[d]);
-                    // e_axis × r
-                    let w = match axis {
-                        0 => [0.0, -r[2], r[1]],
-                        1 => [r[2], 0.0, -r[0]],
-                        _ => [-r[1], r[0], 0.0],
-                    };
-                    v[3 * k..3 * k + 3].copy_from_slice(&w);
-                }
-                modes.push(v);
-            }
-            // Modified Gram–Schmidt (twice), dropping dependent modes (a single node has no
-            // rotations, collinear nodes one fewer).
-            let scale = width * width * cnt;
-            let mut kept: Vec<Vec<f64>> = Vec::new();
-            for mut v in modes {
-                let n0: f64 = v.iter().map(|x| x * x).sum::<f64>();
-                for _ in 0..2 {
-                    for q in &kept {
-                        let d: f64 = v.iter().zip(q).map(|(a, b)| a * b).sum();
-                        v.iter_mut().zip(q).for_each(|(a, b)| *a -= d * b);
-                    }
-                }
-                let nn: f64 = v.iter().map(|x| x * x).sum::<f64>();
-                if nn > 1e-16 * n0.max(1e-30) && nn > 1e-20 * scale {
-                    let s = 1.0 / nn.sqrt();
-                    v.iter_mut().for_each(|x| *x *= s);
-                    kept.push(v);
-                }
-            }
-            for (mi, q) in kept.iter().enumerate() {
-                for (k, &i) in m.iter().enumerate() {
-                    for d in 0..3 {
-                        basis[i as usize][3 * mi + d] = q[3 * k + d];
-                    }
-                }
-            }
-            offset.push(offset.last().expect("nonempty") + kept.len());
-        }
-        Self {
-            agg,
-            members,
-            offset,
-            basis,
-            solver: SpdSolver::new(),
-            factorised: false,
-        }
-    }
-
-    /// Coarse unknowns (modes over all aggregates).
-    pub fn size(&self) -> usize {
-        *self.offset.last().expect("offset has a first entry")
-    }
-
-    /// Number of aggregates.
-    pub fn aggregates(&self) -> usize {
-        self.members.len()
-    }
-
-    fn dim(&self, g: usize) -> usize {
-        self.offset[g + 1] - self.offset[g]
-    }
-
-    /// Compute A_c = Pᵀ A P and factorise it (sparse Cholesky, symbolic analysis reused).
-    pub fn factorize(&mut self, a: &BlockCsr) -> Result<(), SparseError> {
-        let nc = self.size();
-        let trip: Vec<Vec<(usize, usize, f64)>> = (0..self.members.len())
-            .into_par_iter()
-            .map(|g| {
-                let kg = self.dim(g);
-                let mut blocks: HashMap<u32, [f64; 36]> = HashMap::new();
-                for &i in &self.members[g] {
-                    let i = i as usize;
-                    let pi = &self.basis[i];
-                    for k in a.ptr[i]..a.ptr[i + 1] {
-                        let j = a.col[k] as usize;
-                        let h = self.agg[j];
-                        let kh = self.dim(h as usize);
-                        let blk = &a.val[9 * k..9 * k + 9];
-                        let pj = &self.basis[j];
-                        // T = A_ij P_j (3 × kh), then P_iᵀ T (kg × kh).
-                        let mut t = [[0.0; 3]; 6];
-                        for m in 0..kh {
-                            for r in 0..3 {
-                                t[m][r] = blk[3 * r] * pj[3 * m]
-                                    + blk[3 * r + 1] * pj[3 * m + 1]
-                                    + blk[3 * r + 2] * pj[3 * m + 2];
-                            }
-                        }
-                        let out = blocks.entry(h).or_insert([0.0; 36]);
-                        for l in 0..kg {
-                            for m in 0..kh {
-                                out[6 * l + m] += pi[3 * l] * t[m][0]
-                                    + pi[3 * l + 1] * t[m][1]
-                                    + pi[3 * l + 2] * t[m][2];
-                            }
-                        }
-                    }
-                }
-                let mut keys: Vec<u32> = blocks.keys().copied().collect();
-                keys.sort_unstable();
-                let mut out = Vec::new();
-                for h in keys {
-                    let b = &blocks[&h];
-                    let (o0, o1) = (self.offset[g], self.offset[h as usize]);
-                    for l in 0..kg {
-                        for m in 0..self.dim(h as usize) {
-                            out.push((o0 + l, o1 + m, b[6 * l + m]));
-                        }
-                    }
-                }
-                out
-            })
-            .collect();
-        let t: Vec<(usize, usize, f64)> = trip.into_iter().flatten().collect();
-        let ac = assemble(nc, nc, &t)?;
-        self.factorised = false;
-        self.solver.factorize(&ac)?;
-        self.factorised = true;
-        Ok(())
-    }
-
-    /// Whether a factorisation is available for [`Self::apply_add`].
-    pub fn is_factorised(&self) -> bool {
-        self.factorised
-    }
-
-    /// z += P A_c⁻¹ Pᵀ r; returns rᵀ P A_c⁻¹ Pᵀ r.
-    pub fn apply_add(&self, r: &[f64], z: &mut [f64]) -> f64 {
-        let rc: Vec<Vec<f64>> = (0..self.members.len())
-            .into_par_iter()
-            .map(|g| {
-                let kg = self.dim(g);
-                let mut s = vec![0.0; kg];
-                for &i in &self.members[g] {
-                    let i = i as usize;
-                    let p = &self.basis[i];
-                    for (m, sm) in s.iter_mut().enumerate() {
-                        *sm += p[3 * m] * r[3 * i]
-                            + p[3 * m + 1] * r[3 * i + 1]
-                            + p[3 * m + 2] * r[3 * i + 2];
-                    }
-                }
-                s
-            })
-            .collect();
-        let mut rc: Vec<f64> = rc.into_iter().flatten().collect();
-        let rhs = rc.clone();
-        self.solver.solve_in_place(&mut rc);
-        let dot: f64 = rhs.iter().zip(&rc).map(|(a, b)| a * b).sum();
-        z.par_chunks_mut(3 * CHUNK_NODES)
-            .enumerate()
-            .for_each(|(c, zc)| {
-                for (k, za) in zc.chunks_exact_mut(3).enumerate() {
-                    let i = c * CHUNK_NODES + k;
-                    let g = self.agg[i] as usize;
-                    let p = &self.basis[i];
-                    for m in 0..self.dim(g) {
-                        let e = rc[self.offset[g] + m];
-                        for d in 0..3 {
-                            za[d] += p[3 * m + d] * e;
-                        }
-                    }
-                }
-            });
-        dot
-    }
+/// Sum of products over fixed chunks, added in chunk order (the bits of a parallel
+/// chunked sum, computed serially: vectors here are short).
+fn dot(u: &[f64], v: &[f64]) -> f64 {
+    u.chunks(3 * CHUNK_NODES)
+        .zip(v.chunks(3 * CHUNK_NODES))
+        .map(|(p, q)| p.iter().zip(q).map(|(x, y)| x * y).sum::<f64>())
+        .sum()
 }
 
 /// Preconditioned conjugate gradients for A x = b (A symmetric positive definite, node
-/// blocks): block Jacobi `inv` (from [`BlockCsr::diag_inverses`]) plus the coarse
-/// correction when given and factorised. Stops at ‖r‖ ≤ `rel_tol` ‖b‖ or after `max_iter`
+/// blocks) with the 3 × 3 block-Jacobi preconditioner `inv` (inverse diagonal blocks,
+/// row-major, e.g. from [`BlockCsr::diag_inverses`]). Stops at ‖r‖ ≤ `rel_tol` ‖b‖ or after `max_iter`
 /// iterations; returns the solution and the iterations used. `guess` (length `b.len()`)
 /// is scaled to minimise the quadratic along it and used as the start when its residual is
-/// below ‖b‖.
+/// below ‖b‖. Only the products with A run in parallel; the vector updates (a few
+/// thousand entries) are serial, fused into two passes per iteration.
 pub fn pcg(
     a: &impl SymOperator,
     inv: &[[f64; 9]],
-    coarse: Option<&Coarse>,
     b: &[f64],
     guess: Option<&[f64]>,
     rel_tol: f64,
     max_iter: usize,
 ) -> (Vec<f64>, usize) {
     let n = b.len();
-    let coarse = coarse.filter(|c| c.is_factorised());
-    let dot = |u: &[f64], v: &[f64]| -> f64 {
-        let part: Vec<f64> = u
-            .par_chunks(3 * CHUNK_NODES)
-            .zip(v.par_chunks(3 * CHUNK_NODES))
-            .map(|(p, q)| p.iter().zip(q).map(|(x, y)| x * y).sum::<f64>())
-            .collect();
-        part.iter().sum()
-    };
     let mut x = vec![0.0; n];
     let mut r = b.to_vec();
     let bn = dot(b, b).sqrt();
@@ -421,52 +173,42 @@ pub fn pcg(
             }
         }
     }
-    // z = M⁻¹ r; returns (rᵀ z, rᵀ r). `step` first applies x += α p, r −= α Ap.
-    let precondition = |alpha: f64,
-                        x: &mut [f64],
-                        r: &mut [f64],
-                        z: &mut [f64],
-                        p: &[f64],
-                        ap: &[f64]|
+    // x += α p, r −= α Ap, z = M⁻¹ r; returns (rᵀ z, rᵀ r), chunk sums in order.
+    let step = |alpha: f64,
+                x: &mut [f64],
+                r: &mut [f64],
+                z: &mut [f64],
+                p: &[f64],
+                ap: &[f64]|
      -> (f64, f64) {
-        let parts: Vec<(f64, f64)> = x
-            .par_chunks_mut(3 * CHUNK_NODES)
-            .zip(r.par_chunks_mut(3 * CHUNK_NODES))
-            .zip(z.par_chunks_mut(3 * CHUNK_NODES))
-            .enumerate()
-            .map(|(c, ((xc, rc), zc))| {
-                let o = 3 * c * CHUNK_NODES;
-                let (mut rz, mut rr) = (0.0, 0.0);
-                if alpha != 0.0 {
-                    for k in 0..xc.len() {
-                        xc[k] += alpha * p[o + k];
-                        rc[k] -= alpha * ap[o + k];
-                    }
-                }
-                for (k, (ra, za)) in rc.chunks_exact(3).zip(zc.chunks_exact_mut(3)).enumerate() {
-                    let m = &inv[c * CHUNK_NODES + k];
-                    for i in 0..3 {
-                        za[i] = m[3 * i] * ra[0] + m[3 * i + 1] * ra[1] + m[3 * i + 2] * ra[2];
-                        rz += ra[i] * za[i];
-                        rr += ra[i] * ra[i];
-                    }
-                }
-                (rz, rr)
-            })
-            .collect();
         let (mut rz, mut rr) = (0.0, 0.0);
-        for (a, b) in parts {
-            rz += a;
-            rr += b;
-        }
-        if let Some(cs) = coarse {
-            rz += cs.apply_add(r, z);
+        for c in 0..n.div_ceil(3 * CHUNK_NODES) {
+            let (lo, hi) = (3 * c * CHUNK_NODES, (3 * (c + 1) * CHUNK_NODES).min(n));
+            let (mut crz, mut crr) = (0.0, 0.0);
+            if alpha != 0.0 {
+                for k in lo..hi {
+                    x[k] += alpha * p[k];
+                    r[k] -= alpha * ap[k];
+                }
+            }
+            for nd in lo / 3..hi / 3 {
+                let m = &inv[nd];
+                let ra = [r[3 * nd], r[3 * nd + 1], r[3 * nd + 2]];
+                for i in 0..3 {
+                    let zi = m[3 * i] * ra[0] + m[3 * i + 1] * ra[1] + m[3 * i + 2] * ra[2];
+                    z[3 * nd + i] = zi;
+                    crz += ra[i] * zi;
+                    crr += ra[i] * ra[i];
+                }
+            }
+            rz += crz;
+            rr += crr;
         }
         (rz, rr)
     };
     let mut z = vec![0.0; n];
     let mut p = vec![0.0; n];
-    let (mut rz, _) = precondition(0.0, &mut x, &mut r, &mut z, &p, &ap);
+    let (mut rz, _) = step(0.0, &mut x, &mut r, &mut z, &p, &ap);
     p.copy_from_slice(&z);
     for it in 1..=max_iter {
         let pap = a.apply(&p, &mut ap);
@@ -474,19 +216,137 @@ pub fn pcg(
             return (x, it);
         }
         let alpha = rz / pap;
-        let (rz2, rr) = precondition(alpha, &mut x, &mut r, &mut z, &p, &ap);
+        let (rz2, rr) = step(alpha, &mut x, &mut r, &mut z, &p, &ap);
         if rr.sqrt() <= rel_tol * bn {
             return (x, it);
         }
         let beta = rz2 / rz;
         rz = rz2;
-        p.par_chunks_mut(3 * CHUNK_NODES)
-            .zip(z.par_chunks(3 * CHUNK_NODES))
-            .for_each(|(pc, zc)| {
-                for (pi, zi) in pc.iter_mut().zip(zc) {
-                    *pi = zi + beta * *pi;
-                }
-            });
+        for (pi, zi) in p.iter_mut().zip(&z) {
+            *pi = zi + beta * *pi;
+        }
     }
     (x, max_iter)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{DMatrix, DVector};
+
+    /// Deterministic pseudo-random numbers in [−1, 1).
+    struct Lcg(u64);
+    impl Lcg {
+        fn next(&mut self) -> f64 {
+            self.0 = self
+                .0
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((self.0 >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+        }
+    }
+
+    /// A random SPD node-block system: Σ over coupled node pairs of GᵀG (G random 6 × 6 on
+    /// the pair's DOFs) plus 1e-2 I, pairs (a, a+1) and (a, a+5); as a BlockCsr and densely.
+    fn random_spd(nodes: usize, seed: u64) -> (BlockCsr, DMatrix<f64>) {
+        let mut rng = Lcg(seed);
+        let n = 3 * nodes;
+        let mut d = DMatrix::<f64>::identity(n, n) * 1e-2;
+        let mut rows: Vec<Vec<u32>> = (0..nodes).map(|a| vec![a as u32]).collect();
+        for a in 0..nodes {
+            for off in [1, 5] {
+                let b = a + off;
+                if b >= nodes {
+                    continue;
+                }
+                rows[a].push(b as u32);
+                rows[b].push(a as u32);
+                let g = DMatrix::<f64>::from_fn(6, 6, |_, _| rng.next());
+                let gg = g.transpose() * g;
+                let idx = [3 * a, 3 * a + 1, 3 * a + 2, 3 * b, 3 * b + 1, 3 * b + 2];
+                for i in 0..6 {
+                    for j in 0..6 {
+                        d[(idx[i], idx[j])] += gg[(i, j)];
+                    }
+                }
+            }
+        }
+        for r in &mut rows {
+            r.sort_unstable();
+        }
+        let mut m = BlockCsr::from_pattern(&rows);
+        for a in 0..nodes {
+            for k in m.ptr[a]..m.ptr[a + 1] {
+                let b = m.col[k] as usize;
+                for i in 0..3 {
+                    for j in 0..3 {
+                        m.val[9 * k + 3 * i + j] = d[(3 * a + i, 3 * b + j)];
+                    }
+                }
+            }
+        }
+        (m, d)
+    }
+
+    fn rhs(n: usize, seed: u64) -> Vec<f64> {
+        let mut rng = Lcg(seed);
+        (0..n).map(|_| rng.next()).collect()
+    }
+
+    #[test]
+    fn block_product_matches_the_dense_matrix() {
+        let (m, d) = random_spd(150, 7);
+        let x = rhs(450, 3);
+        let mut y = vec![0.0; 450];
+        let xax = m.mul(&x, &mut y);
+        let yd = &d * DVector::from_column_slice(&x);
+        for i in 0..450 {
+            assert!((y[i] - yd[i]).abs() < 1e-12 * yd.amax(), "{i}");
+        }
+        let xd = DVector::from_column_slice(&x);
+        assert!((xax - xd.dot(&yd)).abs() < 1e-12 * xax.abs());
+    }
+
+    /// PCG meets its tolerance on the true residual and matches a dense solve.
+    #[test]
+    fn pcg_solves_a_random_spd_block_system_to_its_tolerance() {
+        let (m, d) = random_spd(200, 11);
+        let b = rhs(600, 5);
+        let bd = DVector::from_column_slice(&b);
+        let exact = d.clone().cholesky().expect("SPD").solve(&bd);
+        let inv = m.diag_inverses();
+        for tol in [1e-3, 1e-6, 1e-10] {
+            let (x, it) = pcg(&m, &inv, &b, None, tol, 10_000);
+            assert!(it < 10_000, "did not converge at {tol}");
+            let xd = DVector::from_column_slice(&x);
+            let res = (&bd - &d * &xd).norm() / bd.norm();
+            assert!(res <= tol, "tol {tol}: residual {res}");
+            if tol == 1e-10 {
+                let err = (&xd - &exact).norm() / exact.norm();
+                assert!(err < 1e-6, "error {err}");
+            }
+        }
+        // Started from the solution, it stops at once.
+        let (_, it) = pcg(&m, &inv, &b, Some(exact.as_slice()), 1e-6, 100);
+        assert!(it <= 1, "{it} iterations from the exact start");
+    }
+
+    /// Same bits for one thread and for three (fixed chunks, in-order sums).
+    #[test]
+    fn pcg_is_independent_of_the_thread_count() {
+        let (m, _) = random_spd(300, 13);
+        let b = rhs(900, 17);
+        let inv = m.diag_inverses();
+        let run = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| pcg(&m, &inv, &b, None, 1e-8, 5000))
+        };
+        let (x1, i1) = run(1);
+        let (x3, i3) = run(3);
+        assert_eq!(i1, i3);
+        assert!(x1.iter().zip(&x3).all(|(a, b)| a.to_bits() == b.to_bits()));
+    }
 }

@@ -20,7 +20,8 @@
 //! CG multiplies by that lower triangle block by block and starts each time step from the
 //! previous step's first Newton direction, scaled to minimise the quadratic along it.
 
-use super::cg::{pcg, BlockCsr, Coarse};
+use super::cg::{pcg, BlockCsr};
+use super::matfree::ElementOperator;
 use super::interior::Interior;
 use super::FemError;
 use crate::math::sparse::SpdSolver;
@@ -169,9 +170,6 @@ pub struct SolveReport {
     pub energy_s: f64,
     /// Potential evaluations (with or without gradient).
     pub evaluations: usize,
-    /// Part of `solve_s` spent building and factorising CG's coarse correction (s); it is
-    /// rebuilt only when CG slows down (see [`BackwardEuler`]), so most steps spend none.
-    pub coarse_s: f64,
 }
 
 /// Compressed lower-triangle pattern over free DOFs with 3 × 3 node blocks.
@@ -469,15 +467,6 @@ impl System {
     }
 }
 
-/// Aggregate width of CG's coarse correction in cells (0: none). Temporary experiment
-/// switch read from FURROW_CG_COARSE.
-fn coarse_width() -> f64 {
-    std::env::var("FURROW_CG_COARSE")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(0.0)
-}
-
 /// Node triplets (a, b, value) summed into CSR form (row pointers, columns, values).
 fn node_csr(n: usize, mut t: Vec<(usize, usize, f64)>) -> (Vec<usize>, Vec<usize>, Vec<f64>) {
     t.sort_unstable_by_key(|&(a, b, _)| (a, b));
@@ -554,10 +543,8 @@ pub struct BackwardEuler {
     eval_clock: std::cell::Cell<(f64, usize)>,
     /// First Newton direction of the last time step (free DOFs, m), CG's warm start.
     last_direction: Option<Vec<f64>>,
-    /// CG's coarse correction (lagged: refactorised when CG slows down).
-    coarse: Option<Coarse>,
-    /// CG iterations of the first solve after the coarse factorisation, and solves since.
-    coarse_ref: Option<(usize, usize)>,
+    /// CG's matrix-free Newton operator (built on the first CG solve without K_x).
+    operator: Option<ElementOperator>,
 }
 
 impl BackwardEuler {
@@ -598,120 +585,8 @@ impl BackwardEuler {
             solver: SpdSolver::new(),
             eval_clock: std::cell::Cell::new((0.0, 0)),
             last_direction: None,
-            coarse: None,
-            coarse_ref: None,
+            operator: None,
         })
-    }
-
-    /// TEMPORARY micro-benchmark (min over repeats, seconds) of the CG pieces at the state q.
-    pub fn micro(&mut self) {
-        let zero = vec![0.0; self.q.len()];
-        self.ensure_system(None).unwrap();
-        let y = self.q.clone();
-        let t = |f: &mut dyn FnMut(), n: usize| -> f64 {
-            let mut best = f64::INFINITY;
-            for _ in 0..n {
-                let s = Instant::now();
-                f();
-                best = best.min(s.elapsed().as_secs_f64());
-            }
-            best
-        };
-        let interior = &self.interior;
-        let rot = t(
-            &mut || {
-                let r: Vec<M3> = (0..interior.elements.len())
-                    .into_par_iter()
-                    .map(|e| interior.element_rotation(&y, e))
-                    .collect();
-                std::hint::black_box(r);
-            },
-            20,
-        );
-        let rotations: Vec<M3> = (0..interior.elements.len())
-            .map(|e| interior.element_rotation(&y, e))
-            .collect();
-        let h = self.settings.dt;
-        let sys = self.system.as_mut().unwrap();
-        let asm = t(
-            &mut || sys.assemble(interior, &rotations, 1.0, None, h * h, None),
-            20,
-        );
-        let fill = t(&mut || sys.fill_bsr(), 20);
-        let n = 3 * sys.nfree;
-        let x: Vec<f64> = (0..n).map(|i| ((i * 7919) % 1000) as f64 * 1e-3).collect();
-        let sysr = &*sys;
-        let mv_old = t(
-            &mut || {
-                std::hint::black_box(block_sym_mul(sysr, &x));
-            },
-            50,
-        );
-        let mut yv = vec![0.0; n];
-        let mv_new = t(
-            &mut || {
-                std::hint::black_box(sysr.bsr.mul(&x, &mut yv));
-            },
-            50,
-        );
-        let inv = sysr.bsr.diag_inverses();
-        let dinv = t(
-            &mut || {
-                std::hint::black_box(sysr.bsr.diag_inverses());
-            },
-            20,
-        );
-        let cg_old = t(
-            &mut || {
-                std::hint::black_box(legacy_pcg(sysr, &x, None, 1e-4, 35));
-            },
-            10,
-        );
-        let cg_new = t(
-            &mut || {
-                std::hint::black_box(pcg(&sysr.bsr, &inv, None, &x, None, 1e-4, 35));
-            },
-            10,
-        );
-        let mut op = super::matfree::ElementOperator::new(interior, &sysr.free);
-        op.update(interior, rotations.clone(), 1.0, h * h, None);
-        let mut y2 = vec![0.0; n];
-        op.mul(&x, &mut y2);
-        sysr.bsr.mul(&x, &mut yv);
-        let diff = y2.iter().zip(&yv).fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
-        let scale = yv.iter().fold(0.0f64, |m, a| m.max(a.abs()));
-        let mv_mf = t(
-            &mut || {
-                std::hint::black_box(op.mul(&x, &mut y2));
-            },
-            50,
-        );
-        let inv2 = op.diag_inverses();
-        let dinv_mf = t(
-            &mut || {
-                std::hint::black_box(op.diag_inverses());
-            },
-            20,
-        );
-        let cg_mf = t(
-            &mut || {
-                std::hint::black_box(pcg(&op, &inv2, None, &x, None, 1e-4, 35));
-            },
-            10,
-        );
-        eprintln!("MF diff {diff:.3e} of {scale:.3e} mv_mf {mv_mf:.6} dinv_mf {dinv_mf:.6} cg35_mf {cg_mf:.5}");
-        let mut g = vec![0.0; y.len()];
-        let en = t(
-            &mut || {
-                g.iter_mut().for_each(|v| *v = 0.0);
-                std::hint::black_box(interior.eval(&y, Some(&mut g), None, false));
-            },
-            10,
-        );
-        let _ = zero;
-        eprintln!(
-            "MICRO rot {rot:.5} asm {asm:.5} fill {fill:.5} mv_old {mv_old:.6} mv_new {mv_new:.6} dinv {dinv:.6} cg35_old {cg_old:.5} cg35_new {cg_new:.5} energy {en:.5}"
-        );
     }
 
     /// y ↦ M y (flat, with the configured mass matrix).
@@ -768,8 +643,7 @@ impl BackwardEuler {
             self.system = Some(System::new(&self.interior, &self.pinned, &sig)?);
             self.solver.reset();
             self.last_direction = None;
-            self.coarse = None;
-            self.coarse_ref = None;
+            self.operator = None;
         }
         if let Some(s) = self.system.as_mut() {
             s.extra_hash = hash;
@@ -977,7 +851,6 @@ impl BackwardEuler {
             cg_iterations: 0,
             energy_s: 0.0,
             evaluations: 0,
-            coarse_s: 0.0,
         };
         let cell = self.interior.cell_size;
         for _ in 0..self.settings.max_newton {
@@ -997,24 +870,6 @@ impl BackwardEuler {
                 None
             };
             let sys = self.system.as_mut().expect("system built");
-            sys.assemble(
-                &self.interior,
-                &rotations,
-                mass_coef,
-                lumped,
-                stiff_coef,
-                ex_trip,
-            );
-            report.assembly_s += t0.elapsed().as_secs_f64();
-            let t1 = Instant::now();
-            let mut rhs = vec![0.0; 3 * sys.nfree];
-            for (n, &f) in sys.free.iter().enumerate() {
-                if f != NONE {
-                    for i in 0..3 {
-                        rhs[3 * f + i] = -stiff_coef * g[3 * n + i];
-                    }
-                }
-            }
             let solver = match self.settings.linear_solver {
                 LinearSolver::Auto if inertia.is_some() && 3 * sys.nfree > AUTO_CG_DOFS => {
                     LinearSolver::ConjugateGradient {
@@ -1025,6 +880,43 @@ impl BackwardEuler {
                 LinearSolver::Auto => LinearSolver::Cholesky,
                 other => other,
             };
+            // CG without coupling terms multiplies element by element (no assembly); with
+            // K_x it multiplies the assembled matrix.
+            let matrix_free = matches!(solver, LinearSolver::ConjugateGradient { .. })
+                && extra.is_none();
+            if matrix_free {
+                let op = self
+                    .operator
+                    .get_or_insert_with(|| ElementOperator::new(&self.interior, &sys.free));
+                let lumped_free =
+                    lumped.map(|m| sys.free_nodes.iter().map(|&nd| m[nd]).collect());
+                op.update(
+                    &self.interior,
+                    rotations,
+                    mass_coef,
+                    stiff_coef,
+                    lumped_free,
+                );
+            } else {
+                sys.assemble(
+                    &self.interior,
+                    &rotations,
+                    mass_coef,
+                    lumped,
+                    stiff_coef,
+                    ex_trip,
+                );
+            }
+            report.assembly_s += t0.elapsed().as_secs_f64();
+            let t1 = Instant::now();
+            let mut rhs = vec![0.0; 3 * sys.nfree];
+            for (n, &f) in sys.free.iter().enumerate() {
+                if f != NONE {
+                    for i in 0..3 {
+                        rhs[3 * f + i] = -stiff_coef * g[3 * n + i];
+                    }
+                }
+            }
             match solver {
                 LinearSolver::Auto => unreachable!("resolved above"),
                 LinearSolver::Cholesky => {
@@ -1046,43 +938,16 @@ impl BackwardEuler {
                     } else {
                         None
                     };
-                    sys.fill_bsr();
-                    let inv = sys.bsr.diag_inverses();
-                    let width = coarse_width() * cell;
-                    if width > 0.0 && self.coarse_ref.is_none() {
-                        let tc = Instant::now();
-                        if self.coarse.is_none() {
-                            let pos: Vec<f64> = sys
-                                .free_nodes
-                                .iter()
-                                .flat_map(|&nd| [y[3 * nd], y[3 * nd + 1], y[3 * nd + 2]])
-                                .collect();
-                            self.coarse = Some(Coarse::new(&sys.bsr, &pos, width));
-                        }
-                        let c = self.coarse.as_mut().expect("built above");
-                        if c.factorize(&sys.bsr).is_err() {
-                            self.coarse = None;
-                        }
-                        report.coarse_s += tc.elapsed().as_secs_f64();
-                    }
-                    let coarse = if width > 0.0 { self.coarse.as_ref() } else { None };
-                    let (x, it) = if std::env::var("FURROW_CG_LEGACY").is_ok() {
-                        legacy_pcg(sys, &rhs, guess, rel_tol, max_iter)
+                    let (x, it) = if matrix_free {
+                        let op = self.operator.as_ref().expect("updated above");
+                        let inv = op.diag_inverses();
+                        pcg(op, &inv, &rhs, guess, rel_tol, max_iter)
                     } else {
-                        pcg(&sys.bsr, &inv, coarse, &rhs, guess, rel_tol, max_iter)
+                        sys.fill_bsr();
+                        let inv = sys.bsr.diag_inverses();
+                        pcg(&sys.bsr, &inv, &rhs, guess, rel_tol, max_iter)
                     };
                     report.cg_iterations += it;
-                    // Lagged coarse factor: keep it while CG stays within 1.5× (+3) of the
-                    // iterations it took right after the factorisation, at most 50 solves.
-                    if self.coarse.is_some() {
-                        self.coarse_ref = match self.coarse_ref {
-                            None => Some((it, 1)),
-                            Some((r0, age)) if it <= (3 * r0 / 2).max(r0 + 3) && age < 50 => {
-                                Some((r0, age + 1))
-                            }
-                            Some(_) => None,
-                        };
-                    }
                     if inertia.is_some() && report.iterations == 0 {
                         self.last_direction = Some(x.clone());
                     }
@@ -1168,154 +1033,76 @@ impl BackwardEuler {
     }
 }
 
-/// y = A x for the symmetric system matrix of `sys` (lower triangle stored in CSC with 3 × 3
-/// node blocks, see [`System`]), block by block, in parallel over node-column chunks with
-/// per-chunk accumulators.
-fn block_sym_mul(sys: &System, x: &[f64]) -> Vec<f64> {
-    let n = x.len();
-    let nodes = sys.nfree;
-    let v = sys.mat.val();
-    let cp = &sys.colptr;
-    // A fixed split (not the thread count) and an in-order sum: the same bits on any pool.
-    let chunk = nodes.div_ceil(16).max(16);
-    (0..nodes)
-        .into_par_iter()
-        .step_by(chunk)
-        .map(|b0| {
-            let mut y = vec![0.0; n];
-            for b in b0..(b0 + chunk).min(nodes) {
-                let c = [cp[3 * b], cp[3 * b + 1], cp[3 * b + 2]];
-                let xb = [x[3 * b], x[3 * b + 1], x[3 * b + 2]];
-                // Diagonal block from its lower triangle.
-                let d = |i: usize, j: usize| {
-                    if i >= j {
-                        v[c[j] + i - j]
-                    } else {
-                        v[c[i] + j - i]
-                    }
-                };
-                let mut acc = [0.0; 3];
-                for i in 0..3 {
-                    acc[i] = d(i, 0) * xb[0] + d(i, 1) * xb[1] + d(i, 2) * xb[2];
-                }
-                let (s0, s1, s2) = (
-                    &v[c[0] + 3..cp[3 * b + 1]],
-                    &v[c[1] + 2..cp[3 * b + 2]],
-                    &v[c[2] + 1..cp[3 * b + 3]],
-                );
-                for (r, &a) in sys.nbrs[b][1..].iter().enumerate() {
-                    let o = 3 * r;
-                    let col0 = &s0[o..o + 3];
-                    let col1 = &s1[o..o + 3];
-                    let col2 = &s2[o..o + 3];
-                    let xa = &x[3 * a..3 * a + 3];
-                    let ya = &mut y[3 * a..3 * a + 3];
-                    for i in 0..3 {
-                        ya[i] += col0[i] * xb[0] + col1[i] * xb[1] + col2[i] * xb[2];
-                    }
-                    acc[0] += col0[0] * xa[0] + col0[1] * xa[1] + col0[2] * xa[2];
-                    acc[1] += col1[0] * xa[0] + col1[1] * xa[1] + col1[2] * xa[2];
-                    acc[2] += col2[0] * xa[0] + col2[1] * xa[1] + col2[2] * xa[2];
-                }
-                for i in 0..3 {
-                    y[3 * b + i] += acc[i];
-                }
-            }
-            y
-        })
-        .collect::<Vec<Vec<f64>>>()
-        .into_iter()
-        .fold(vec![0.0; n], |mut a, b| {
-            a.iter_mut().zip(&b).for_each(|(p, q)| *p += q);
-            a
-        })
-}
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fem::bench::cube_mesh;
+    use crate::fem::Material;
+    use crate::lattice::{ElementOrder, Lattice, LatticeSettings};
+    use nalgebra::{Rotation3, Unit};
 
-/// Preconditioned conjugate gradients with 3 × 3 block-Jacobi on a lower-stored SPD matrix
-/// with node blocks (the layout of `System`). Returns the solution and the iterations.
-/// `guess` (when given, of length `b.len()`) is the starting point; it is dropped for zero
-/// when its residual exceeds ‖b‖.
-fn legacy_pcg(
-    sys: &System,
-    b: &[f64],
-    guess: Option<&[f64]>,
-    rel_tol: f64,
-    max_iter: usize,
-) -> (Vec<f64>, usize) {
-    let nodes = sys.nfree;
-    let ar = sys.mat.as_ref();
-    let cp = ar.symbolic().col_ptr();
-    let v = ar.val();
-    // Diagonal blocks: column 3n+j starts with rows 3n+j..3n+2.
-    let inv: Vec<M3> = (0..nodes)
-        .map(|nd| {
-            let mut m = M3::zeros();
-            for j in 0..3 {
-                for i in j..3 {
-                    let val = v[cp[3 * nd + j] + i - j];
-                    m[(i, j)] = val;
-                    m[(j, i)] = val;
+    /// The matrix-free operator and the assembled matrix (lower triangle mirrored into
+    /// node-block rows) give the same products and diagonal blocks, with consistent and
+    /// with lumped mass, pinned nodes and arbitrary element rotations.
+    #[test]
+    fn matrix_free_operator_equals_the_assembled_matrix() {
+        let h = 0.02;
+        let lat = Lattice::build(
+            &cube_mesh(3.0 * h, 3),
+            &LatticeSettings {
+                cell_size: Some(h),
+                order: ElementOrder::Quadratic,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let int = Interior::new(&lat, &Material::default()).unwrap();
+        let pinned: Vec<bool> = lat.rest.iter().map(|p| p.z < 0.5 * h).collect();
+        let mut sys = System::new(&int, &pinned, &[]).unwrap();
+        let rot: Vec<M3> = (0..int.elements.len())
+            .map(|e| {
+                let ax = Unit::new_normalize(Vector3::new(1.0, e as f64, 2.0 - e as f64));
+                *Rotation3::from_axis_angle(&ax, 0.3 * e as f64).matrix()
+            })
+            .collect();
+        let lumped_all = int.node_masses();
+        let lumped_free: Vec<f64> = sys.free_nodes.iter().map(|&n| lumped_all[n]).collect();
+        let n = 3 * sys.nfree;
+        let x: Vec<f64> = (0..n).map(|i| ((i * 7919) % 1000) as f64 * 1e-3 - 0.5).collect();
+        for lumped in [false, true] {
+            let coefs = (1.0, h * h);
+            sys.assemble(
+                &int,
+                &rot,
+                coefs.0,
+                lumped.then_some(lumped_all.as_slice()),
+                coefs.1,
+                None,
+            );
+            sys.fill_bsr();
+            let mut op = ElementOperator::new(&int, &sys.free);
+            op.update(
+                &int,
+                rot.clone(),
+                coefs.0,
+                coefs.1,
+                lumped.then(|| lumped_free.clone()),
+            );
+            let (mut y1, mut y2) = (vec![0.0; n], vec![0.0; n]);
+            let e1 = sys.bsr.mul(&x, &mut y1);
+            let e2 = op.mul(&x, &mut y2);
+            let scale = y1.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            let diff = y1
+                .iter()
+                .zip(&y2)
+                .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+            assert!(diff < 1e-12 * scale, "lumped {lumped}: {diff} of {scale}");
+            assert!((e1 - e2).abs() < 1e-12 * e1.abs());
+            for (a, b) in sys.bsr.diag_inverses().iter().zip(op.diag_inverses()) {
+                for k in 0..9 {
+                    assert!((a[k] - b[k]).abs() < 1e-9 * a[k].abs().max(1e-3 * a[0].abs()));
                 }
             }
-            m.try_inverse().unwrap_or_else(|| {
-                M3::from_diagonal(&m.diagonal().map(|d| 1.0 / d.abs().max(1e-300)))
-            })
-        })
-        .collect();
-    let precond = |r: &[f64]| -> Vec<f64> {
-        let mut z = vec![0.0; r.len()];
-        for (nd, m) in inv.iter().enumerate() {
-            let rv = nalgebra::Vector3::new(r[3 * nd], r[3 * nd + 1], r[3 * nd + 2]);
-            let zv = m * rv;
-            z[3 * nd..3 * nd + 3].copy_from_slice(zv.as_slice());
-        }
-        z
-    };
-    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-    let n = b.len();
-    let mut x = vec![0.0; n];
-    let mut r = b.to_vec();
-    let bn = dot(b, b).sqrt();
-    if bn == 0.0 {
-        return (x, 0);
-    }
-    if let Some(g) = guess.filter(|g| g.len() == n) {
-        // Scale the guess to minimise the quadratic along it: α = gᵀb / gᵀAg.
-        let ag = block_sym_mul(sys, g);
-        let gag = dot(g, &ag);
-        if gag > 0.0 {
-            let alpha = dot(g, b) / gag;
-            let r0: Vec<f64> = b.iter().zip(&ag).map(|(bi, ai)| bi - alpha * ai).collect();
-            if dot(&r0, &r0).sqrt() < bn {
-                x.iter_mut().zip(g).for_each(|(xi, gi)| *xi = alpha * gi);
-                r = r0;
-            }
         }
     }
-    let mut z = precond(&r);
-    let mut p = z.clone();
-    let mut rz = dot(&r, &z);
-    for it in 1..=max_iter {
-        let ap = block_sym_mul(sys, &p);
-        let pap = dot(&p, &ap);
-        if pap <= 0.0 {
-            return (x, it);
-        }
-        let alpha = rz / pap;
-        for i in 0..n {
-            x[i] += alpha * p[i];
-            r[i] -= alpha * ap[i];
-        }
-        if dot(&r, &r).sqrt() <= rel_tol * bn {
-            return (x, it);
-        }
-        z = precond(&r);
-        let rz2 = dot(&r, &z);
-        let beta = rz2 / rz;
-        rz = rz2;
-        for i in 0..n {
-            p[i] = z[i] + beta * p[i];
-        }
-    }
-    (x, max_iter)
 }
