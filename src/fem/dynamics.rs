@@ -17,12 +17,18 @@
 //! The matrix is assembled straight into a compressed lower-triangle pattern built once
 //! (node blocks of 3 × 3), in parallel over node columns, through a precomputed map from
 //! (element, node pair) to block position; each block is R_e K₀_ab R_eᵀ with K₀ precomputed.
-//! CG multiplies by that lower triangle block by block and starts each time step from the
-//! previous step's first Newton direction, scaled to minimise the quadratic along it.
+//! Conjugate gradients (block-Jacobi preconditioned, [`super::cg::pcg`]) skip the assembly
+//! when there is no K_x: they multiply element by element ([`ElementOperator`]: rotate,
+//! one shared K₀ + M₀ product per chunk of elements, rotate back), which costs about what a
+//! product with the assembled matrix costs and saves its assembly. With K_x they multiply the
+//! assembled matrix, mirrored into full node-block rows. CG starts each time step from the
+//! previous step's first Newton direction, scaled to minimise the quadratic along it. The
+//! element rotations of the gradient evaluation at the Newton point are reused for its
+//! matrix.
 
 use super::cg::{pcg, BlockCsr};
-use super::matfree::ElementOperator;
 use super::interior::Interior;
+use super::matfree::ElementOperator;
 use super::FemError;
 use crate::math::sparse::SpdSolver;
 use crate::math::Energy;
@@ -61,9 +67,9 @@ pub enum LinearSolver {
     /// Measured choice (the default): Cholesky for quasi-static solves (no mass term, badly
     /// conditioned for CG) and for time steps with at most [`AUTO_CG_DOFS`] free DOFs;
     /// block-Jacobi CG (rel_tol 1e-4, ≤ 1000 iterations) for larger time steps, where it
-    /// measured 5–10× faster than Cholesky per Newton iteration (1,000 quadratic elements,
-    /// 4,320 DOFs, release, 2 loaded cores: CG 18–28 ms with 35 iterations vs Cholesky
-    /// 230–330 ms per solve).
+    /// measured about 10× faster than Cholesky per Newton iteration (1,000 quadratic
+    /// elements, 4,320 DOFs, release, 2 loaded cores: matrix-free CG 17–35 ms with 35
+    /// iterations, no assembly, vs Cholesky 230–330 ms per solve).
     Auto,
     /// Sparse Cholesky (faer, symbolic analysis cached): exact, cost grows fast in 3D.
     Cholesky,
@@ -545,6 +551,8 @@ pub struct BackwardEuler {
     last_direction: Option<Vec<f64>>,
     /// CG's matrix-free Newton operator (built on the first CG solve without K_x).
     operator: Option<ElementOperator>,
+    /// Positions of the last potential evaluation with gradient and its element rotations.
+    rot_cache: std::cell::RefCell<(Vec<f64>, Vec<M3>)>,
 }
 
 impl BackwardEuler {
@@ -586,6 +594,7 @@ impl BackwardEuler {
             eval_clock: std::cell::Cell::new((0.0, 0)),
             last_direction: None,
             operator: None,
+            rot_cache: Default::default(),
         })
     }
 
@@ -766,9 +775,16 @@ impl BackwardEuler {
     ) -> (f64, Vec<f64>) {
         let n = y.len();
         let mut g = if want_grad { vec![0.0; n] } else { Vec::new() };
-        let mut phi =
-            self.interior
-                .eval(y, if want_grad { Some(&mut g) } else { None }, None, false);
+        let mut phi = if want_grad {
+            let mut cache = self.rot_cache.borrow_mut();
+            let (at, rot) = &mut *cache;
+            let e = self.interior.eval_with_rotations(y, &mut g, rot);
+            at.clear();
+            at.extend_from_slice(y);
+            e
+        } else {
+            self.interior.eval(y, None, None, false)
+        };
         if let Some((target, h)) = inertia {
             let d: Vec<f64> = y.iter().zip(target).map(|(a, b)| a - b).collect();
             let md = self.mass_times(&d);
@@ -859,10 +875,19 @@ impl BackwardEuler {
                 break;
             }
             let t0 = Instant::now();
-            let rotations: Vec<M3> = (0..self.interior.elements.len())
-                .into_par_iter()
-                .map(|e| self.interior.element_rotation(y, e))
-                .collect();
+            // The rotations of the last gradient evaluation when it was at y (it usually is).
+            let rotations: Vec<M3> = {
+                let cache = self.rot_cache.borrow();
+                if cache.0.as_slice() == &*y && cache.1.len() == self.interior.elements.len() {
+                    cache.1.clone()
+                } else {
+                    drop(cache);
+                    (0..self.interior.elements.len())
+                        .into_par_iter()
+                        .map(|e| self.interior.element_rotation(y, e))
+                        .collect()
+                }
+            };
             let ex_trip = extra.map(|x| x.stiffness);
             let lumped = if self.settings.lumped_mass {
                 Some(self.lumped.as_slice())
@@ -882,14 +907,13 @@ impl BackwardEuler {
             };
             // CG without coupling terms multiplies element by element (no assembly); with
             // K_x it multiplies the assembled matrix.
-            let matrix_free = matches!(solver, LinearSolver::ConjugateGradient { .. })
-                && extra.is_none();
+            let matrix_free =
+                matches!(solver, LinearSolver::ConjugateGradient { .. }) && extra.is_none();
             if matrix_free {
                 let op = self
                     .operator
                     .get_or_insert_with(|| ElementOperator::new(&self.interior, &sys.free));
-                let lumped_free =
-                    lumped.map(|m| sys.free_nodes.iter().map(|&nd| m[nd]).collect());
+                let lumped_free = lumped.map(|m| sys.free_nodes.iter().map(|&nd| m[nd]).collect());
                 op.update(
                     &self.interior,
                     rotations,
@@ -1068,7 +1092,9 @@ mod tests {
         let lumped_all = int.node_masses();
         let lumped_free: Vec<f64> = sys.free_nodes.iter().map(|&n| lumped_all[n]).collect();
         let n = 3 * sys.nfree;
-        let x: Vec<f64> = (0..n).map(|i| ((i * 7919) % 1000) as f64 * 1e-3 - 0.5).collect();
+        let x: Vec<f64> = (0..n)
+            .map(|i| ((i * 7919) % 1000) as f64 * 1e-3 - 0.5)
+            .collect();
         for lumped in [false, true] {
             let coefs = (1.0, h * h);
             sys.assemble(

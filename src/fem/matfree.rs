@@ -123,7 +123,6 @@ impl ElementOperator {
     pub fn mul(&self, x: &[f64], y: &mut [f64]) -> f64 {
         let k = self.k;
         let n3 = 3 * k;
-        let ne = self.rot.len();
         let mut guard = self.buf.lock().expect("scratch lock");
         let buf: &mut [f64] = &mut guard;
         let ke = MatRef::from_column_major_slice(&self.ke, n3, n3);
@@ -162,7 +161,6 @@ impl ElementOperator {
                     }
                 }
             });
-        let _ = ne;
         let buf: &[f64] = buf;
         let parts: Vec<f64> = y
             .par_chunks_mut(3 * CHUNK_NODES)
