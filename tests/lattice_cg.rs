@@ -151,7 +151,7 @@ fn cg_with_coupling_terms_matches_cholesky() {
     let rest = lat.rest_flat();
     let qc = run(LinearSolver::Cholesky);
     let qg = run(cg(1e-10));
-    let motion = max_gap(&[qc.clone()], &[rest]);
+    let motion = max_gap(std::slice::from_ref(&qc), &[rest]);
     let gap = max_gap(&[qc], &[qg]);
     println!("CG vs Cholesky with K_x: {gap:.3e} m of motion {motion:.3e} m");
     assert!(motion > 1e-4, "{motion}");
