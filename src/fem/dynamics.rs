@@ -17,10 +17,18 @@
 //! The matrix is assembled straight into a compressed lower-triangle pattern built once
 //! (node blocks of 3 × 3), in parallel over node columns, through a precomputed map from
 //! (element, node pair) to block position; each block is R_e K₀_ab R_eᵀ with K₀ precomputed.
-//! CG multiplies by that lower triangle block by block and starts each time step from the
-//! previous step's first Newton direction, scaled to minimise the quadratic along it.
+//! Conjugate gradients (block-Jacobi preconditioned, [`super::cg::pcg`]) skip the assembly
+//! when there is no K_x: they multiply element by element ([`ElementOperator`]: rotate,
+//! one shared K₀ + M₀ product per chunk of elements, rotate back), which costs about what a
+//! product with the assembled matrix costs and saves its assembly. With K_x they multiply the
+//! assembled matrix, mirrored into full node-block rows. CG starts each time step from the
+//! previous step's first Newton direction, scaled to minimise the quadratic along it. The
+//! element rotations of the gradient evaluation at the Newton point are reused for its
+//! matrix.
 
+use super::cg::{pcg, BlockCsr};
 use super::interior::Interior;
+use super::matfree::ElementOperator;
 use super::FemError;
 use crate::math::sparse::SpdSolver;
 use crate::math::Energy;
@@ -59,9 +67,9 @@ pub enum LinearSolver {
     /// Measured choice (the default): Cholesky for quasi-static solves (no mass term, badly
     /// conditioned for CG) and for time steps with at most [`AUTO_CG_DOFS`] free DOFs;
     /// block-Jacobi CG (rel_tol 1e-4, ≤ 1000 iterations) for larger time steps, where it
-    /// measured 5–10× faster than Cholesky per Newton iteration (1,000 quadratic elements,
-    /// 4,320 DOFs, release, 2 loaded cores: CG 18–28 ms with 35 iterations vs Cholesky
-    /// 230–330 ms per solve).
+    /// measured about 10× faster than Cholesky per Newton iteration (1,000 quadratic
+    /// elements, 4,320 DOFs, release, 2 loaded cores: matrix-free CG 17–35 ms with 35
+    /// iterations, no assembly, vs Cholesky 230–330 ms per solve).
     Auto,
     /// Sparse Cholesky (faer, symbolic analysis cached): exact, cost grows fast in 3D.
     Cholesky,
@@ -189,6 +197,14 @@ struct System {
     /// FNV hash of the extra triplets' (row, column) layout last seen with this system.
     extra_hash: u64,
     mat: SparseColMat<usize, f64>,
+    /// The same matrix with both triangles in node-block rows (for CG), filled from `mat`.
+    bsr: BlockCsr,
+    /// For each block of `bsr` off the diagonal: the rank of the lower-triangle partner in
+    /// its column's `nbrs` list (block (a, b), a > b: rank of a in `nbrs[b]`; a < b: rank of
+    /// b in `nbrs[a]`).
+    bsr_rank: Vec<u32>,
+    /// Free node → node.
+    free_nodes: Vec<usize>,
 }
 
 const NONE: usize = usize::MAX;
@@ -272,6 +288,31 @@ impl System {
         let nnz = rows.len();
         let sym = SymbolicSparseColMat::new_checked(n, n, colptr.clone(), None, rows);
         let mat = SparseColMat::new(sym, vec![0.0; nnz]);
+        // Full block rows: lower partners (ascending b < a), the diagonal, then nbrs[a].
+        let mut lower: Vec<Vec<(u32, u32)>> = vec![Vec::new(); nfree];
+        for (b, l) in nbrs.iter().enumerate() {
+            for (r, &a) in l[1..].iter().enumerate() {
+                lower[a].push((b as u32, r as u32));
+            }
+        }
+        let mut rows_b: Vec<Vec<u32>> = Vec::with_capacity(nfree);
+        let mut bsr_rank = Vec::new();
+        for a in 0..nfree {
+            let mut row: Vec<u32> = Vec::new();
+            for &(b, r) in &lower[a] {
+                row.push(b);
+                bsr_rank.push(r);
+            }
+            row.push(a as u32);
+            bsr_rank.push(0);
+            for (r, &b) in nbrs[a][1..].iter().enumerate() {
+                row.push(b as u32);
+                bsr_rank.push(r as u32);
+            }
+            rows_b.push(row);
+        }
+        let bsr = BlockCsr::from_pattern(&rows_b);
+        let free_nodes = (0..interior.nodes).filter(|&n| free[n] != NONE).collect();
         Ok(Self {
             free,
             nfree,
@@ -283,7 +324,46 @@ impl System {
             extra_sig: extra.to_vec(),
             extra_hash: 0,
             mat,
+            bsr,
+            bsr_rank,
+            free_nodes,
         })
+    }
+
+    /// Copy the assembled lower-triangle matrix into the full node-block rows of `bsr`.
+    fn fill_bsr(&mut self) {
+        let cp = &self.colptr;
+        let cv = self.mat.val();
+        let rank = &self.bsr_rank;
+        let bsr = &mut self.bsr;
+        let (ptr, col) = (&bsr.ptr, &bsr.col);
+        let mut rows: Vec<&mut [f64]> = Vec::with_capacity(ptr.len() - 1);
+        let mut rest: &mut [f64] = &mut bsr.val;
+        for a in 0..ptr.len() - 1 {
+            let (head, tail) = rest.split_at_mut(9 * (ptr[a + 1] - ptr[a]));
+            rows.push(head);
+            rest = tail;
+        }
+        rows.into_par_iter().enumerate().for_each(|(a, out)| {
+            for k in ptr[a]..ptr[a + 1] {
+                let b = col[k] as usize;
+                let r = rank[k] as usize;
+                let o = &mut out[9 * (k - ptr[a])..9 * (k - ptr[a]) + 9];
+                for i in 0..3 {
+                    for j in 0..3 {
+                        o[3 * i + j] = if b < a {
+                            cv[cp[3 * b + j] + (3 - j) + 3 * r + i]
+                        } else if b > a {
+                            cv[cp[3 * a + i] + (3 - i) + 3 * r + j]
+                        } else if i >= j {
+                            cv[cp[3 * a + j] + i - j]
+                        } else {
+                            cv[cp[3 * a + i] + j - i]
+                        };
+                    }
+                }
+            }
+        });
     }
 
     /// Value index of entry (3·fa + i, 3·fb + j), fa ≥ fb, (i ≥ j when fa = fb).
@@ -469,6 +549,10 @@ pub struct BackwardEuler {
     eval_clock: std::cell::Cell<(f64, usize)>,
     /// First Newton direction of the last time step (free DOFs, m), CG's warm start.
     last_direction: Option<Vec<f64>>,
+    /// CG's matrix-free Newton operator (built on the first CG solve without K_x).
+    operator: Option<ElementOperator>,
+    /// Positions of the last potential evaluation with gradient and its element rotations.
+    rot_cache: std::cell::RefCell<(Vec<f64>, Vec<M3>)>,
 }
 
 impl BackwardEuler {
@@ -509,6 +593,8 @@ impl BackwardEuler {
             solver: SpdSolver::new(),
             eval_clock: std::cell::Cell::new((0.0, 0)),
             last_direction: None,
+            operator: None,
+            rot_cache: Default::default(),
         })
     }
 
@@ -566,6 +652,7 @@ impl BackwardEuler {
             self.system = Some(System::new(&self.interior, &self.pinned, &sig)?);
             self.solver.reset();
             self.last_direction = None;
+            self.operator = None;
         }
         if let Some(s) = self.system.as_mut() {
             s.extra_hash = hash;
@@ -688,9 +775,16 @@ impl BackwardEuler {
     ) -> (f64, Vec<f64>) {
         let n = y.len();
         let mut g = if want_grad { vec![0.0; n] } else { Vec::new() };
-        let mut phi =
-            self.interior
-                .eval(y, if want_grad { Some(&mut g) } else { None }, None, false);
+        let mut phi = if want_grad {
+            let mut cache = self.rot_cache.borrow_mut();
+            let (at, rot) = &mut *cache;
+            let e = self.interior.eval_with_rotations(y, &mut g, rot);
+            at.clear();
+            at.extend_from_slice(y);
+            e
+        } else {
+            self.interior.eval(y, None, None, false)
+        };
         if let Some((target, h)) = inertia {
             let d: Vec<f64> = y.iter().zip(target).map(|(a, b)| a - b).collect();
             let md = self.mass_times(&d);
@@ -781,10 +875,19 @@ impl BackwardEuler {
                 break;
             }
             let t0 = Instant::now();
-            let rotations: Vec<M3> = (0..self.interior.elements.len())
-                .into_par_iter()
-                .map(|e| self.interior.element_rotation(y, e))
-                .collect();
+            // The rotations of the last gradient evaluation when it was at y (it usually is).
+            let rotations: Vec<M3> = {
+                let cache = self.rot_cache.borrow();
+                if cache.0.as_slice() == &*y && cache.1.len() == self.interior.elements.len() {
+                    cache.1.clone()
+                } else {
+                    drop(cache);
+                    (0..self.interior.elements.len())
+                        .into_par_iter()
+                        .map(|e| self.interior.element_rotation(y, e))
+                        .collect()
+                }
+            };
             let ex_trip = extra.map(|x| x.stiffness);
             let lumped = if self.settings.lumped_mass {
                 Some(self.lumped.as_slice())
@@ -792,24 +895,6 @@ impl BackwardEuler {
                 None
             };
             let sys = self.system.as_mut().expect("system built");
-            sys.assemble(
-                &self.interior,
-                &rotations,
-                mass_coef,
-                lumped,
-                stiff_coef,
-                ex_trip,
-            );
-            report.assembly_s += t0.elapsed().as_secs_f64();
-            let t1 = Instant::now();
-            let mut rhs = vec![0.0; 3 * sys.nfree];
-            for (n, &f) in sys.free.iter().enumerate() {
-                if f != NONE {
-                    for i in 0..3 {
-                        rhs[3 * f + i] = -stiff_coef * g[3 * n + i];
-                    }
-                }
-            }
             let solver = match self.settings.linear_solver {
                 LinearSolver::Auto if inertia.is_some() && 3 * sys.nfree > AUTO_CG_DOFS => {
                     LinearSolver::ConjugateGradient {
@@ -820,6 +905,42 @@ impl BackwardEuler {
                 LinearSolver::Auto => LinearSolver::Cholesky,
                 other => other,
             };
+            // CG without coupling terms multiplies element by element (no assembly); with
+            // K_x it multiplies the assembled matrix.
+            let matrix_free =
+                matches!(solver, LinearSolver::ConjugateGradient { .. }) && extra.is_none();
+            if matrix_free {
+                let op = self
+                    .operator
+                    .get_or_insert_with(|| ElementOperator::new(&self.interior, &sys.free));
+                let lumped_free = lumped.map(|m| sys.free_nodes.iter().map(|&nd| m[nd]).collect());
+                op.update(
+                    &self.interior,
+                    rotations,
+                    mass_coef,
+                    stiff_coef,
+                    lumped_free,
+                );
+            } else {
+                sys.assemble(
+                    &self.interior,
+                    &rotations,
+                    mass_coef,
+                    lumped,
+                    stiff_coef,
+                    ex_trip,
+                );
+            }
+            report.assembly_s += t0.elapsed().as_secs_f64();
+            let t1 = Instant::now();
+            let mut rhs = vec![0.0; 3 * sys.nfree];
+            for (n, &f) in sys.free.iter().enumerate() {
+                if f != NONE {
+                    for i in 0..3 {
+                        rhs[3 * f + i] = -stiff_coef * g[3 * n + i];
+                    }
+                }
+            }
             match solver {
                 LinearSolver::Auto => unreachable!("resolved above"),
                 LinearSolver::Cholesky => {
@@ -841,7 +962,15 @@ impl BackwardEuler {
                     } else {
                         None
                     };
-                    let (x, it) = pcg(sys, &rhs, guess, rel_tol, max_iter);
+                    let (x, it) = if matrix_free {
+                        let op = self.operator.as_ref().expect("updated above");
+                        let inv = op.diag_inverses();
+                        pcg(op, &inv, &rhs, guess, rel_tol, max_iter)
+                    } else {
+                        sys.fill_bsr();
+                        let inv = sys.bsr.diag_inverses();
+                        pcg(&sys.bsr, &inv, &rhs, guess, rel_tol, max_iter)
+                    };
                     report.cg_iterations += it;
                     if inertia.is_some() && report.iterations == 0 {
                         self.last_direction = Some(x.clone());
@@ -928,154 +1057,78 @@ impl BackwardEuler {
     }
 }
 
-/// y = A x for the symmetric system matrix of `sys` (lower triangle stored in CSC with 3 × 3
-/// node blocks, see [`System`]), block by block, in parallel over node-column chunks with
-/// per-chunk accumulators.
-fn block_sym_mul(sys: &System, x: &[f64]) -> Vec<f64> {
-    let n = x.len();
-    let nodes = sys.nfree;
-    let v = sys.mat.val();
-    let cp = &sys.colptr;
-    // A fixed split (not the thread count) and an in-order sum: the same bits on any pool.
-    let chunk = nodes.div_ceil(16).max(16);
-    (0..nodes)
-        .into_par_iter()
-        .step_by(chunk)
-        .map(|b0| {
-            let mut y = vec![0.0; n];
-            for b in b0..(b0 + chunk).min(nodes) {
-                let c = [cp[3 * b], cp[3 * b + 1], cp[3 * b + 2]];
-                let xb = [x[3 * b], x[3 * b + 1], x[3 * b + 2]];
-                // Diagonal block from its lower triangle.
-                let d = |i: usize, j: usize| {
-                    if i >= j {
-                        v[c[j] + i - j]
-                    } else {
-                        v[c[i] + j - i]
-                    }
-                };
-                let mut acc = [0.0; 3];
-                for i in 0..3 {
-                    acc[i] = d(i, 0) * xb[0] + d(i, 1) * xb[1] + d(i, 2) * xb[2];
-                }
-                let (s0, s1, s2) = (
-                    &v[c[0] + 3..cp[3 * b + 1]],
-                    &v[c[1] + 2..cp[3 * b + 2]],
-                    &v[c[2] + 1..cp[3 * b + 3]],
-                );
-                for (r, &a) in sys.nbrs[b][1..].iter().enumerate() {
-                    let o = 3 * r;
-                    let col0 = &s0[o..o + 3];
-                    let col1 = &s1[o..o + 3];
-                    let col2 = &s2[o..o + 3];
-                    let xa = &x[3 * a..3 * a + 3];
-                    let ya = &mut y[3 * a..3 * a + 3];
-                    for i in 0..3 {
-                        ya[i] += col0[i] * xb[0] + col1[i] * xb[1] + col2[i] * xb[2];
-                    }
-                    acc[0] += col0[0] * xa[0] + col0[1] * xa[1] + col0[2] * xa[2];
-                    acc[1] += col1[0] * xa[0] + col1[1] * xa[1] + col1[2] * xa[2];
-                    acc[2] += col2[0] * xa[0] + col2[1] * xa[1] + col2[2] * xa[2];
-                }
-                for i in 0..3 {
-                    y[3 * b + i] += acc[i];
-                }
-            }
-            y
-        })
-        .collect::<Vec<Vec<f64>>>()
-        .into_iter()
-        .fold(vec![0.0; n], |mut a, b| {
-            a.iter_mut().zip(&b).for_each(|(p, q)| *p += q);
-            a
-        })
-}
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fem::bench::cube_mesh;
+    use crate::fem::Material;
+    use crate::lattice::{ElementOrder, Lattice, LatticeSettings};
+    use nalgebra::{Rotation3, Unit};
 
-/// Preconditioned conjugate gradients with 3 × 3 block-Jacobi on a lower-stored SPD matrix
-/// with node blocks (the layout of `System`). Returns the solution and the iterations.
-/// `guess` (when given, of length `b.len()`) is the starting point; it is dropped for zero
-/// when its residual exceeds ‖b‖.
-fn pcg(
-    sys: &System,
-    b: &[f64],
-    guess: Option<&[f64]>,
-    rel_tol: f64,
-    max_iter: usize,
-) -> (Vec<f64>, usize) {
-    let nodes = sys.nfree;
-    let ar = sys.mat.as_ref();
-    let cp = ar.symbolic().col_ptr();
-    let v = ar.val();
-    // Diagonal blocks: column 3n+j starts with rows 3n+j..3n+2.
-    let inv: Vec<M3> = (0..nodes)
-        .map(|nd| {
-            let mut m = M3::zeros();
-            for j in 0..3 {
-                for i in j..3 {
-                    let val = v[cp[3 * nd + j] + i - j];
-                    m[(i, j)] = val;
-                    m[(j, i)] = val;
+    /// The matrix-free operator and the assembled matrix (lower triangle mirrored into
+    /// node-block rows) give the same products and diagonal blocks, with consistent and
+    /// with lumped mass, pinned nodes and arbitrary element rotations.
+    #[test]
+    fn matrix_free_operator_equals_the_assembled_matrix() {
+        let h = 0.02;
+        let lat = Lattice::build(
+            &cube_mesh(3.0 * h, 3),
+            &LatticeSettings {
+                cell_size: Some(h),
+                order: ElementOrder::Quadratic,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let int = Interior::new(&lat, &Material::default()).unwrap();
+        let pinned: Vec<bool> = lat.rest.iter().map(|p| p.z < 0.5 * h).collect();
+        let mut sys = System::new(&int, &pinned, &[]).unwrap();
+        let rot: Vec<M3> = (0..int.elements.len())
+            .map(|e| {
+                let ax = Unit::new_normalize(Vector3::new(1.0, e as f64, 2.0 - e as f64));
+                *Rotation3::from_axis_angle(&ax, 0.3 * e as f64).matrix()
+            })
+            .collect();
+        let lumped_all = int.node_masses();
+        let lumped_free: Vec<f64> = sys.free_nodes.iter().map(|&n| lumped_all[n]).collect();
+        let n = 3 * sys.nfree;
+        let x: Vec<f64> = (0..n)
+            .map(|i| ((i * 7919) % 1000) as f64 * 1e-3 - 0.5)
+            .collect();
+        for lumped in [false, true] {
+            let coefs = (1.0, h * h);
+            sys.assemble(
+                &int,
+                &rot,
+                coefs.0,
+                lumped.then_some(lumped_all.as_slice()),
+                coefs.1,
+                None,
+            );
+            sys.fill_bsr();
+            let mut op = ElementOperator::new(&int, &sys.free);
+            op.update(
+                &int,
+                rot.clone(),
+                coefs.0,
+                coefs.1,
+                lumped.then(|| lumped_free.clone()),
+            );
+            let (mut y1, mut y2) = (vec![0.0; n], vec![0.0; n]);
+            let e1 = sys.bsr.mul(&x, &mut y1);
+            let e2 = op.mul(&x, &mut y2);
+            let scale = y1.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            let diff = y1
+                .iter()
+                .zip(&y2)
+                .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+            assert!(diff < 1e-12 * scale, "lumped {lumped}: {diff} of {scale}");
+            assert!((e1 - e2).abs() < 1e-12 * e1.abs());
+            for (a, b) in sys.bsr.diag_inverses().iter().zip(op.diag_inverses()) {
+                for k in 0..9 {
+                    assert!((a[k] - b[k]).abs() < 1e-9 * a[k].abs().max(1e-3 * a[0].abs()));
                 }
             }
-            m.try_inverse().unwrap_or_else(|| {
-                M3::from_diagonal(&m.diagonal().map(|d| 1.0 / d.abs().max(1e-300)))
-            })
-        })
-        .collect();
-    let precond = |r: &[f64]| -> Vec<f64> {
-        let mut z = vec![0.0; r.len()];
-        for (nd, m) in inv.iter().enumerate() {
-            let rv = nalgebra::Vector3::new(r[3 * nd], r[3 * nd + 1], r[3 * nd + 2]);
-            let zv = m * rv;
-            z[3 * nd..3 * nd + 3].copy_from_slice(zv.as_slice());
-        }
-        z
-    };
-    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-    let n = b.len();
-    let mut x = vec![0.0; n];
-    let mut r = b.to_vec();
-    let bn = dot(b, b).sqrt();
-    if bn == 0.0 {
-        return (x, 0);
-    }
-    if let Some(g) = guess.filter(|g| g.len() == n) {
-        // Scale the guess to minimise the quadratic along it: α = gᵀb / gᵀAg.
-        let ag = block_sym_mul(sys, g);
-        let gag = dot(g, &ag);
-        if gag > 0.0 {
-            let alpha = dot(g, b) / gag;
-            let r0: Vec<f64> = b.iter().zip(&ag).map(|(bi, ai)| bi - alpha * ai).collect();
-            if dot(&r0, &r0).sqrt() < bn {
-                x.iter_mut().zip(g).for_each(|(xi, gi)| *xi = alpha * gi);
-                r = r0;
-            }
         }
     }
-    let mut z = precond(&r);
-    let mut p = z.clone();
-    let mut rz = dot(&r, &z);
-    for it in 1..=max_iter {
-        let ap = block_sym_mul(sys, &p);
-        let pap = dot(&p, &ap);
-        if pap <= 0.0 {
-            return (x, it);
-        }
-        let alpha = rz / pap;
-        for i in 0..n {
-            x[i] += alpha * p[i];
-            r[i] -= alpha * ap[i];
-        }
-        if dot(&r, &r).sqrt() <= rel_tol * bn {
-            return (x, it);
-        }
-        z = precond(&r);
-        let rz2 = dot(&r, &z);
-        let beta = rz2 / rz;
-        rz = rz2;
-        for i in 0..n {
-            p[i] = z[i] + beta * p[i];
-        }
-    }
-    (x, max_iter)
 }

@@ -161,6 +161,21 @@ impl Interior {
         self.order.nodes_per_element()
     }
 
+    /// Deformation gradient at the element centre, F_c = Σ_a x_a ∇N_a(centre)ᵀ (no
+    /// allocation).
+    fn center_def_grad(&self, x: &[f64], e: usize) -> M3 {
+        let mut f = M3::zeros();
+        for (&n, ga) in self.elements[e].iter().zip(&self.center_g) {
+            for i in 0..3 {
+                let xi = x[3 * n + i];
+                for j in 0..3 {
+                    f[(i, j)] += xi * ga[j];
+                }
+            }
+        }
+        f
+    }
+
     fn gather(&self, x: &[f64], e: usize) -> Vec<Vector3<f64>> {
         self.elements[e]
             .iter()
@@ -186,7 +201,7 @@ impl Interior {
 
     /// The element rotation R_e (polar rotation of F at the cell centre, reflection removed).
     pub fn element_rotation(&self, x: &[f64], e: usize) -> M3 {
-        rotation(&Self::def_grad(&self.gather(x, e), &self.center_g))
+        rotation(&self.center_def_grad(x, e))
     }
 
     /// Energy (J) of element `e`, adding its gradient (N) into `grad` (local, 3K) when
@@ -231,7 +246,7 @@ impl Interior {
         let (r, fc) = match frozen {
             Some(r) => (*r, None),
             None => {
-                let f = Self::def_grad(&self.gather(x, e), &self.center_g);
+                let f = self.center_def_grad(x, e);
                 (rotation(&f), Some(f))
             }
         };
@@ -314,12 +329,35 @@ impl Interior {
         out
     }
 
+    /// Energy (J) at `x` (flat node positions, m), adding the gradient (N) into `grad`,
+    /// and writing each element's rotation R_e(x) into `rotations` (which Newton reuses
+    /// for its matrix at the same positions).
+    pub(crate) fn eval_with_rotations(
+        &self,
+        x: &[f64],
+        grad: &mut [f64],
+        rotations: &mut Vec<M3>,
+    ) -> f64 {
+        self.eval_impl_rot(x, None, Some(grad), None, Some(rotations))
+    }
+
     fn eval_impl(
         &self,
         x: &[f64],
         frozen: Option<&[M3]>,
         grad: Option<&mut [f64]>,
         hess: Option<&mut Vec<(usize, usize, f64)>>,
+    ) -> f64 {
+        self.eval_impl_rot(x, frozen, grad, hess, None)
+    }
+
+    fn eval_impl_rot(
+        &self,
+        x: &[f64],
+        frozen: Option<&[M3]>,
+        grad: Option<&mut [f64]>,
+        hess: Option<&mut Vec<(usize, usize, f64)>>,
+        rot_out: Option<&mut Vec<M3>>,
     ) -> f64 {
         let want_g = grad.is_some();
         let want_h = hess.is_some();
@@ -336,11 +374,13 @@ impl Interior {
             // Chunks are grouped into at most GROUPS fixed groups whose partial sums are
             // added in group order: the result does not depend on the thread count.
             let chunks = ne.div_ceil(CHUNK);
+            let rot_out_wanted = rot_out.is_some();
             let per_group = chunks.div_ceil(GROUPS).max(1);
-            let partial: Vec<(f64, Vec<f64>)> = (0..chunks.div_ceil(per_group))
+            let partial: Vec<(f64, Vec<f64>, Vec<M3>)> = (0..chunks.div_ceil(per_group))
                 .into_par_iter()
                 .map(|grp| {
                     let (mut en, mut g) = (0.0, vec![0.0; len]);
+                    let mut rots = Vec::new();
                     for c in grp * per_group..((grp + 1) * per_group).min(chunks) {
                         let e0 = c * CHUNK;
                         let m = CHUNK.min(ne - e0);
@@ -357,6 +397,10 @@ impl Interior {
                                 &mut us[j * n3..(j + 1) * n3],
                             ));
                         }
+                        if rot_out_wanted {
+                            rots.extend(rot.iter().map(|(r, _)| *r));
+                        }
+                        // (nalgebra's product measured faster than faer's for this shape.)
                         let um = nalgebra::DMatrixView::from_slice(&us, n3, m);
                         let fm = k0 * um;
                         let fs = fm.as_slice();
@@ -381,12 +425,18 @@ impl Interior {
                             }
                         }
                     }
-                    (en, g)
+                    (en, g, rots)
                 })
                 .collect();
             let mut energy = 0.0;
             let mut g = vec![0.0; len];
-            for (e, gp) in partial {
+            if let Some(ro) = rot_out {
+                ro.clear();
+                for (_, _, r) in &partial {
+                    ro.extend_from_slice(r);
+                }
+            }
+            for (e, gp, _) in partial {
                 energy += e;
                 g.iter_mut().zip(&gp).for_each(|(p, q)| *p += q);
             }

@@ -4,9 +4,11 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod bench;
+pub mod cg;
 pub mod corot;
 pub mod dynamics;
 pub mod interior;
+pub mod matfree;
 
 pub use dynamics::{
     BackwardEuler, ExtraTerms, LinearSolver, SolveReport, SolveStatus, StepSettings, AUTO_CG_DOFS,
