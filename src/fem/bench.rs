@@ -1,6 +1,7 @@
 //! `furrow bench lattice`: one backward Euler step of a lattice of quadratic elements, and
 //! lattice construction on a face-sized open mesh.
 
+use super::dynamics::AUTO_CG_REL_TOL;
 use super::{BackwardEuler, Interior, LinearSolver, Material, StepSettings};
 use crate::lattice::{ElementOrder, Lattice, LatticeSettings};
 use crate::mesh::TriMesh;
@@ -57,8 +58,9 @@ pub fn cube_mesh(a: f64, m: usize) -> TriMesh {
 /// step starts from the warm-up step's direction). CG runs also report `best_*`: the
 /// minimum of each time over 10 further steps (robust against other processes' load).
 /// Prefixes: none (Cholesky, Newton to convergence), `single_newton_` (Cholesky, one
-/// linearised step), `cg_` (CG rel_tol 1e-4, Newton to convergence), `cg_single_newton_`
-/// (CG rel_tol 1e-4, one step), `cg_single_newton_tol1e-3_` (CG rel_tol 1e-3, one step).
+/// linearised step), `cg_` (CG at the default rel_tol [`AUTO_CG_REL_TOL`], Newton to
+/// convergence), `cg_single_newton_` (the same CG, one step), `cg_single_newton_tol1e-4_`
+/// (CG rel_tol 1e-4, one step).
 /// `face_lattice_build_s` times [`Lattice::build`] with default settings on the procedural
 /// face rig (`rig::face::generate()`, ~10k vertices), and `face_1cm_lattice_build_s` with
 /// 1 cm cells.
@@ -68,7 +70,7 @@ pub fn bench_lattice(elements: usize) -> anyhow::Result<serde_json::Value> {
     let cg = bench_step(
         elements,
         LinearSolver::ConjugateGradient {
-            rel_tol: 1e-4,
+            rel_tol: AUTO_CG_REL_TOL,
             max_iter: 500,
         },
         20,
@@ -76,17 +78,17 @@ pub fn bench_lattice(elements: usize) -> anyhow::Result<serde_json::Value> {
     let one = bench_step(
         elements,
         LinearSolver::ConjugateGradient {
-            rel_tol: 1e-4,
+            rel_tol: AUTO_CG_REL_TOL,
             max_iter: 500,
         },
         1,
     )?;
-    // The same single linearised step at CG rel_tol 1e-3 (tests/lattice_cg.rs measures the
-    // trajectory error of that tolerance against backward Euler's time step error).
-    let one3 = bench_step(
+    // The same single linearised step at the tighter CG rel_tol 1e-4 (tests/lattice_cg.rs
+    // measures the trajectory error of both against backward Euler's time-step error).
+    let one4 = bench_step(
         elements,
         LinearSolver::ConjugateGradient {
-            rel_tol: 1e-3,
+            rel_tol: 1e-4,
             max_iter: 500,
         },
         1,
@@ -110,7 +112,7 @@ pub fn bench_lattice(elements: usize) -> anyhow::Result<serde_json::Value> {
         ("single_newton_", &chol1),
         ("cg_", &cg),
         ("cg_single_newton_", &one),
-        ("cg_single_newton_tol1e-3_", &one3),
+        ("cg_single_newton_tol1e-4_", &one4),
     ] {
         for (k, x) in v.as_object().expect("object") {
             if prefix.is_empty()
