@@ -794,9 +794,11 @@ impl StaticSolver {
 mod tests {
     use super::*;
 
-    /// E = Σ x_i⁴ / 4 over 6 dofs.
-    struct Quartic;
-    impl Energy for Quartic {
+    /// E = k Σ x_i⁴ / 4 over 6 dofs.
+    struct ScaledQuartic(f64);
+    /// k = 1.
+    const QUARTIC: ScaledQuartic = ScaledQuartic(1.0);
+    impl Energy for ScaledQuartic {
         fn dofs(&self) -> usize {
             6
         }
@@ -807,17 +809,18 @@ mod tests {
             hess: Option<&mut Vec<(usize, usize, f64)>>,
             _p: bool,
         ) -> f64 {
+            let k = self.0;
             if let Some(g) = grad {
                 for (gi, xi) in g.iter_mut().zip(x) {
-                    *gi += xi.powi(3);
+                    *gi += k * xi.powi(3);
                 }
             }
             if let Some(h) = hess {
                 for (i, xi) in x.iter().enumerate() {
-                    h.push((i, i, 3.0 * xi * xi));
+                    h.push((i, i, 3.0 * k * xi * xi));
                 }
             }
-            x.iter().map(|v| v.powi(4) / 4.0).sum()
+            k * x.iter().map(|v| v.powi(4) / 4.0).sum::<f64>()
         }
     }
 
@@ -911,7 +914,7 @@ mod tests {
         };
         let mut solver = StaticSolver::new(settings).unwrap();
         let mut x = vec![0.5, 3.0, -0.5, 1.0, 1.0, 0.0];
-        let rep = solver.solve(&Quartic, &p, &mut x).unwrap();
+        let rep = solver.solve(&QUARTIC, &p, &mut x).unwrap();
         assert_eq!(rep.status, SolveStatus::Converged, "{rep:?}");
         let exact = [0.5, 1.0, 1.0, 2.0, -1.0, 0.0];
         for (a, b) in x.iter().zip(exact) {
@@ -919,47 +922,19 @@ mod tests {
         }
         assert!((solver.multipliers()[0] + 1.0).abs() < 1e-9);
         // Warm start at the answer: zero iterations; new rhs: one analysis in total.
-        let rep2 = solver.solve(&Quartic, &p, &mut x).unwrap();
+        let rep2 = solver.solve(&QUARTIC, &p, &mut x).unwrap();
         assert_eq!((rep2.status, rep2.iterations), (SolveStatus::Converged, 0));
         let mut p3 = p.clone();
         p3.constraints.rhs[0] = -4.0;
-        let rep3 = solver.solve(&Quartic, &p3, &mut x).unwrap();
+        let rep3 = solver.solve(&QUARTIC, &p3, &mut x).unwrap();
         assert_eq!(rep3.status, SolveStatus::Converged);
         assert!((x[1] + 2.0).abs() < 1e-9 && (x[2] + 2.0).abs() < 1e-9);
         assert_eq!(solver.symbolic_analyses(), 1);
         // Bad input is an error naming the problem.
         let mut short = vec![0.0; 3];
-        assert!(solver.solve(&Quartic, &p, &mut short).is_err());
+        assert!(solver.solve(&QUARTIC, &p, &mut short).is_err());
         let mut nan = vec![f64::NAN; 6];
-        assert!(solver.solve(&Quartic, &p, &mut nan).is_err());
-    }
-
-    /// E = k Σ x_i⁴ / 4 over 6 dofs (the [`Quartic`] k times stiffer).
-    struct StiffQuartic(f64);
-    impl Energy for StiffQuartic {
-        fn dofs(&self) -> usize {
-            6
-        }
-        fn eval(
-            &self,
-            x: &[f64],
-            grad: Option<&mut [f64]>,
-            hess: Option<&mut Vec<(usize, usize, f64)>>,
-            _p: bool,
-        ) -> f64 {
-            let k = self.0;
-            if let Some(g) = grad {
-                for (gi, xi) in g.iter_mut().zip(x) {
-                    *gi += k * xi.powi(3);
-                }
-            }
-            if let Some(h) = hess {
-                for (i, xi) in x.iter().enumerate() {
-                    h.push((i, i, 3.0 * k * xi * xi));
-                }
-            }
-            k * x.iter().map(|v| v.powi(4) / 4.0).sum::<f64>()
-        }
+        assert!(solver.solve(&QUARTIC, &p, &mut nan).is_err());
     }
 
     /// The first direction of a solve may come from the previous solve's factor: the answer
@@ -989,19 +964,19 @@ mod tests {
         type Case = (Box<dyn Energy>, StaticProblem, [f64; 6], usize);
         let cases: Vec<Case> = vec![
             (
-                Box::new(Quartic),
+                Box::new(QUARTIC),
                 moved.clone(),
                 [0.5, -2.0, -2.0, 2.0, -1.0, 0.0],
                 1,
             ),
             (
-                Box::new(StiffQuartic(100.0)),
+                Box::new(ScaledQuartic(100.0)),
                 base.clone(),
                 [0.5, 1.0, 1.0, 0.08f64.cbrt(), -(0.01f64.cbrt()), 0.0],
                 1,
             ),
             (
-                Box::new(Quartic),
+                Box::new(QUARTIC),
                 StaticProblem {
                     constraints: LinearConstraints {
                         rows: 1,
@@ -1021,7 +996,7 @@ mod tests {
         for (k, (energy, problem, exact, reuses)) in cases.into_iter().enumerate() {
             let mut warm = StaticSolver::new(settings).unwrap();
             let mut x = start.clone();
-            assert!(warm.solve(&Quartic, &base, &mut x).unwrap().status == SolveStatus::Converged);
+            assert!(warm.solve(&QUARTIC, &base, &mut x).unwrap().status == SolveStatus::Converged);
             let rep = warm.solve(energy.as_ref(), &problem, &mut x).unwrap();
             assert_eq!(rep.status, SolveStatus::Converged, "case {k}: {rep:?}");
             assert_eq!(rep.reused_factorizations, reuses, "case {k}: {rep:?}");
