@@ -100,6 +100,12 @@ pub struct StaticSettings {
     /// constraints it left more frames unconverged (frames 8–15 of the demo: 2 → 3, and
     /// twice the skin time), so it is opt-in.
     pub linear_tolerance: f64,
+    /// Let the first direction of a solve reuse the factorisation the previous converged
+    /// solve ended with (see [`StaticSolver::solve`]). Opt-in: on the benchmark sheet it
+    /// saves one of four factorisations per warm solve, but on the face demo it changed the
+    /// path through the hard frames 13–17 and the skin then stalled in every later frame
+    /// (27 of 40 frames unconverged against 2 without it).
+    pub reuse_last_factor: bool,
     /// Maximum trial steps per line search.
     pub max_line_search: usize,
     /// Also accept steps that satisfy Armijo on the energy merit (the Lagrangian with the
@@ -118,6 +124,7 @@ impl Default for StaticSettings {
             gamma: None,
             refinement_steps: 3,
             linear_tolerance: 1e-15,
+            reuse_last_factor: false,
             max_line_search: 30,
             energy_merit: false,
         }
@@ -553,7 +560,8 @@ impl StaticSolver {
         // which is where this solve starts, as one frame follows the last. Only the speed of
         // the first step depends on it: the line search checks the step, later directions
         // are factorised afresh, and a rejected reused step is retried with a fresh factor.
-        let mut reuse_factor = have_hessian.is_none()
+        let mut reuse_factor = st.reuse_last_factor
+            && have_hessian.is_none()
             && self.kkt.is_factored()
             && self.last_pinned == p.pinned
             && self
@@ -870,6 +878,7 @@ mod tests {
         let settings = StaticSettings {
             tolerance: 1e-12,
             gamma: Some(1.0),
+            reuse_last_factor: true,
             ..Default::default()
         };
         let mut solver = StaticSolver::new(settings).unwrap();
@@ -955,6 +964,7 @@ mod tests {
         let settings = StaticSettings {
             tolerance: 1e-10,
             gamma: Some(1.0),
+            reuse_last_factor: true,
             ..Default::default()
         };
         let start = vec![0.5, 3.0, -0.5, 1.0, 1.0, 0.0];
