@@ -3,24 +3,15 @@
 //! Euler itself, and CG against the exact (Cholesky) solve.
 #![allow(clippy::needless_range_loop)]
 
-use furrow::fem::bench::cube_mesh;
+use furrow::fem::bench::cube_lattice;
 use furrow::fem::{BackwardEuler, Interior, LinearSolver, Material, StepSettings};
-use furrow::lattice::{ElementOrder, Lattice, LatticeSettings};
 
 /// The bench cube (n³ quadratic cells of 2 cm, soft tissue, bottom two control-point layers
 /// pinned) sagging under gravity from rest: node positions (flat, m) after each step up to
 /// time `t_end` (s), recorded every `record` steps.
 fn sag(n: usize, dt: f64, t_end: f64, record: usize, solver: LinearSolver) -> Vec<Vec<f64>> {
     let h = 0.02;
-    let lat = Lattice::build(
-        &cube_mesh(n as f64 * h, n),
-        &LatticeSettings {
-            cell_size: Some(h),
-            order: ElementOrder::Quadratic,
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let lat = cube_lattice(n, h).unwrap();
     let int = Interior::new(&lat, &Material::default()).unwrap();
     let pinned: Vec<bool> = lat.rest.iter().map(|p| p.z < h).collect();
     let settings = StepSettings {
@@ -111,15 +102,7 @@ fn cg_tolerance_error_is_far_below_the_time_step_error() {
 fn cg_with_coupling_terms_matches_cholesky() {
     let h = 0.02;
     let n = 4;
-    let lat = Lattice::build(
-        &cube_mesh(n as f64 * h, n),
-        &LatticeSettings {
-            cell_size: Some(h),
-            order: ElementOrder::Quadratic,
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let lat = cube_lattice(n, h).unwrap();
     let pinned: Vec<bool> = lat.rest.iter().map(|p| p.z < 0.5 * h).collect();
     let (a, b) = (lat.node_count() - 1, lat.node_count() / 2);
     let k = 50.0;

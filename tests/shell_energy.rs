@@ -2,23 +2,12 @@
 //! rigid-motion invariance, and the cylinder bending calibration D/(2R²).
 
 use furrow::math::fd::{check_gradient, check_hessian};
+use furrow::math::rng::Lcg;
 use furrow::math::Energy;
 use furrow::mesh::TriMesh;
 use furrow::shell::sheet::equilateral_sheet;
 use furrow::shell::{Shell, ShellMaterial};
 use nalgebra::{Rotation3, Vector3};
-
-/// Deterministic pseudo-random numbers in [−1, 1] (64-bit LCG).
-struct Lcg(u64);
-impl Lcg {
-    fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        ((self.0 >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-    }
-}
 
 fn material() -> ShellMaterial {
     ShellMaterial {
@@ -31,12 +20,12 @@ fn material() -> ShellMaterial {
 /// A small sheet with a curved, irregular rest shape, and a random large deformation of it.
 fn random_case(seed: u64) -> (Shell, Vec<f64>, f64) {
     let a = 0.01;
-    let mut rng = Lcg(seed);
+    let mut rng = Lcg::from_state(seed);
     let mut s = equilateral_sheet(3, 3, a).mesh;
     for p in s.positions.iter_mut() {
-        p.x += 0.15 * a * rng.next();
-        p.y += 0.15 * a * rng.next();
-        p.z += 0.3 * a * rng.next();
+        p.x += 0.15 * a * rng.next_signed();
+        p.y += 0.15 * a * rng.next_signed();
+        p.z += 0.3 * a * rng.next_signed();
     }
     let shell = Shell::new(s.clone(), material()).unwrap();
     let x: Vec<f64> = s
@@ -45,9 +34,9 @@ fn random_case(seed: u64) -> (Shell, Vec<f64>, f64) {
         .flat_map(|p| {
             let q = Vector3::new(p.x * 1.1, p.y * 0.93, p.z + 3.0 * (p.x / 0.03).powi(2) * a);
             [
-                q.x + 0.2 * a * rng.next(),
-                q.y + 0.2 * a * rng.next(),
-                q.z + 0.3 * a * rng.next(),
+                q.x + 0.2 * a * rng.next_signed(),
+                q.y + 0.2 * a * rng.next_signed(),
+                q.z + 0.3 * a * rng.next_signed(),
             ]
         })
         .collect();

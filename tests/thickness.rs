@@ -6,21 +6,10 @@
 mod common;
 
 use furrow::math::fd::{check_gradient, check_hessian};
+use furrow::math::rng::Lcg;
 use furrow::math::Energy;
 use furrow::shell::sheet::equilateral_sheet;
 use furrow::shell::{Shell, ShellMaterial};
-
-/// Deterministic pseudo-random numbers in [−1, 1] (64-bit LCG).
-struct Lcg(u64);
-impl Lcg {
-    fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        ((self.0 >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-    }
-}
 
 fn material(poisson: f64) -> ShellMaterial {
     ShellMaterial {
@@ -34,16 +23,16 @@ fn material(poisson: f64) -> ShellMaterial {
 fn fd_gradient_and_hessian_with_varying_thickness() {
     for seed in [3u64, 11] {
         let a = 0.01;
-        let mut rng = Lcg(seed);
+        let mut rng = Lcg::from_state(seed);
         let mut m = equilateral_sheet(3, 3, a).mesh;
         for p in m.positions.iter_mut() {
-            p.x += 0.15 * a * rng.next();
-            p.y += 0.15 * a * rng.next();
-            p.z += 0.3 * a * rng.next();
+            p.x += 0.15 * a * rng.next_signed();
+            p.y += 0.15 * a * rng.next_signed();
+            p.z += 0.3 * a * rng.next_signed();
         }
         // Thickness from 0.3 to 3 mm, a different value on every face.
         let h: Vec<f64> = (0..m.triangles.len())
-            .map(|_| 1e-3 * 10f64.powf(0.5 * rng.next()))
+            .map(|_| 1e-3 * 10f64.powf(0.5 * rng.next_signed()))
             .collect();
         let shell = Shell::with_thickness(m.clone(), material(0.35), h).unwrap();
         let x: Vec<f64> = m
@@ -51,9 +40,9 @@ fn fd_gradient_and_hessian_with_varying_thickness() {
             .iter()
             .flat_map(|p| {
                 [
-                    1.1 * p.x + 0.2 * a * rng.next(),
-                    0.93 * p.y + 0.2 * a * rng.next(),
-                    p.z + 3.0 * (p.x / 0.03).powi(2) * a + 0.3 * a * rng.next(),
+                    1.1 * p.x + 0.2 * a * rng.next_signed(),
+                    0.93 * p.y + 0.2 * a * rng.next_signed(),
+                    p.z + 3.0 * (p.x / 0.03).powi(2) * a + 0.3 * a * rng.next_signed(),
                 ]
             })
             .collect();
@@ -81,11 +70,11 @@ fn uniform_thickness_is_bit_identical_and_bad_lists_are_refused() {
     let mat = material(0.4);
     let a = Shell::new(m.clone(), mat).unwrap();
     let b = Shell::with_thickness(m.clone(), mat, vec![mat.thickness; m.triangles.len()]).unwrap();
-    let mut rng = Lcg(5);
+    let mut rng = Lcg::from_state(5);
     let x: Vec<f64> = m
         .flat_positions()
         .iter()
-        .map(|v| v + 2e-3 * rng.next())
+        .map(|v| v + 2e-3 * rng.next_signed())
         .collect();
     let (mut ga, mut gb) = (vec![0.0; x.len()], vec![0.0; x.len()]);
     let (mut ha, mut hb) = (Vec::new(), Vec::new());

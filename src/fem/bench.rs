@@ -45,6 +45,19 @@ pub fn cube_mesh(a: f64, m: usize) -> TriMesh {
     TriMesh::new(pos, tris)
 }
 
+/// Lattice of n³ quadratic cells of side `h` (m) over the box [0, n h]³ ([`cube_mesh`]): the
+/// benchmark cube.
+pub fn cube_lattice(n: usize, h: f64) -> Result<Lattice, crate::lattice::LatticeError> {
+    Lattice::build(
+        &cube_mesh(n as f64 * h, n),
+        &LatticeSettings {
+            cell_size: Some(h),
+            order: ElementOrder::Quadratic,
+            ..Default::default()
+        },
+    )
+}
+
 /// Run the lattice benchmark on about `elements` quadratic elements and return its
 /// measurements as a flat JSON object (elements, nodes, times in seconds).
 ///

@@ -232,24 +232,13 @@ pub fn pcg(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::math::rng::Lcg;
     use nalgebra::{DMatrix, DVector};
-
-    /// Deterministic pseudo-random numbers in [−1, 1).
-    struct Lcg(u64);
-    impl Lcg {
-        fn next(&mut self) -> f64 {
-            self.0 = self
-                .0
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((self.0 >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-        }
-    }
 
     /// A random SPD node-block system: Σ over coupled node pairs of GᵀG (G random 6 × 6 on
     /// the pair's DOFs) plus 1e-2 I, pairs (a, a+1) and (a, a+5); as a BlockCsr and densely.
     fn random_spd(nodes: usize, seed: u64) -> (BlockCsr, DMatrix<f64>) {
-        let mut rng = Lcg(seed);
+        let mut rng = Lcg::from_state(seed);
         let n = 3 * nodes;
         let mut d = DMatrix::<f64>::identity(n, n) * 1e-2;
         let mut rows: Vec<Vec<u32>> = (0..nodes).map(|a| vec![a as u32]).collect();
@@ -261,7 +250,7 @@ mod tests {
                 }
                 rows[a].push(b as u32);
                 rows[b].push(a as u32);
-                let g = DMatrix::<f64>::from_fn(6, 6, |_, _| rng.next());
+                let g = DMatrix::<f64>::from_fn(6, 6, |_, _| rng.next_signed());
                 let gg = g.transpose() * g;
                 let idx = [3 * a, 3 * a + 1, 3 * a + 2, 3 * b, 3 * b + 1, 3 * b + 2];
                 for i in 0..6 {
@@ -289,8 +278,8 @@ mod tests {
     }
 
     fn rhs(n: usize, seed: u64) -> Vec<f64> {
-        let mut rng = Lcg(seed);
-        (0..n).map(|_| rng.next()).collect()
+        let mut rng = Lcg::from_state(seed);
+        (0..n).map(|_| rng.next_signed()).collect()
     }
 
     #[test]

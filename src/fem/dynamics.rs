@@ -1067,9 +1067,8 @@ impl BackwardEuler {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fem::bench::cube_mesh;
+    use crate::fem::bench::cube_lattice;
     use crate::fem::Material;
-    use crate::lattice::{ElementOrder, Lattice, LatticeSettings};
     use nalgebra::{Rotation3, Unit};
 
     /// The matrix-free operator and the assembled matrix (lower triangle mirrored into
@@ -1078,15 +1077,7 @@ mod tests {
     #[test]
     fn matrix_free_operator_equals_the_assembled_matrix() {
         let h = 0.02;
-        let lat = Lattice::build(
-            &cube_mesh(3.0 * h, 3),
-            &LatticeSettings {
-                cell_size: Some(h),
-                order: ElementOrder::Quadratic,
-                ..Default::default()
-            },
-        )
-        .unwrap();
+        let lat = cube_lattice(3, h).unwrap();
         let int = Interior::new(&lat, &Material::default()).unwrap();
         let pinned: Vec<bool> = lat.rest.iter().map(|p| p.z < 0.5 * h).collect();
         let mut sys = System::new(&int, &pinned, &[]).unwrap();

@@ -3,6 +3,7 @@
 
 pub mod energy;
 pub mod fd;
+pub mod rng;
 pub mod sparse;
 
 pub use energy::Energy;

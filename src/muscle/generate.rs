@@ -330,27 +330,7 @@ pub const ARKIT_NAMES: [&str; 52] = [
     "tongueOut",
 ];
 
-/// Deterministic pseudo-random numbers in [0, 1) (64-bit LCG, high bits).
-pub struct Lcg(u64);
-
-impl Lcg {
-    /// A generator from `seed`.
-    pub fn new(seed: u64) -> Self {
-        Self(
-            seed.wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407),
-        )
-    }
-
-    /// The next number in [0, 1).
-    pub fn next_f64(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
+pub use crate::math::rng::Lcg;
 
 /// 52 synthetic ARKit-named blend shapes on `mesh` (for tests and `furrow bench fit`): each
 /// is a smooth Gaussian bump of displacement, `amplitude` metres at its centre, radius

@@ -205,7 +205,6 @@ pub struct StaticSolver {
 
 /// What a factorisation was built for besides the Hessian: the free constraint entries, the
 /// dof count and γ.
-#[derive(PartialEq)]
 struct FactorLayout {
     cfree: Vec<(usize, usize, f64)>,
     dofs: usize,
@@ -560,15 +559,12 @@ impl StaticSolver {
         // which is where this solve starts, as one frame follows the last. Only the speed of
         // the first step depends on it: the line search checks the step, later directions
         // are factorised afresh, and a rejected reused step is retried with a fresh factor.
+        let layout = self.reusable_factor.take();
         let mut reuse_factor = st.reuse_last_factor
             && have_hessian.is_none()
             && self.kkt.is_factored()
             && self.last_pinned == p.pinned
-            && self
-                .reusable_factor
-                .take()
-                .is_some_and(|l| l.dofs == x.len() && l.gamma == gamma && l.cfree == s.cfree);
-        self.reusable_factor = None;
+            && layout.is_some_and(|l| l.dofs == x.len() && l.gamma == gamma && l.cfree == s.cfree);
         let mut mu = std::mem::take(&mut self.multipliers);
         let t = Instant::now();
         let (mut r, mut energy) = self.residual(e, p, &s, x, &mu, gamma);
@@ -786,7 +782,12 @@ impl StaticSolver {
         self.multipliers = mu;
         self.last_x = x.to_vec();
         self.last_pinned = p.pinned.clone();
-        if rep.status == SolveStatus::Converged && self.factor_ok && self.kkt.is_factored() {
+        // The layout is kept (a copy of the constraint entries) only when reuse is on.
+        if st.reuse_last_factor
+            && rep.status == SolveStatus::Converged
+            && self.factor_ok
+            && self.kkt.is_factored()
+        {
             self.reusable_factor = Some(FactorLayout {
                 cfree: s.cfree.clone(),
                 dofs: x.len(),
@@ -902,12 +903,9 @@ mod tests {
         }
     }
 
-    /// Pinned x0 = 0.5; x1 + x2 = 2 → x1 = x2 = 1, multiplier λ = −1; force 8 on x3 →
-    /// x3 = 2; force −1 on x4 → x4 = −1; x5 free, no force → 0 (Hessian singular there at
-    /// the solution, so the solver must cope with a vanishing curvature).
-    #[test]
-    fn newton_finds_known_constrained_minimum_and_reuses_analysis() {
-        let p = StaticProblem {
+    /// The [`QUARTIC`]'s test problem: x0 pinned, x1 + x2 = 2, forces 8 on x3 and −1 on x4.
+    fn quartic_problem() -> StaticProblem {
+        StaticProblem {
             pinned: vec![0],
             constraints: LinearConstraints {
                 rows: 1,
@@ -915,7 +913,15 @@ mod tests {
                 rhs: vec![2.0],
             },
             forces: vec![0.0, 0.0, 0.0, 8.0, -1.0, 0.0],
-        };
+        }
+    }
+
+    /// Pinned x0 = 0.5; x1 + x2 = 2 → x1 = x2 = 1, multiplier λ = −1; force 8 on x3 →
+    /// x3 = 2; force −1 on x4 → x4 = −1; x5 free, no force → 0 (Hessian singular there at
+    /// the solution, so the solver must cope with a vanishing curvature).
+    #[test]
+    fn newton_finds_known_constrained_minimum_and_reuses_analysis() {
+        let p = quartic_problem();
         let settings = StaticSettings {
             tolerance: 1e-10,
             gamma: Some(1.0),
@@ -952,15 +958,7 @@ mod tests {
     /// changed between the solves (100× stiffer); a changed constraint matrix must not reuse.
     #[test]
     fn reused_first_factor_changes_only_the_path_not_the_answer() {
-        let base = StaticProblem {
-            pinned: vec![0],
-            constraints: LinearConstraints {
-                rows: 1,
-                entries: vec![(0, 1, 1.0), (0, 2, 1.0)],
-                rhs: vec![2.0],
-            },
-            forces: vec![0.0, 0.0, 0.0, 8.0, -1.0, 0.0],
-        };
+        let base = quartic_problem();
         let settings = StaticSettings {
             tolerance: 1e-10,
             gamma: Some(1.0),

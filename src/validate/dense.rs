@@ -41,6 +41,7 @@
 
 use super::measure::{self, Measured};
 use crate::coupling::wavelength::Bilayer;
+use crate::math::rng::Lcg;
 use crate::math::Energy;
 use crate::solver::statics::{HessianMode, StaticProblem, StaticSettings, StaticSolver};
 use crate::solver::status::SolveStatus;
@@ -555,14 +556,6 @@ fn onset_fit(steps: &[StepRecord], min_amp: f64) -> Option<(f64, f64)> {
     Some((me - ma / c, c))
 }
 
-/// Deterministic uniform numbers in [−1, 1) (64-bit LCG).
-fn lcg(state: &mut u64) -> f64 {
-    *state = state
-        .wrapping_mul(6364136223846793005)
-        .wrapping_add(1442695040888963407);
-    2.0 * ((*state >> 11) as f64 / (1u64 << 53) as f64) - 1.0
-}
-
 /// The strip mesh, materials and top row of a case: returns (mesh, materials, skin bottom y).
 fn build(case: &DenseCase, lambda: f64) -> (QuadMesh, Vec<(f64, f64)>, f64) {
     let b = &case.bilayer;
@@ -622,11 +615,12 @@ pub fn run(case: &DenseCase) -> anyhow::Result<DenseResult> {
     // linearly to zero at the bottom.
     let length = case.periods * lambda;
     let modes = (8.0 * case.periods).ceil() as usize;
-    let mut state = case
-        .seed
-        .wrapping_mul(0x9E37_79B9_7F4A_7C15)
-        .wrapping_add(17);
-    let signs: Vec<f64> = (0..modes).map(|_| lcg(&mut state).signum()).collect();
+    let mut rng = Lcg::from_state(
+        case.seed
+            .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            .wrapping_add(17),
+    );
+    let signs: Vec<f64> = (0..modes).map(|_| rng.next_signed().signum()).collect();
     let amp = case.imperfection * case.bilayer.thickness / (modes as f64).sqrt();
     let eta = |x: f64| -> f64 {
         signs
@@ -932,11 +926,11 @@ mod tests {
     }
 
     fn perturbed(mesh: &QuadMesh, amp: f64, seed: u64) -> Vec<f64> {
-        let mut s = seed;
+        let mut rng = Lcg::from_state(seed);
         mesh.nodes
             .iter()
             .flat_map(|p| [p[0], p[1]])
-            .map(|v| v + amp * lcg(&mut s))
+            .map(|v| v + amp * rng.next_signed())
             .collect()
     }
 
@@ -1016,11 +1010,11 @@ mod tests {
         let mut exact = Vec::new();
         e.eval(&x, None, Some(&mut exact), false);
         let ke = crate::math::sparse::dense_from_triplets(n, &exact);
-        let mut s = 9u64;
+        let mut rng = Lcg::from_state(9);
         let mut min_proj = f64::INFINITY;
         let mut min_exact = f64::INFINITY;
         for _ in 0..200 {
-            let v: Vec<f64> = (0..n).map(|_| lcg(&mut s)).collect();
+            let v: Vec<f64> = (0..n).map(|_| rng.next_signed()).collect();
             let q = |m: &[f64]| -> f64 {
                 (0..n)
                     .map(|i| v[i] * (0..n).map(|j| m[i * n + j] * v[j]).sum::<f64>())

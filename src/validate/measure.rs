@@ -345,20 +345,11 @@ mod tests {
     use super::*;
     use std::f64::consts::PI;
 
-    /// Deterministic uniform numbers in [0, 1) (64-bit LCG), so tests are reproducible.
-    struct Lcg(u64);
-    impl Lcg {
-        fn next(&mut self) -> f64 {
-            self.0 = self
-                .0
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (self.0 >> 11) as f64 / (1u64 << 53) as f64
-        }
-        /// Approximately standard normal (sum of 12 uniforms − 6).
-        fn normal(&mut self) -> f64 {
-            (0..12).map(|_| self.next()).sum::<f64>() - 6.0
-        }
+    use crate::math::rng::Lcg;
+
+    /// Approximately standard normal (sum of 12 uniforms − 6).
+    fn normal(rng: &mut Lcg) -> f64 {
+        (0..12).map(|_| rng.next_f64()).sum::<f64>() - 6.0
     }
 
     fn profile(
@@ -414,10 +405,10 @@ mod tests {
         // Gaussian noise of 10% of the amplitude: hysteresis keeps crossings single; the
         // regression over ~20 crossings averages the jitter (measured 1.3e-3). Allow 5e-3.
         let lambda = 3e-3;
-        let mut rng = Lcg(7);
+        let mut rng = Lcg::from_state(7);
         let p: Vec<(f64, f64)> = profile(500, 11.7 * lambda, lambda, 1e-4, 0.0, |_| 0.0)
             .into_iter()
-            .map(|(s, z)| (s, z + 1e-5 * rng.normal()))
+            .map(|(s, z)| (s, z + 1e-5 * normal(&mut rng)))
             .collect();
         let m = wavelength(&p).expect("wrinkle");
         assert!(rel(m.wavelength, lambda) < 5e-3, "{m:?}");
@@ -430,10 +421,10 @@ mod tests {
         // allow 1e-3).
         let lambda = 5e-3;
         let span = 9.5 * lambda;
-        let mut rng = Lcg(42);
+        let mut rng = Lcg::from_state(42);
         let mut p: Vec<(f64, f64)> = (0..700)
             .map(|_| {
-                let s = span * rng.next();
+                let s = span * rng.next_f64();
                 (s, 3e-5 * (2.0 * PI * s / lambda).cos() + 0.02 * s)
             })
             .collect();
@@ -467,9 +458,9 @@ mod tests {
         let tiny = profile(300, span, 5e-3, 1e-12, 0.0, |_| 0.0);
         assert!(wavelength(&tiny).is_none());
         // White noise: no single sinusoid explains half of it.
-        let mut rng = Lcg(3);
+        let mut rng = Lcg::from_state(3);
         let noise: Vec<(f64, f64)> = (0..400)
-            .map(|i| (i as f64 * 1e-4, 1e-4 * rng.normal()))
+            .map(|i| (i as f64 * 1e-4, 1e-4 * normal(&mut rng)))
             .collect();
         assert!(wavelength(&noise).is_none());
         // Too few samples, and non-finite samples.
