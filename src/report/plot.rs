@@ -53,6 +53,47 @@ pub enum LegendAt {
     LowerRight,
     /// Bottom left corner.
     LowerLeft,
+    /// The corner whose legend-sized area holds the fewest data points.
+    Auto,
+}
+
+/// The corner of the plotting area whose box of `box_w × box_h` (fractions of the area) holds
+/// the fewest of `points`, given as fractions (0..1) of the axes; ties go to the upper right,
+/// then upper left, lower right, lower left.
+pub fn least_crowded_corner(points: &[(f64, f64)], box_w: f64, box_h: f64) -> LegendAt {
+    let count = |x_right: bool, y_top: bool| {
+        points
+            .iter()
+            .filter(|&&(x, y)| {
+                let in_x = if x_right {
+                    x >= 1.0 - box_w
+                } else {
+                    x <= box_w
+                };
+                let in_y = if y_top { y >= 1.0 - box_h } else { y <= box_h };
+                in_x && in_y
+            })
+            .count()
+    };
+    [
+        (LegendAt::UpperRight, count(true, true)),
+        (LegendAt::UpperLeft, count(false, true)),
+        (LegendAt::LowerRight, count(true, false)),
+        (LegendAt::LowerLeft, count(false, false)),
+    ]
+    .into_iter()
+    .min_by_key(|c| c.1)
+    .map(|c| c.0)
+    .unwrap_or_default()
+}
+
+/// Position of `v` as a fraction of the axis range (log or linear).
+fn axis_fraction(v: f64, (lo, hi): (f64, f64), log: bool) -> f64 {
+    if log {
+        (v / lo).ln() / (hi / lo).ln()
+    } else {
+        (v - lo) / (hi - lo)
+    }
 }
 
 /// A line or scatter chart with labelled axes and a legend.
@@ -120,7 +161,7 @@ pub fn tradeoff_chart(
         log_x: true,
         log_y: true,
         series,
-        legend: LegendAt::UpperRight,
+        legend: LegendAt::Auto,
     }
 }
 
@@ -191,12 +232,6 @@ fn axis_range(
         } else {
             (lo, hi)
         };
-        // A logarithmic axis is labelled at its powers of ten (and their multiples between
-        // them): reach down to the power of ten below when the range holds none, so the axis
-        // is never left without numbers.
-        if lo.log10().floor() == hi.log10().floor() {
-            return Ok((10f64.powf(lo.log10().floor()), hi));
-        }
         Ok((lo, hi))
     } else {
         let span = hi - lo;
@@ -209,6 +244,40 @@ fn axis_range(
         }
         Ok((lo - 0.05 * span, hi + 0.05 * span))
     }
+}
+
+/// Tick values of a logarithmic axis over `[lo, hi]` (lo > 0): the labelled (bold) ticks and
+/// the unlabelled grid lines (light). Labels go at 1, 2 and 5 times the powers of ten; when the
+/// range holds fewer than three of those, at every integer multiple 1…9 of them, and when
+/// still fewer than three at the half steps as well (1.5, 2.5, 3.5, 4.5); a range too narrow
+/// for two of those is labelled at its two ends. Grid lines go at every integer multiple in
+/// the range.
+pub fn log_ticks(lo: f64, hi: f64) -> (Vec<f64>, Vec<f64>) {
+    if !(lo > 0.0 && hi > lo && hi.is_finite()) {
+        return (Vec::new(), Vec::new());
+    }
+    let inside = |v: f64| v >= lo * (1.0 - 1e-12) && v <= hi * (1.0 + 1e-12);
+    let (k0, k1) = (lo.log10().floor() as i32 - 1, hi.log10().ceil() as i32 + 1);
+    let multiples = |set: &[f64]| -> Vec<f64> {
+        (k0..=k1)
+            .flat_map(|k| set.iter().map(move |m| m * 10f64.powi(k)))
+            .filter(|&v| inside(v))
+            .collect()
+    };
+    let all: Vec<f64> = multiples(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0]);
+    let mut bold = multiples(&[1.0, 2.0, 5.0]);
+    if bold.len() < 3 {
+        bold = all.clone();
+    }
+    if bold.len() < 3 {
+        bold = multiples(&[
+            1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0, 6.0, 7.0, 8.0, 9.0,
+        ]);
+    }
+    if bold.len() < 2 {
+        bold = vec![lo, hi];
+    }
+    (bold, all)
 }
 
 /// Keep a point if it can be placed on the chart's axes.
@@ -258,23 +327,27 @@ fn render_frame(frame: &Frame<'_>, size: (u32, u32), body: &impl Body) -> Result
             .y_label_area_size(84);
         let (x0, x1) = frame.x;
         let (y0, y1) = frame.y;
+        // Log axes get their ticks from `log_ticks` (plotters' own skip ranges that hold no
+        // power of ten, and round-off in its decade arithmetic can drop every label).
+        let log_x = || {
+            let (bold, light) = log_ticks(x0, x1);
+            (x0..x1)
+                .log_scale()
+                .with_key_points(bold)
+                .with_light_points(light)
+        };
+        let log_y = || {
+            let (bold, light) = log_ticks(y0, y1);
+            (y0..y1)
+                .log_scale()
+                .with_key_points(bold)
+                .with_light_points(light)
+        };
         match (frame.log_x, frame.log_y) {
             (false, false) => draw_axes(builder.build_cartesian_2d(x0..x1, y0..y1), frame, body)?,
-            (true, false) => draw_axes(
-                builder.build_cartesian_2d((x0..x1).log_scale(), y0..y1),
-                frame,
-                body,
-            )?,
-            (false, true) => draw_axes(
-                builder.build_cartesian_2d(x0..x1, (y0..y1).log_scale()),
-                frame,
-                body,
-            )?,
-            (true, true) => draw_axes(
-                builder.build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale()),
-                frame,
-                body,
-            )?,
+            (true, false) => draw_axes(builder.build_cartesian_2d(log_x(), y0..y1), frame, body)?,
+            (false, true) => draw_axes(builder.build_cartesian_2d(x0..x1, log_y()), frame, body)?,
+            (true, true) => draw_axes(builder.build_cartesian_2d(log_x(), log_y()), frame, body)?,
         }
         root.present().map_err(|e| anyhow!("chart: {e}"))?;
     }
@@ -304,7 +377,21 @@ where
     body.draw(&mut ctx)
 }
 
-struct LineBody<'c>(&'c Chart);
+struct LineBody<'c> {
+    chart: &'c Chart,
+    /// The legend corner, resolved ([`LegendAt::Auto`] replaced by a corner).
+    legend: LegendAt,
+}
+
+/// plotters' position for a legend corner ([`LegendAt::Auto`] unresolved: upper right).
+fn label_position(at: LegendAt) -> SeriesLabelPosition {
+    match at {
+        LegendAt::UpperRight | LegendAt::Auto => SeriesLabelPosition::UpperRight,
+        LegendAt::UpperLeft => SeriesLabelPosition::UpperLeft,
+        LegendAt::LowerRight => SeriesLabelPosition::LowerRight,
+        LegendAt::LowerLeft => SeriesLabelPosition::LowerLeft,
+    }
+}
 
 impl Body for LineBody<'_> {
     fn draw<'a, X, Y>(
@@ -315,7 +402,7 @@ impl Body for LineBody<'_> {
         X: Ranged<ValueType = f64> + ValueFormatter<f64>,
         Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
     {
-        let chart = self.0;
+        let chart = self.chart;
         let mut order: Vec<usize> = (0..chart.series.len()).collect();
         order.sort_by_key(|&k| chart.series[k].highlight);
         let mut any_legend = false;
@@ -386,12 +473,7 @@ impl Body for LineBody<'_> {
         }
         if any_legend {
             ctx.configure_series_labels()
-                .position(match chart.legend {
-                    LegendAt::UpperRight => SeriesLabelPosition::UpperRight,
-                    LegendAt::UpperLeft => SeriesLabelPosition::UpperLeft,
-                    LegendAt::LowerRight => SeriesLabelPosition::LowerRight,
-                    LegendAt::LowerLeft => SeriesLabelPosition::LowerLeft,
-                })
+                .position(label_position(self.legend))
                 .label_font((FAMILY, 16.0))
                 .background_style(WHITE.mix(0.85))
                 .border_style(BLACK)
@@ -430,7 +512,21 @@ pub fn render_line_chart(chart: &Chart, size: (u32, u32)) -> Result<RgbImage> {
         x,
         y,
     };
-    render_frame(&frame, size, &LineBody(chart))
+    let legend = if chart.legend == LegendAt::Auto {
+        let frac: Vec<(f64, f64)> = pts()
+            .map(|p| {
+                (
+                    axis_fraction(p.0, x, chart.log_x),
+                    axis_fraction(p.1, y, chart.log_y),
+                )
+            })
+            .collect();
+        let entries = chart.series.iter().filter(|s| !s.name.is_empty()).count();
+        least_crowded_corner(&frac, 0.4, (0.06 * entries as f64 + 0.04).min(0.9))
+    } else {
+        chart.legend
+    };
+    render_frame(&frame, size, &LineBody { chart, legend })
 }
 
 /// Write `chart` as a PNG of [`DEFAULT_SIZE`] at `path` (atomically, replacing).
@@ -564,12 +660,7 @@ impl Body for ContourBody<'_> {
                 });
         }
         ctx.configure_series_labels()
-            .position(match chart.legend {
-                LegendAt::UpperRight => SeriesLabelPosition::UpperRight,
-                LegendAt::UpperLeft => SeriesLabelPosition::UpperLeft,
-                LegendAt::LowerRight => SeriesLabelPosition::LowerRight,
-                LegendAt::LowerLeft => SeriesLabelPosition::LowerLeft,
-            })
+            .position(label_position(chart.legend))
             .label_font((FAMILY, 16.0))
             .background_style(WHITE.mix(0.85))
             .border_style(BLACK)
@@ -621,17 +712,54 @@ pub fn contour_chart(path: &Path, chart: &ContourChart) -> Result<()> {
 
 #[cfg(test)]
 mod tests {
-    use super::axis_range;
+    use super::{axis_range, least_crowded_corner, log_ticks, LegendAt};
 
-    /// A log axis whose data hold no power of ten reaches down to the one below (so it gets
-    /// labels); one that holds a power of ten keeps its padded range.
+    /// The legend goes to the corner without points: points in the upper right and lower
+    /// left send it to the upper left; an empty chart keeps the upper right.
     #[test]
-    fn log_axis_range_always_holds_a_power_of_ten() {
-        let (lo, hi) = axis_range([0.11, 0.33].into_iter(), true, false, "y").unwrap();
-        assert_eq!((lo, hi), (0.1, 0.33));
-        let (lo, hi) = axis_range([9.0, 90.0].into_iter(), true, false, "x").unwrap();
-        assert_eq!((lo, hi), (9.0, 90.0));
-        let (lo, _) = axis_range([2.0, 3.0].into_iter(), true, true, "x").unwrap();
-        assert_eq!(lo, 1.0);
+    fn legend_avoids_the_points() {
+        let pts = [(0.95, 0.9), (0.8, 0.95), (0.1, 0.1), (0.5, 0.5)];
+        assert_eq!(least_crowded_corner(&pts, 0.4, 0.3), LegendAt::UpperLeft);
+        let pts = [(0.95, 0.9), (0.1, 0.9), (0.1, 0.1)];
+        assert_eq!(least_crowded_corner(&pts, 0.4, 0.3), LegendAt::LowerRight);
+        assert_eq!(least_crowded_corner(&[], 0.4, 0.3), LegendAt::UpperRight);
+    }
+
+    /// Every log axis gets at least two labelled ticks inside its range, whatever the range
+    /// (within one decade, across many, or narrower than one multiple): the charts of
+    /// `report tradeoff` once came out with no labels at all on an error axis of 0.11–0.37.
+    #[test]
+    fn log_axes_always_have_labels_inside_the_range() {
+        for (a, b) in [
+            (0.11, 0.37),
+            (0.1, 0.35),
+            (3.9, 33.0),
+            (1.2, 4.5),
+            (1e-7, 3e2),
+            (0.0101, 0.0102),
+            (7.0, 7.5),
+            (950.0, 1050.0),
+        ] {
+            let (lo, hi) = axis_range([a, b].into_iter(), true, true, "y").unwrap();
+            let (bold, light) = log_ticks(lo, hi);
+            assert!(bold.len() >= 2, "{a}..{b}: {bold:?}");
+            for v in bold.iter().chain(&light) {
+                assert!(
+                    *v >= lo * (1.0 - 1e-9) && *v <= hi * (1.0 + 1e-9),
+                    "{a}..{b}: tick {v} outside {lo}..{hi}"
+                );
+            }
+        }
+        // 0.11–0.37 holds only 0.2 and 0.3 of the integer multiples: the half steps join.
+        let (bold, _) = log_ticks(0.11, 0.37);
+        let want = [0.15, 0.2, 0.25, 0.3, 0.35];
+        assert_eq!(bold.len(), want.len(), "{bold:?}");
+        for (b, w) in bold.iter().zip(want) {
+            assert!((b - w).abs() < 1e-15, "{bold:?}");
+        }
+        // Three decades: 1, 2, 5 times each power of ten.
+        let (bold, light) = log_ticks(1.0, 1000.0);
+        assert_eq!(bold.len(), 10);
+        assert_eq!(light.len(), 28);
     }
 }

@@ -634,7 +634,7 @@ pub fn chart(
         log_x: true,
         log_y: true,
         series,
-        legend: LegendAt::UpperRight,
+        legend: LegendAt::Auto,
     }
 }
 
