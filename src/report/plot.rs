@@ -7,6 +7,7 @@ use super::font::{ensure_registered, FAMILY};
 use super::pareto::pareto_points;
 use anyhow::{anyhow, Result};
 use image::RgbImage;
+use plotters::coord::combinators::{LogCoord, WithKeyPoints};
 use plotters::coord::ranged1d::ValueFormatter;
 use plotters::prelude::*;
 use std::path::Path;
@@ -280,6 +281,17 @@ pub fn log_ticks(lo: f64, hi: f64) -> (Vec<f64>, Vec<f64>) {
     (bold, all)
 }
 
+/// A logarithmic axis over `[lo, hi]` ticked by [`log_ticks`] (plotters' own ticks skip
+/// ranges that hold no power of ten, and round-off in its decade arithmetic can drop every
+/// label).
+fn log_axis(lo: f64, hi: f64) -> WithKeyPoints<LogCoord<f64>> {
+    let (bold, light) = log_ticks(lo, hi);
+    (lo..hi)
+        .log_scale()
+        .with_key_points(bold)
+        .with_light_points(light)
+}
+
 /// Keep a point if it can be placed on the chart's axes.
 fn drawable(p: (f64, f64), log_x: bool, log_y: bool) -> bool {
     p.0.is_finite() && p.1.is_finite() && (!log_x || p.0 > 0.0) && (!log_y || p.1 > 0.0)
@@ -327,22 +339,7 @@ fn render_frame(frame: &Frame<'_>, size: (u32, u32), body: &impl Body) -> Result
             .y_label_area_size(84);
         let (x0, x1) = frame.x;
         let (y0, y1) = frame.y;
-        // Log axes get their ticks from `log_ticks` (plotters' own skip ranges that hold no
-        // power of ten, and round-off in its decade arithmetic can drop every label).
-        let log_x = || {
-            let (bold, light) = log_ticks(x0, x1);
-            (x0..x1)
-                .log_scale()
-                .with_key_points(bold)
-                .with_light_points(light)
-        };
-        let log_y = || {
-            let (bold, light) = log_ticks(y0, y1);
-            (y0..y1)
-                .log_scale()
-                .with_key_points(bold)
-                .with_light_points(light)
-        };
+        let (log_x, log_y) = (|| log_axis(x0, x1), || log_axis(y0, y1));
         match (frame.log_x, frame.log_y) {
             (false, false) => draw_axes(builder.build_cartesian_2d(x0..x1, y0..y1), frame, body)?,
             (true, false) => draw_axes(builder.build_cartesian_2d(log_x(), y0..y1), frame, body)?,
