@@ -65,6 +65,11 @@ pub struct EmbeddedShell {
     hessian_pattern: Mutex<Option<Pattern>>,
 }
 
+/// Most halvings of a skin solve's load change when Newton does not converge directly: up to
+/// 2² = 4 equal increments (each a full solve; a failed direct solve on the face demo's hard
+/// frames costs about 60 Newton iterations already, so more levels would cost minutes).
+pub const CONTINUATION_LEVELS: usize = 2;
+
 /// What one two-step frame did: the shell statics report, the interior step report and the
 /// time (s) of each stage.
 #[derive(Debug, Clone, serde::Serialize)]
@@ -356,17 +361,31 @@ impl EmbeddedShell {
 
     /// Shell statics (step 1): from the last x, find the equilibrium of E_x subject to
     /// H x = H B q (3 rows per cluster, one per coordinate; pinned vertices sit at B q).
+    /// When Newton does not get there directly, the move from the current cluster means
+    /// to H B q is split into up to 2^[`CONTINUATION_LEVELS`] equal increments
+    /// ([`StaticSolver::solve_in_increments`]).
     /// Returns the solver's report; the state is kept only if it stayed finite (otherwise
     /// the previous state is restored and the report's status says `NotFinite`).
     pub fn solve(&mut self, q: &[f64]) -> Result<SolveReport, SolverError> {
         self.check_q(q)?;
         let bq = self.embedded_flat(q);
+        // Where a continuation would start: the current state's own cluster means and
+        // pinned positions.
+        let rhs_from = self.problem.constraints.apply(&self.x);
+        let pinned_from: Vec<f64> = self.problem.pinned.iter().map(|&d| self.x[d]).collect();
         self.problem.constraints.rhs = self.problem.constraints.apply(&bq);
         for &v in &self.pinned_vertices {
             self.x[3 * v..3 * v + 3].copy_from_slice(&bq[3 * v..3 * v + 3]);
         }
         let backup = self.x.clone();
-        let mut rep = self.solver.solve(&self.shell, &self.problem, &mut self.x)?;
+        let mut rep = self.solver.solve_in_increments(
+            &self.shell,
+            &self.problem,
+            &mut self.x,
+            &rhs_from,
+            &pinned_from,
+            CONTINUATION_LEVELS,
+        )?;
         if self.x.iter().any(|v| !v.is_finite()) {
             self.x = backup;
             rep.status = SolveStatus::NotFinite;

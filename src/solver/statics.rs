@@ -540,6 +540,7 @@ impl StaticSolver {
             solve_s: 0.0,
             line_search_s: 0.0,
             total_s: 0.0,
+            increments: 1,
         };
         if self.multipliers.len() != nc {
             self.multipliers = vec![0.0; nc];
@@ -797,6 +798,95 @@ impl StaticSolver {
         rep.total_s = t_start.elapsed().as_secs_f64();
         Ok(rep)
     }
+
+    /// [`StaticSolver::solve`] with load continuation: when the direct solve stops at the
+    /// iteration limit or in a failed line search, start again from the same state (`x` and
+    /// multipliers as given) and apply the change of load, from `rhs_from` (the constraint
+    /// right-hand side of that state) and `pinned_from` (its pinned dof values, in the order
+    /// of `p.pinned`) to those of `p` and `x`, in 2, then 4, … up to 2^`levels` equal
+    /// increments, each solved to equilibrium. Large target jumps (a frame that moves the
+    /// skin's clusters far, or a buckling event) converge along such a path where Newton from
+    /// the far start does not. The report sums the work of every attempt; its status and
+    /// residual are those of the last solve, and `increments` says how many were needed.
+    pub fn solve_in_increments(
+        &mut self,
+        e: &dyn Energy,
+        p: &StaticProblem,
+        x: &mut [f64],
+        rhs_from: &[f64],
+        pinned_from: &[f64],
+        levels: usize,
+    ) -> Result<SolveReport, SolverError> {
+        if rhs_from.len() != p.constraints.rhs.len() || pinned_from.len() != p.pinned.len() {
+            return Err(SolverError::Problem(format!(
+                "continuation start has {} constraint values and {} pinned values, the problem {} and {}",
+                rhs_from.len(),
+                pinned_from.len(),
+                p.constraints.rhs.len(),
+                p.pinned.len()
+            )));
+        }
+        let x_start = x.to_vec();
+        let mu_start = self.multipliers.clone();
+        let last_x_start = self.last_x.clone();
+        let last_pinned_start = self.last_pinned.clone();
+        let target_pinned: Vec<f64> = p.pinned.iter().map(|&d| x[d]).collect();
+        let mut total = self.solve(e, p, x)?;
+        let retry = matches!(
+            total.status,
+            SolveStatus::IterationLimit | SolveStatus::LineSearchFailed
+        );
+        if !retry {
+            return Ok(total);
+        }
+        let mut sub = p.clone();
+        for level in 1..=levels {
+            let m = 1usize << level;
+            x.copy_from_slice(&x_start);
+            self.multipliers = mu_start.clone();
+            self.last_x = last_x_start.clone();
+            self.last_pinned = last_pinned_start.clone();
+            // The start state's pinned values, so the pinned-motion predictor sees each
+            // increment's motion only.
+            for (&d, &v) in p.pinned.iter().zip(pinned_from) {
+                x[d] = v;
+                if let Some(l) = self.last_x.get_mut(d) {
+                    *l = v;
+                }
+            }
+            let mut done = true;
+            for k in 1..=m {
+                let t = k as f64 / m as f64;
+                for ((r, &a), &b) in sub
+                    .constraints
+                    .rhs
+                    .iter_mut()
+                    .zip(rhs_from)
+                    .zip(&p.constraints.rhs)
+                {
+                    *r = a + t * (b - a);
+                }
+                for ((&d, &a), &b) in p.pinned.iter().zip(pinned_from).zip(&target_pinned) {
+                    x[d] = a + t * (b - a);
+                }
+                let rep = self.solve(e, &sub, x)?;
+                total.add_work(&rep);
+                total.status = rep.status;
+                total.residual = rep.residual;
+                total.constraint_violation = rep.constraint_violation;
+                total.energy = rep.energy;
+                total.increments = m;
+                if rep.status != SolveStatus::Converged {
+                    done = false;
+                    break;
+                }
+            }
+            if done || total.status == SolveStatus::NotFinite {
+                break;
+            }
+        }
+        Ok(total)
+    }
 }
 
 #[cfg(test)]
@@ -901,6 +991,139 @@ mod tests {
         for (i, xi) in x.iter().enumerate() {
             assert!((xi - 0.5 * i as f64).abs() < 1e-12, "{x:?}");
         }
+    }
+
+    /// Springs in series with hardening E_i(Δ) = k_i (Δ²/2 + Δ⁴/4) between dofs i and i + 1.
+    struct HardeningChain([f64; 4]);
+    impl Energy for HardeningChain {
+        fn dofs(&self) -> usize {
+            5
+        }
+        fn eval(
+            &self,
+            x: &[f64],
+            grad: Option<&mut [f64]>,
+            hess: Option<&mut Vec<(usize, usize, f64)>>,
+            _p: bool,
+        ) -> f64 {
+            let k = self.0;
+            let d: Vec<f64> = (0..4).map(|i| x[i + 1] - x[i]).collect();
+            if let Some(g) = grad {
+                for i in 0..4 {
+                    let f = k[i] * (d[i] + d[i].powi(3));
+                    g[i] -= f;
+                    g[i + 1] += f;
+                }
+            }
+            if let Some(h) = hess {
+                for i in 0..4 {
+                    let s = k[i] * (1.0 + 3.0 * d[i] * d[i]);
+                    h.extend([(i, i, s), (i + 1, i + 1, s), (i, i + 1, -s), (i + 1, i, -s)]);
+                }
+            }
+            (0..4)
+                .map(|i| k[i] * (d[i].powi(2) / 2.0 + d[i].powi(4) / 4.0))
+                .sum()
+        }
+    }
+
+    /// Load continuation on a chain of hardening springs (k = 1, 3, 0.5, 2), x0 pinned and
+    /// x4 held by the constraint x4 = d. From the equilibrium at x0 = 0, d = 1 the load jumps
+    /// to x0 = −1, d = 30: with 4 Newton iterations allowed the direct solve stops at the
+    /// iteration limit, the increments converge, and the answer is the series-spring one
+    /// (the same force F in every spring, k_i (Δ_i + Δ_i³) = F, Σ Δ_i = 31), found here by
+    /// bisection independently of the solver.
+    #[test]
+    fn load_increments_converge_where_the_direct_solve_does_not() {
+        let k = [1.0, 3.0, 0.5, 2.0];
+        let chain = HardeningChain(k);
+        let problem = |x4: f64| StaticProblem {
+            pinned: vec![0],
+            constraints: LinearConstraints {
+                rows: 1,
+                entries: vec![(0, 4, 1.0)],
+                rhs: vec![x4],
+            },
+            forces: Vec::new(),
+        };
+        let settings = StaticSettings {
+            tolerance: 1e-9,
+            max_iterations: 4,
+            gamma: Some(1.0),
+            ..Default::default()
+        };
+        let start = |solver: &mut StaticSolver| {
+            let mut x = vec![0.0, 0.2, 0.4, 0.6, 0.8];
+            let rep = StaticSolver::solve(solver, &chain, &problem(1.0), &mut x).unwrap();
+            assert_eq!(rep.status, SolveStatus::Converged, "{rep:?}");
+            x
+        };
+        // The direct solve fails within 4 iterations.
+        let mut direct = StaticSolver::new(StaticSettings {
+            max_iterations: 50,
+            ..settings
+        })
+        .unwrap();
+        let x_start = start(&mut direct);
+        direct.settings.max_iterations = 4;
+        let mut x = x_start.clone();
+        x[0] = -1.0;
+        let rep = direct.solve(&chain, &problem(30.0), &mut x).unwrap();
+        assert_eq!(rep.status, SolveStatus::IterationLimit, "{rep:?}");
+        // The same jump in increments.
+        let mut solver = StaticSolver::new(StaticSettings {
+            max_iterations: 50,
+            ..settings
+        })
+        .unwrap();
+        let x_start = start(&mut solver);
+        solver.settings.max_iterations = 4;
+        let mut x = x_start.clone();
+        x[0] = -1.0;
+        let rep = solver
+            .solve_in_increments(
+                &chain,
+                &problem(30.0),
+                &mut x,
+                &[x_start[4]],
+                &[x_start[0]],
+                4,
+            )
+            .unwrap();
+        assert_eq!(rep.status, SolveStatus::Converged, "{rep:?}");
+        assert!(rep.increments >= 2 && rep.increments <= 16, "{rep:?}");
+        // Series springs: Σ Δ_i(F) = 31 with Δ_i the real root of Δ + Δ³ = F / k_i.
+        let stretch = |f: f64, ki: f64| {
+            let (mut lo, mut hi) = (0.0, f / ki + 1.0);
+            for _ in 0..200 {
+                let m = 0.5 * (lo + hi);
+                if ki * (m + m * m * m) < f {
+                    lo = m;
+                } else {
+                    hi = m;
+                }
+            }
+            0.5 * (lo + hi)
+        };
+        let (mut lo, mut hi) = (0.0, 1e6);
+        for _ in 0..200 {
+            let f = 0.5 * (lo + hi);
+            if k.iter().map(|&ki| stretch(f, ki)).sum::<f64>() < 31.0 {
+                lo = f;
+            } else {
+                hi = f;
+            }
+        }
+        let f = 0.5 * (lo + hi);
+        let mut want = -1.0;
+        for (i, &ki) in k.iter().enumerate() {
+            want += stretch(f, ki);
+            assert!((x[i + 1] - want).abs() < 1e-8, "dof {}: {x:?}", i + 1);
+        }
+        // A start of the wrong size is an error, not a guess.
+        assert!(solver
+            .solve_in_increments(&chain, &problem(30.0), &mut x, &[], &[0.0], 2)
+            .is_err());
     }
 
     /// The [`QUARTIC`]'s test problem: x0 pinned, x1 + x2 = 2, forces 8 on x3 and −1 on x4.

@@ -63,4 +63,27 @@ pub struct SolveReport {
     pub line_search_s: f64,
     /// Wall-clock seconds of the whole solve.
     pub total_s: f64,
+    /// Equal load increments of the solve that ended it: 1 when solved directly, 2ᵏ when
+    /// [`StaticSolver::solve_in_increments`](super::StaticSolver::solve_in_increments) had to
+    /// split the change of constraint target and pinned positions (0 before any solve).
+    #[serde(default)]
+    pub increments: usize,
+}
+
+impl SolveReport {
+    /// Add the work of `other` (iterations, factorisations, solves, seconds) to this report;
+    /// the outcome fields (status, residuals, energy) are left alone.
+    pub fn add_work(&mut self, other: &SolveReport) {
+        self.iterations += other.iterations;
+        self.modified_hessian_steps += other.modified_hessian_steps;
+        self.factorizations += other.factorizations;
+        self.reused_factorizations += other.reused_factorizations;
+        self.linear_solves += other.linear_solves;
+        self.assembly_s += other.assembly_s;
+        self.symbolic_s += other.symbolic_s;
+        self.factor_s += other.factor_s;
+        self.solve_s += other.solve_s;
+        self.line_search_s += other.line_search_s;
+        self.total_s += other.total_s;
+    }
 }
