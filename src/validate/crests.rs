@@ -313,8 +313,8 @@ pub fn trilinear_slope_jumps(s: &SlabSettings, r: &SlabResult) -> Vec<f64> {
         .collect()
 }
 
-/// The skin's height along the middle row minus the least-squares fit of {1, X, sin 2π(X/P
-/// + φ), cos 2π(X/P + φ)} in the rest position X (P, φ the bend's period and phase): removes
+/// The skin's height along the middle row minus the least-squares fit of {1, X, sin θ,
+/// cos θ}, θ = 2π (X/P + φ), in the rest position X (P, φ the bend's period and phase): removes
 /// the prescribed smooth bend whatever amplitude each element order gives it (a quadratic
 /// B-spline scales a sampled sine down), leaving the wrinkle and anything tied to the grid.
 /// `(deformed x (m), height (m))`, ordered by x. With no bend only the line is removed.
