@@ -22,6 +22,13 @@
 //!   centres, 0 on average for uniform phases with standard deviation 1/√(2N) (so √(2N) V is
 //!   a z-score of locking to boundaries);
 //! - the fraction of crests within `band` cells of a boundary (2 · band for uniform phases).
+//!
+//! Faceting ([`run_facets`]): where the wrinkle is much shorter than an element (λ ≪ cell),
+//! the paper's other trilinear artefact is that the C⁰ joints of the elements show in the
+//! skin. On a slab whose interior is held on a smooth bend, the trilinear embedded surface
+//! kinks at every face by a known slope jump J; the skin's slope jump there (fitted on the
+//! bend-removed height smoothed over λ_m) over J says how much of that crease the skin
+//! shows, 0 for a C¹ (quadratic B-spline) interior.
 
 use super::measure;
 use super::slab::{run_slab, SlabResult, SlabSettings};
@@ -135,8 +142,9 @@ pub struct CrestRun {
     pub crests: Vec<f64>,
     /// Phase of each crest in its cell (cells, [0, 1)).
     pub phases: Vec<f64>,
-    /// Phases (cells) of the crests of the skin's absolute height z instead of its height w
-    /// above the embedded surface (the same where the embedded surface is flat).
+    /// Phases (cells) of the crests of the skin's absolute height z, with the prescribed
+    /// bend removed ([`bend_removed_profile`]), instead of its height w above the embedded
+    /// surface (the same where the embedded surface is flat).
     pub height_phases: Vec<f64>,
     /// How much of the wrinkle the interior follows: RMS of the embedded surface's height
     /// B q over RMS of the skin's height w above it, both detrended by the moving average of
@@ -225,7 +233,7 @@ pub fn run_crests(s: &SlabSettings) -> anyhow::Result<CrestRun> {
     let r = run_slab(s)?;
     let (measured, crests, phases) = crests_of(&r, MARGIN);
     let z = SlabResult {
-        profile: r.row.iter().map(|s| (s.x, s.z)).collect(),
+        profile: bend_removed_profile(s, &r),
         ..r.clone()
     };
     let (_, _, height_phases) = crests_of(&z, MARGIN);
@@ -256,6 +264,245 @@ pub fn run_crests(s: &SlabSettings) -> anyhow::Result<CrestRun> {
     })
 }
 
+// ---------------------------------------------------------------------------------------
+// Faceting: the trilinear element boundaries seen in the skin (the paper's high-frequency
+// artefact, λ ≪ cell).
+// ---------------------------------------------------------------------------------------
+
+/// Cells along the faceting slab: 4 cells over 16 λ, so each cell is 4 λ (λ/cell ≈ 0.26
+/// measured): the wrinkle is much shorter than an element, the paper's "high wrinkle
+/// frequency" regime in which the C⁰ joints of trilinear elements show in the skin.
+pub const FACET_CELLS: usize = 4;
+
+/// The slab of the faceting check: [`slab_settings`] 16 λ long with [`FACET_CELLS`] cells
+/// (cell = 4 λ ≈ 52 mm) and a fully held interior bent by a sine of amplitude 0.3 λ (3.9 mm)
+/// and period 10.8 λ (2.7 cells, incommensurate with the grid so every face sees a different
+/// bend phase), phase 0.3 period. The trilinear interpolant of that bend has slope jumps of
+/// 0.07–0.24 rad at the interior faces, comparable to the wrinkle's slope 2π A/λ ≈ 0.5
+/// (A ≈ 0.08 λ measured); the quadratic B-spline surface is C¹ (no jumps).
+pub fn facet_slab_settings(order: ElementOrder) -> SlabSettings {
+    let mut s = slab_settings(order, FACET_CELLS);
+    s.length = 16.0;
+    s.bend = 0.3;
+    s.bend_period = 10.8;
+    s.bend_phase = 0.3;
+    s
+}
+
+/// The prescribed bend height (m) at rest position `x` (m) of a slab run with settings `s`
+/// and predicted wavelength `lambda` (m): bend · λ · sin(2π (x / (bend_period · λ) +
+/// bend_phase)); 0 when `s.bend` is 0.
+pub fn bend_height(s: &SlabSettings, lambda: f64, x: f64) -> f64 {
+    if s.bend <= 0.0 {
+        return 0.0;
+    }
+    let period = s.bend_period * lambda;
+    s.bend * lambda * (2.0 * PI * (x / period + s.bend_phase)).sin()
+}
+
+/// Slope jumps (rad, small-angle: right slope − left slope, in the deformed frame) of the
+/// trilinear interpolant of the bend at the interior faces i = 1 ..= cells_along − 1 of a
+/// held, affinely compressed slab: (b_{i+1} − 2 b_i + b_{i−1}) / (cell (1 − ε)), b_i the bend
+/// height at face i. This is the kink a trilinear lattice puts in the embedded surface;
+/// quadratic B-spline surfaces have none.
+pub fn trilinear_slope_jumps(s: &SlabSettings, r: &SlabResult) -> Vec<f64> {
+    let eps = r.strains.last().copied().unwrap_or(0.0);
+    let b = |i: usize| bend_height(s, r.predicted, i as f64 * r.cell);
+    (1..s.cells_along)
+        .map(|i| (b(i + 1) - 2.0 * b(i) + b(i - 1)) / (r.cell * (1.0 - eps)))
+        .collect()
+}
+
+/// The skin's height along the middle row minus the least-squares fit of {1, X, sin θ,
+/// cos θ}, θ = 2π (X/P + φ), in the rest position X (P, φ the bend's period and phase): removes
+/// the prescribed smooth bend whatever amplitude each element order gives it (a quadratic
+/// B-spline scales a sampled sine down), leaving the wrinkle and anything tied to the grid.
+/// `(deformed x (m), height (m))`, ordered by x. With no bend only the line is removed.
+pub fn bend_removed_profile(s: &SlabSettings, r: &SlabResult) -> Vec<(f64, f64)> {
+    use nalgebra::{Matrix4, Vector4};
+    let period = s.bend_period * r.predicted;
+    let basis = |x: f64| {
+        let a = 2.0 * PI * (x / period + s.bend_phase);
+        if s.bend > 0.0 {
+            Vector4::new(1.0, x / r.length, a.sin(), a.cos())
+        } else {
+            Vector4::new(1.0, x / r.length, 0.0, 0.0)
+        }
+    };
+    let mut ata = Matrix4::<f64>::zeros();
+    let mut atb = Vector4::<f64>::zeros();
+    for v in &r.row {
+        let b = basis(v.rest_x);
+        ata += b * b.transpose();
+        atb += b * v.z;
+    }
+    if s.bend <= 0.0 {
+        ata[(2, 2)] = 1.0;
+        ata[(3, 3)] = 1.0;
+    }
+    let coef = ata.try_inverse().unwrap_or_else(Matrix4::zeros) * atb;
+    r.row
+        .iter()
+        .map(|v| (v.x, v.z - coef.dot(&basis(v.rest_x))))
+        .collect()
+}
+
+/// The moving average of width `width` (m) of a profile `(position (m), height (m))` (the
+/// exact mean of the piecewise linear profile over [x − width/2, x + width/2]): a sinusoid
+/// of period `width` averages to zero, so with `width` = λ_m it removes the wrinkle and keeps
+/// the slow shape. Samples whose window does not fit are dropped; ordered by position.
+pub fn moving_average(profile: &[(f64, f64)], width: f64) -> Vec<(f64, f64)> {
+    let mut p: Vec<(f64, f64)> = profile
+        .iter()
+        .copied()
+        .filter(|(x, z)| x.is_finite() && z.is_finite())
+        .collect();
+    p.sort_by(|a, b| a.0.total_cmp(&b.0));
+    p.dedup_by(|b, a| a.0 == b.0);
+    measure::detrend_moving_average(&p, width)
+        .into_iter()
+        .filter_map(|(x, d)| {
+            let i = p.binary_search_by(|v| v.0.total_cmp(&x)).ok()?;
+            Some((x, p[i].1 - d))
+        })
+        .collect()
+}
+
+/// Slope jump (rad, small-angle: right slope − left slope) at `xf` (m) of a profile that was
+/// smoothed by a moving average of width `blur` (m, 0 for none): the least-squares fit of
+/// a + b d + c d² + κ g(d) to the samples with |d| = |x − xf| ≤ `half` (m) gives 2κ, g the
+/// moving average of |d| (|d| beyond blur/2, (d² + blur²/4)/blur inside). A kink of slope
+/// jump J smoothed by that moving average gives exactly J (plus sampling error); a C¹
+/// profile gives ≈ 0 (the quadratic absorbs its curvature); a kink blurred further (by the
+/// skin's own smoothness) gives less than J. `None` with fewer than 8 samples in the window.
+pub fn slope_jump(profile: &[(f64, f64)], xf: f64, half: f64, blur: f64) -> Option<f64> {
+    use nalgebra::{Matrix4, Vector4};
+    let mut ata = Matrix4::<f64>::zeros();
+    let mut atb = Vector4::<f64>::zeros();
+    let mut n = 0;
+    let bw = blur / half;
+    for &(x, z) in profile {
+        let d = (x - xf) / half;
+        if d.abs() <= 1.0 {
+            let g = if d.abs() >= 0.5 * bw {
+                d.abs()
+            } else {
+                (d * d + 0.25 * bw * bw) / bw
+            };
+            let b = Vector4::new(1.0, d, d * d, g);
+            ata += b * b.transpose();
+            atb += b * z;
+            n += 1;
+        }
+    }
+    if n < 8 {
+        return None;
+    }
+    let c = ata.try_inverse()? * atb;
+    Some(2.0 * c[3] / half)
+}
+
+/// How much of the trilinear kink the skin shows at some positions: the least-squares
+/// factor f = Σ J_skin J / Σ J² over faces (J the trilinear slope jump of the embedded
+/// surface at that face, J_skin the skin's measured slope jump), 1 = the skin creases as
+/// much as the trilinear embedded surface, 0 = smooth.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct KinkFraction {
+    /// Offset of the probed positions from the faces (cells): 0 = on the element
+    /// boundaries, ½ = at cell centres (the null positions, no kink there for either order).
+    pub offset: f64,
+    /// The factor f (dimensionless).
+    pub fraction: f64,
+    /// J_skin / J per face used (dimensionless).
+    pub per_face: Vec<f64>,
+}
+
+/// The outcome of one faceting slab run.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct FacetRun {
+    /// Element order of the lattice.
+    pub order: ElementOrder,
+    /// Predicted critical wavelength λ (m).
+    pub predicted: f64,
+    /// Measured wavelength of the bend-removed skin height (m; NaN when none was measured).
+    pub measured: f64,
+    /// Measured λ over the deformed mean cell size (dimensionless).
+    pub lambda_over_cell: f64,
+    /// Wrinkle amplitude of the bend-removed skin height (m; NaN when none was measured).
+    pub amplitude: f64,
+    /// Trilinear slope jumps (rad) at the interior faces ([`trilinear_slope_jumps`]).
+    pub jumps: Vec<f64>,
+    /// Half-width (m) of the window of [`slope_jump`] (1.5 λ_m); its blur is λ_m.
+    pub window: f64,
+    /// The skin's kink fraction on the faces (offset 0).
+    pub at_faces: KinkFraction,
+    /// The same at cell centres (offset ½): the null model, ≈ 0 for any order.
+    pub at_centres: KinkFraction,
+    /// Whether every shell statics converged.
+    pub converged: bool,
+    /// Wall-clock seconds of the slab run.
+    pub seconds: f64,
+}
+
+/// Run a (bent, held) slab and measure how much of the trilinear kink at each element
+/// boundary shows in the skin: the bend-removed skin height ([`bend_removed_profile`]) is
+/// smoothed by a moving average of width λ_m (the wrinkle averages out), and its slope jump
+/// ([`slope_jump`], half-window 1.5 λ_m) is compared with the trilinear interpolant's
+/// ([`trilinear_slope_jumps`]) at the faces and at the cell centres. Faces whose window
+/// leaves the central part of the profile (`MARGIN`) are skipped.
+pub fn run_facets(s: &SlabSettings) -> anyhow::Result<FacetRun> {
+    let r = run_slab(s)?;
+    let profile = bend_removed_profile(s, &r);
+    let m = measure::wavelength(&profile);
+    let measured = m.as_ref().map(|m| m.wavelength).unwrap_or(f64::NAN);
+    let lambda = if measured.is_finite() {
+        measured
+    } else {
+        r.predicted
+    };
+    let smooth = moving_average(&profile, lambda);
+    let jumps = trilinear_slope_jumps(s, &r);
+    let (x0, x1) = match (profile.first(), profile.last()) {
+        (Some(a), Some(b)) => (a.0, b.0),
+        _ => anyhow::bail!("the slab run returned an empty profile"),
+    };
+    let (lo, hi) = (x0 + MARGIN * (x1 - x0), x1 - MARGIN * (x1 - x0));
+    let half = 1.5 * lambda;
+    let mean_cell = (r.faces[r.faces.len() - 1] - r.faces[0]) / (r.faces.len() - 1) as f64;
+    let probe = |offset: f64| {
+        let (mut num, mut den, mut per_face) = (0.0, 0.0, Vec::new());
+        for (k, &j) in jumps.iter().enumerate() {
+            let xf = r.faces[k + 1] + offset * mean_cell;
+            if xf - half < lo || xf + half > hi {
+                continue;
+            }
+            if let Some(js) = slope_jump(&smooth, xf, half, lambda) {
+                num += js * j;
+                den += j * j;
+                per_face.push(js / j);
+            }
+        }
+        KinkFraction {
+            offset,
+            fraction: num / den,
+            per_face,
+        }
+    };
+    Ok(FacetRun {
+        order: s.order,
+        predicted: r.predicted,
+        measured,
+        lambda_over_cell: measured / mean_cell,
+        amplitude: m.map(|m| m.amplitude).unwrap_or(f64::NAN),
+        jumps: jumps.clone(),
+        window: half,
+        at_faces: probe(0.0),
+        at_centres: probe(0.5),
+        converged: r.converged,
+        seconds: r.seconds,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -280,6 +527,51 @@ mod tests {
             let want = 1.3 + k as f64;
             assert!((x - want).abs() < 0.01, "crest {x} vs {want}");
         }
+    }
+
+    /// Known answers of the kink fit: a kink of slope jump J = 0.2 on a parabola, with a
+    /// wrinkle of period 1 on top, moving-averaged over the wrinkle's period: the fit gives J
+    /// to 2 %; the same profile without the kink gives |J| < 0.005; at a point 2 periods from
+    /// the kink it gives |J| < 0.005.
+    #[test]
+    fn slope_jump_of_a_blurred_kink() {
+        let lambda = 1.0;
+        let make = |jump: f64| -> Vec<(f64, f64)> {
+            (0..=400)
+                .map(|i| {
+                    let x = i as f64 * 0.05;
+                    let z = 0.5 * jump * (x - 10.0).abs()
+                        + 0.01 * (x - 7.0).powi(2)
+                        + 0.08 * (2.0 * PI * x / lambda + 0.4).sin();
+                    (x, z)
+                })
+                .collect()
+        };
+        let smooth = moving_average(&make(0.2), lambda);
+        let j = slope_jump(&smooth, 10.0, 1.5 * lambda, lambda).unwrap();
+        assert!((j - 0.2).abs() < 0.004, "{j}");
+        let j0 = slope_jump(&moving_average(&make(0.0), lambda), 10.0, 1.5, lambda).unwrap();
+        assert!(j0.abs() < 0.005, "{j0}");
+        let jf = slope_jump(&smooth, 13.5, 1.5, lambda).unwrap();
+        assert!(jf.abs() < 0.005, "{jf}");
+        // Without the blur in the model, the fit sees only part of the blurred kink.
+        let jn = slope_jump(&smooth, 10.0, 1.5, 0.0).unwrap();
+        println!("blurred kink: {j:.4} with the blur modelled, {jn:.4} without (J = 0.2)");
+        assert_eq!(slope_jump(&smooth, 100.0, 1.5, lambda), None);
+    }
+
+    /// The bend height follows its formula, phase included; with no bend it is 0.
+    #[test]
+    fn bend_height_and_phase() {
+        let mut s = facet_slab_settings(ElementOrder::Trilinear);
+        let lambda = 0.01;
+        // sin(2π (x/P + φ)) at x = 0 is sin(2π · 0.3); a quarter period later it is cos.
+        let p = s.bend_period * lambda;
+        let a = s.bend * lambda;
+        assert!((bend_height(&s, lambda, 0.0) - a * (2.0 * PI * 0.3).sin()).abs() < 1e-15);
+        assert!((bend_height(&s, lambda, 0.25 * p) - a * (2.0 * PI * 0.3).cos()).abs() < 1e-15);
+        s.bend = 0.0;
+        assert_eq!(bend_height(&s, lambda, 0.3), 0.0);
     }
 
     #[test]

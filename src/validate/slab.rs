@@ -85,6 +85,11 @@ pub struct SlabSettings {
     /// Period of the bend, in λ (used when `bend` > 0).
     #[serde(default)]
     pub bend_period: f64,
+    /// Phase of the bend, in periods: the bend is bend · λ · sin(2π (x / (bend_period · λ) +
+    /// bend_phase)). Shifting it moves the bend's peaks against the element grid by
+    /// bend_phase · bend_period · λ (m) without moving the grid. 0 = a sine starting at x = 0.
+    #[serde(default)]
+    pub bend_phase: f64,
 }
 
 impl SlabSettings {
@@ -109,6 +114,7 @@ impl SlabSettings {
             seed: 1,
             bend: 0.0,
             bend_period: 4.0,
+            bend_phase: 0.0,
         }
     }
 
@@ -149,6 +155,12 @@ impl SlabSettings {
         }
         if self.bend > 0.0 {
             pos(self.bend_period, "bend_period")?;
+        }
+        if !self.bend_phase.is_finite() {
+            bail!(
+                "slab setting `bend_phase` must be finite (periods), got {}",
+                self.bend_phase
+            );
         }
         if self.cells_along == 0 || self.depth_cells == 0 || self.steps == 0 {
             bail!("slab settings `cells_along`, `depth_cells` and `steps` must be at least 1");
@@ -393,7 +405,7 @@ pub fn run_slab(s: &SlabSettings) -> anyhow::Result<SlabResult> {
         let (amp, period) = (s.bend * lambda, s.bend_period * lambda);
         for n in 0..lattice.node_count() {
             let x = lattice.rest[n].x;
-            q[3 * n + 2] += amp * (2.0 * std::f64::consts::PI * x / period).sin();
+            q[3 * n + 2] += amp * (2.0 * std::f64::consts::PI * (x / period + s.bend_phase)).sin();
         }
     }
     // Loading ramp (geometric), starting just past the buckling strain at λ.
