@@ -25,7 +25,9 @@ pub enum ValidateCommand {
     Dense(ValidateArgs),
     /// Where the wrinkle crests fall in the element grid, trilinear against quadratic
     /// lattices, on coarse slabs (λ/cell 0.8 to 1.4): crests.csv (one row per crest) and the
-    /// phase statistics against uniform phases.
+    /// phase statistics against uniform phases; and whether the element boundaries crease
+    /// the skin where λ ≪ cell (facets.csv: the fraction of the trilinear kink the skin shows
+    /// at each face and, as the null, at each cell centre).
     #[command(after_help = "Example:\n  furrow validate crests --out out/validate")]
     Crests(ValidateArgs),
 }
@@ -168,7 +170,8 @@ fn run_crest_check(a: ValidateArgs, out: &Output) -> anyhow::Result<()> {
     use crate::lattice::ElementOrder;
     use crate::validate::crests;
     let csv_path = a.out.join("crests.csv");
-    let ow = check_outputs(&[&csv_path], a.force)?;
+    let facets_path = a.out.join("facets.csv");
+    let ow = check_outputs(&[&csv_path, &facets_path], a.force)?;
     let cells: Vec<usize> = if a.quick {
         crests::CELLS[1..3].to_vec()
     } else {
@@ -220,10 +223,36 @@ fn run_crest_check(a: ValidateArgs, out: &Output) -> anyhow::Result<()> {
         ));
         stats.push(serde_json::json!({ "order": format!("{o:?}"), "stats": st }));
     }
+    // Faceting where λ ≪ cell (cell = 4 λ, interior held on a bend).
+    let pb = out.progress(orders.len() as u64, "faceting slabs");
+    let mut facets = Vec::new();
+    let mut fcsv = String::from("order,position,offset_cells,face,kink_fraction\n");
+    for (k, &o) in orders.iter().enumerate() {
+        let r = crests::run_facets(&crests::facet_slab_settings(o))?;
+        for (pos, kf) in [("face", &r.at_faces), ("centre", &r.at_centres)] {
+            for (i, f) in kf.per_face.iter().enumerate() {
+                let _ = writeln!(fcsv, "{o:?},{pos},{},{i},{f:.4}", kf.offset);
+            }
+        }
+        out.say(format!(
+            "{o:?} lattice, λ/cell {:.2}: the skin shows {:.2} of the trilinear kink at element \
+             faces, {:.2} at cell centres (1 = all of it, 0 = none)",
+            r.lambda_over_cell, r.at_faces.fraction, r.at_centres.fraction
+        ));
+        facets.push(r);
+        pb.set_position(k as u64 + 1);
+    }
+    pb.finish_and_clear();
+    atomic::write(&facets_path, fcsv.as_bytes(), ow)?;
     out.json_result(&serde_json::json!({
-        "ok": true, "csv": csv_path, "stats": stats, "runs": runs,
+        "ok": true, "csv": csv_path, "facets_csv": facets_path, "stats": stats, "runs": runs,
+        "facets": facets,
     }));
-    out.say(format!("  {}", csv_path.display()));
+    out.say(format!(
+        "  {}\n  {}",
+        csv_path.display(),
+        facets_path.display()
+    ));
     Ok(())
 }
 

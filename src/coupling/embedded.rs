@@ -63,12 +63,9 @@ pub struct EmbeddedShell {
     pinned_vertices: Vec<usize>,
     /// Pattern of the shell Hessian triplets (built at the first `coupling_terms`).
     hessian_pattern: Mutex<Option<Pattern>>,
+    /// Most halvings of the load change when a solve fails (0 = none).
+    continuation_levels: usize,
 }
-
-/// Most halvings of a skin solve's load change when Newton does not converge directly: up to
-/// 2² = 4 equal increments (each a full solve; a failed direct solve on the face demo's hard
-/// frames costs about 60 Newton iterations already, so more levels would cost minutes).
-pub const CONTINUATION_LEVELS: usize = 2;
 
 /// What one two-step frame did: the shell statics report, the interior step report and the
 /// time (s) of each stage.
@@ -214,6 +211,7 @@ impl EmbeddedShell {
             solver,
             problem,
             pinned_vertices: Vec::new(),
+            continuation_levels: 0,
             hessian_pattern: Mutex::new(None),
         })
     }
@@ -361,9 +359,9 @@ impl EmbeddedShell {
 
     /// Shell statics (step 1): from the last x, find the equilibrium of E_x subject to
     /// H x = H B q (3 rows per cluster, one per coordinate; pinned vertices sit at B q).
-    /// When Newton does not get there directly, the move from the current cluster means
-    /// to H B q is split into up to 2^[`CONTINUATION_LEVELS`] equal increments
-    /// ([`StaticSolver::solve_in_increments`]).
+    /// With [`EmbeddedShell::set_continuation_levels`] above 0, a solve that does not get
+    /// there directly is redone with the move from the current cluster means to H B q split
+    /// into up to 2^levels equal increments ([`StaticSolver::solve_in_increments`]).
     /// Returns the solver's report; the state is kept only if it stayed finite (otherwise
     /// the previous state is restored and the report's status says `NotFinite`).
     pub fn solve(&mut self, q: &[f64]) -> Result<SolveReport, SolverError> {
@@ -384,13 +382,22 @@ impl EmbeddedShell {
             &mut self.x,
             &rhs_from,
             &pinned_from,
-            CONTINUATION_LEVELS,
+            self.continuation_levels,
         )?;
         if self.x.iter().any(|v| !v.is_finite()) {
             self.x = backup;
             rep.status = SolveStatus::NotFinite;
         }
         Ok(rep)
+    }
+
+    /// Let a failed skin solve be redone with its load change split into up to 2^`levels`
+    /// equal increments (0, the default, turns this off). On the validation slab with a held,
+    /// bent quadratic interior it turned load steps whose line search failed from the first
+    /// step into converged ones; on the face demo's two hard frames (13 and 14) it did not
+    /// help and tripled their time, so the pipeline leaves it off.
+    pub fn set_continuation_levels(&mut self, levels: usize) {
+        self.continuation_levels = levels;
     }
 
     /// The skin's terms for the interior step: (Bᵀ K_x B as triplets over node dofs, both

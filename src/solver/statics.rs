@@ -1070,6 +1070,11 @@ mod tests {
         x[0] = -1.0;
         let rep = direct.solve(&chain, &problem(30.0), &mut x).unwrap();
         assert_eq!(rep.status, SolveStatus::IterationLimit, "{rep:?}");
+        println!(
+            "direct: residual {} from {}",
+            rep.residual, rep.initial_residual
+        );
+        assert!(rep.residual > 0.1 * rep.initial_residual, "{rep:?}");
         // The same jump in increments.
         let mut solver = StaticSolver::new(StaticSettings {
             max_iterations: 50,

@@ -377,6 +377,9 @@ pub fn run_slab(s: &SlabSettings) -> anyhow::Result<SlabResult> {
         settings,
     )
     .context("building the slab's skin")?;
+    // A failed load step is redone in up to 4 increments (held, bent quadratic interiors
+    // otherwise stall from the first step; see `EmbeddedShell::set_continuation_levels`).
+    skin.set_continuation_levels(2);
     // Interior, affinely compressed; ends and bottom pinned.
     let interior = Interior::new(
         &lattice,
