@@ -73,13 +73,8 @@ mod tests {
     #[test]
     fn matches_the_definition_on_a_scatter() {
         // A deterministic pseudo-random cloud with ties: the sweep agrees with brute force.
-        let mut s = 12345u64;
-        let mut next = || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((s >> 33) % 20) as f64
-        };
+        let mut rng = crate::math::rng::Lcg::from_state(12345);
+        let mut next = || (rng.next_f64() * 20.0).floor();
         let p: Vec<(f64, f64)> = (0..200).map(|_| (next(), next())).collect();
         // Brute force keeps duplicates of an optimal point; the sweep keeps the first.
         let want = brute(&p);

@@ -226,6 +226,21 @@ pub struct HingeElement {
     pub rest_angle: f64,
 }
 
+/// The fold θ − θ̄ (rad) taken into (−π, π]: θ from `atan2` jumps by 2π where a hinge
+/// passes through the fully folded state θ = ±π, and measured from the rest angle the jump
+/// moves to a fold of π away from rest, so the energy stays continuous (and smooth) through
+/// θ = ±π for any rest angle.
+pub fn angle_change(theta: f64, rest: f64) -> f64 {
+    let d = theta - rest;
+    if d > std::f64::consts::PI {
+        d - 2.0 * std::f64::consts::PI
+    } else if d <= -std::f64::consts::PI {
+        d + 2.0 * std::f64::consts::PI
+    } else {
+        d
+    }
+}
+
 /// Energy (J) of one hinge; adds the 12-gradient and fills the 12 × 12 Hessian when asked.
 pub fn hinge_element(
     el: &HingeElement,
@@ -234,7 +249,7 @@ pub fn hinge_element(
     hess: Option<&mut [f64; 144]>,
 ) -> f64 {
     let (theta, g) = hinge_angle(x);
-    let dth = theta - el.rest_angle;
+    let dth = angle_change(theta, el.rest_angle);
     let energy = el.k * dth * dth;
     if let Some(gr) = grad {
         for i in 0..4 {
@@ -419,6 +434,59 @@ impl Energy for BendingEnergy {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A hinge with a sharp rest fold (θ̄ = 3 rad) bent through θ = ±π, where atan2 jumps
+    /// by 2π: the energy is continuous there (k (π − 3)² from both sides) and its gradient
+    /// matches finite differences across the jump.
+    #[test]
+    fn hinge_energy_is_continuous_through_the_folded_state() {
+        let el = HingeElement {
+            v: [0, 1, 2, 3],
+            k: 2.0,
+            rest_angle: 3.0,
+        };
+        // Edge along x; wing A in the xy half-plane y > 0; wing B at angle φ from −y.
+        let hinge = |phi: f64| {
+            [
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [0.4, 1.0, 0.0],
+                [0.6, -phi.cos(), phi.sin()],
+            ]
+        };
+        let angle = |phi: f64| hinge_angle(hinge(phi)).0;
+        // φ = π puts wing B onto wing A: fully folded. Find the sides of the atan2 jump.
+        let (a, b) = (std::f64::consts::PI - 1e-3, std::f64::consts::PI + 1e-3);
+        assert!(
+            (angle(a) - angle(b)).abs() > 6.0,
+            "the test must cross the atan2 jump: {} {}",
+            angle(a),
+            angle(b)
+        );
+        let (ea, eb) = (
+            hinge_element(&el, hinge(a), None, None),
+            hinge_element(&el, hinge(b), None, None),
+        );
+        let want = 2.0 * (std::f64::consts::PI - 3.0).powi(2);
+        assert!(
+            (ea - want).abs() < 1e-2 && (eb - want).abs() < 1e-2,
+            "{ea} {eb} {want}"
+        );
+        // dE/dφ by finite differences across the jump against the chain rule.
+        let h = 1e-6;
+        let phi = std::f64::consts::PI + 2e-7;
+        let num = (hinge_element(&el, hinge(phi + h), None, None)
+            - hinge_element(&el, hinge(phi - h), None, None))
+            / (2.0 * h);
+        let mut g = [0.0; 12];
+        hinge_element(&el, hinge(phi), Some(&mut g), None);
+        let dx3 = [0.0, phi.sin(), phi.cos()];
+        let ana: f64 = (0..3).map(|c| g[9 + c] * dx3[c]).sum();
+        assert!(
+            (num - ana).abs() < 1e-5 * ana.abs().max(1.0),
+            "{num} vs {ana}"
+        );
+    }
 
     #[test]
     fn hinge_angle_gradient_matches_finite_differences() {

@@ -608,13 +608,8 @@ mod tests {
     /// √(2N) V; over 400 draws of N = 20 the means match to sampling error.
     #[test]
     fn null_model_of_uniform_phases() {
-        let mut state = 12345u64;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = crate::math::rng::Lcg::from_state(12345);
+        let mut next = || rng.next_f64();
         let (draws, n) = (400, 20);
         let (mut r2, mut z2) = (0.0, 0.0);
         for _ in 0..draws {
