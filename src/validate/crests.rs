@@ -352,13 +352,7 @@ pub fn bend_removed_profile(s: &SlabSettings, r: &SlabResult) -> Vec<(f64, f64)>
 /// of period `width` averages to zero, so with `width` = λ_m it removes the wrinkle and keeps
 /// the slow shape. Samples whose window does not fit are dropped; ordered by position.
 pub fn moving_average(profile: &[(f64, f64)], width: f64) -> Vec<(f64, f64)> {
-    let mut p: Vec<(f64, f64)> = profile
-        .iter()
-        .copied()
-        .filter(|(x, z)| x.is_finite() && z.is_finite())
-        .collect();
-    p.sort_by(|a, b| a.0.total_cmp(&b.0));
-    p.dedup_by(|b, a| a.0 == b.0);
+    let p = measure::sorted_finite(profile);
     measure::detrend_moving_average(&p, width)
         .into_iter()
         .filter_map(|(x, d)| {

@@ -185,6 +185,19 @@ pub fn wavelength_with(profile: &[(f64, f64)], opts: &MeasureOptions) -> Option<
     })
 }
 
+/// The finite samples of a profile `(position, value)` ordered by position, the first of
+/// any samples at the same position kept.
+pub fn sorted_finite(profile: &[(f64, f64)]) -> Vec<(f64, f64)> {
+    let mut p: Vec<(f64, f64)> = profile
+        .iter()
+        .copied()
+        .filter(|(s, z)| s.is_finite() && z.is_finite())
+        .collect();
+    p.sort_by(|a, b| a.0.total_cmp(&b.0));
+    p.dedup_by(|b, a| a.0 == b.0);
+    p
+}
+
 /// The height profile `(position (m), height (m))` minus its moving average of width `width`
 /// (m): the exact mean of the piecewise linear profile over `[s − width/2, s + width/2]`. A
 /// sinusoid of period `width` passes unchanged (its mean over one period is zero), while
@@ -193,13 +206,7 @@ pub fn wavelength_with(profile: &[(f64, f64)], opts: &MeasureOptions) -> Option<
 /// window does not fit inside the profile are dropped. Empty when fewer than 2 samples
 /// remain or `width` is not positive.
 pub fn detrend_moving_average(profile: &[(f64, f64)], width: f64) -> Vec<(f64, f64)> {
-    let mut p: Vec<(f64, f64)> = profile
-        .iter()
-        .copied()
-        .filter(|(s, z)| s.is_finite() && z.is_finite())
-        .collect();
-    p.sort_by(|a, b| a.0.total_cmp(&b.0));
-    p.dedup_by(|b, a| a.0 == b.0);
+    let p = sorted_finite(profile);
     if p.len() < 2 || !(width.is_finite() && width > 0.0) {
         return Vec::new();
     }
