@@ -7,10 +7,11 @@
 use furrow::fem::{Interior, Material};
 use furrow::lattice::{Lattice, LatticeSettings};
 use furrow::math::fd::{check_gradient, check_hessian};
+use furrow::math::rng::Lcg;
 use furrow::math::Energy;
 use furrow::mesh::TriMesh;
 use furrow::muscle::generate::{
-    generate_muscles, synthetic_arkit_targets, GenerateSettings, Lcg, ARKIT_NAMES,
+    generate_muscles, synthetic_arkit_targets, GenerateSettings, ARKIT_NAMES,
 };
 use furrow::muscle::{
     ActiveEnergy, FitSettings, Fitter, Forward, ForwardStatus, FrameStatus, Muscle,

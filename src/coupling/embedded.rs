@@ -367,23 +367,29 @@ impl EmbeddedShell {
     pub fn solve(&mut self, q: &[f64]) -> Result<SolveReport, SolverError> {
         self.check_q(q)?;
         let bq = self.embedded_flat(q);
-        // Where a continuation would start: the current state's own cluster means and
-        // pinned positions.
-        let rhs_from = self.problem.constraints.apply(&self.x);
-        let pinned_from: Vec<f64> = self.problem.pinned.iter().map(|&d| self.x[d]).collect();
+        // Where a continuation would start (only when one may run): the current state's own
+        // cluster means and pinned positions.
+        let from = (self.continuation_levels > 0).then(|| {
+            let rhs: Vec<f64> = self.problem.constraints.apply(&self.x);
+            let pinned: Vec<f64> = self.problem.pinned.iter().map(|&d| self.x[d]).collect();
+            (rhs, pinned)
+        });
         self.problem.constraints.rhs = self.problem.constraints.apply(&bq);
         for &v in &self.pinned_vertices {
             self.x[3 * v..3 * v + 3].copy_from_slice(&bq[3 * v..3 * v + 3]);
         }
         let backup = self.x.clone();
-        let mut rep = self.solver.solve_in_increments(
-            &self.shell,
-            &self.problem,
-            &mut self.x,
-            &rhs_from,
-            &pinned_from,
-            self.continuation_levels,
-        )?;
+        let mut rep = match &from {
+            Some((rhs_from, pinned_from)) => self.solver.solve_in_increments(
+                &self.shell,
+                &self.problem,
+                &mut self.x,
+                rhs_from,
+                pinned_from,
+                self.continuation_levels,
+            )?,
+            None => self.solver.solve(&self.shell, &self.problem, &mut self.x)?,
+        };
         if self.x.iter().any(|v| !v.is_finite()) {
             self.x = backup;
             rep.status = SolveStatus::NotFinite;

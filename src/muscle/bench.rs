@@ -2,9 +2,10 @@
 //! elements.
 
 use super::fit::{FitSettings, Fitter};
-use super::generate::{generate_muscles, synthetic_arkit_targets, GenerateSettings, Lcg};
+use super::generate::{generate_muscles, synthetic_arkit_targets, GenerateSettings};
 use crate::fem::{Interior, Material};
 use crate::lattice::{Lattice, LatticeSettings};
+use crate::math::rng::Lcg;
 use nalgebra::Vector3;
 use std::time::Instant;
 

@@ -6,6 +6,7 @@ use super::MuscleError;
 use crate::fem::Interior;
 use crate::io::model::MorphTarget;
 use crate::lattice::Lattice;
+use crate::math::rng::Lcg;
 use crate::math::sparse::{Pattern, SpdSolver};
 use crate::math::Energy;
 use crate::mesh::TriMesh;
@@ -329,8 +330,6 @@ pub const ARKIT_NAMES: [&str; 52] = [
     "noseSneerRight",
     "tongueOut",
 ];
-
-pub use crate::math::rng::Lcg;
 
 /// 52 synthetic ARKit-named blend shapes on `mesh` (for tests and `furrow bench fit`): each
 /// is a smooth Gaussian bump of displacement, `amplitude` metres at its centre, radius

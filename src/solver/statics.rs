@@ -826,6 +826,9 @@ impl StaticSolver {
                 p.pinned.len()
             )));
         }
+        if levels == 0 {
+            return self.solve(e, p, x);
+        }
         let x_start = x.to_vec();
         let mu_start = self.multipliers.clone();
         let last_x_start = self.last_x.clone();
@@ -846,10 +849,9 @@ impl StaticSolver {
             self.multipliers = mu_start.clone();
             self.last_x = last_x_start.clone();
             self.last_pinned = last_pinned_start.clone();
-            // The start state's pinned values, so the pinned-motion predictor sees each
-            // increment's motion only.
+            // The pinned-motion predictor compares with the start state's pinned values, so
+            // it sees each increment's motion only (x's pinned values are set per increment).
             for (&d, &v) in p.pinned.iter().zip(pinned_from) {
-                x[d] = v;
                 if let Some(l) = self.last_x.get_mut(d) {
                     *l = v;
                 }
@@ -923,9 +925,18 @@ mod tests {
         }
     }
 
-    /// E = Σ (x_{i+1} − x_i)² / 2 over a chain of 5 dofs (unit springs).
-    struct Chain;
-    impl Energy for Chain {
+    /// Springs in series between dofs i and i + 1 of a chain of 5 dofs, with energy
+    /// E_i(Δ) = k_i (Δ²/2 + quartic · Δ⁴/4) (hardening when quartic > 0).
+    struct SpringChain {
+        k: [f64; 4],
+        quartic: f64,
+    }
+    /// Unit linear springs: E = Σ (x_{i+1} − x_i)² / 2.
+    const LINEAR_CHAIN: SpringChain = SpringChain {
+        k: [1.0; 4],
+        quartic: 0.0,
+    };
+    impl Energy for SpringChain {
         fn dofs(&self) -> usize {
             5
         }
@@ -936,24 +947,24 @@ mod tests {
             hess: Option<&mut Vec<(usize, usize, f64)>>,
             _p: bool,
         ) -> f64 {
+            let (k, c) = (self.k, self.quartic);
+            let d: Vec<f64> = (0..4).map(|i| x[i + 1] - x[i]).collect();
             if let Some(g) = grad {
                 for i in 0..4 {
-                    let d = x[i + 1] - x[i];
-                    g[i] -= d;
-                    g[i + 1] += d;
+                    let f = k[i] * (d[i] + c * d[i].powi(3));
+                    g[i] -= f;
+                    g[i + 1] += f;
                 }
             }
             if let Some(h) = hess {
                 for i in 0..4 {
-                    h.extend([
-                        (i, i, 1.0),
-                        (i + 1, i + 1, 1.0),
-                        (i, i + 1, -1.0),
-                        (i + 1, i, -1.0),
-                    ]);
+                    let s = k[i] * (1.0 + 3.0 * c * d[i] * d[i]);
+                    h.extend([(i, i, s), (i + 1, i + 1, s), (i, i + 1, -s), (i + 1, i, -s)]);
                 }
             }
-            (0..4).map(|i| (x[i + 1] - x[i]).powi(2) / 2.0).sum()
+            (0..4)
+                .map(|i| k[i] * (d[i].powi(2) / 2.0 + c * d[i].powi(4) / 4.0))
+                .sum()
         }
     }
 
@@ -974,10 +985,10 @@ mod tests {
         };
         let mut solver = StaticSolver::new(settings).unwrap();
         let mut x = vec![0.0, 0.3, -0.2, 0.1, 1.0];
-        let rep = solver.solve(&Chain, &p, &mut x).unwrap();
+        let rep = solver.solve(&LINEAR_CHAIN, &p, &mut x).unwrap();
         assert_eq!(rep.status, SolveStatus::Converged, "{rep:?}");
         x[4] = 2.0;
-        let rep = solver.solve(&Chain, &p, &mut x).unwrap();
+        let rep = solver.solve(&LINEAR_CHAIN, &p, &mut x).unwrap();
         assert_eq!(rep.status, SolveStatus::Converged, "{rep:?}");
         assert_eq!(
             (
@@ -993,40 +1004,6 @@ mod tests {
         }
     }
 
-    /// Springs in series with hardening E_i(Δ) = k_i (Δ²/2 + Δ⁴/4) between dofs i and i + 1.
-    struct HardeningChain([f64; 4]);
-    impl Energy for HardeningChain {
-        fn dofs(&self) -> usize {
-            5
-        }
-        fn eval(
-            &self,
-            x: &[f64],
-            grad: Option<&mut [f64]>,
-            hess: Option<&mut Vec<(usize, usize, f64)>>,
-            _p: bool,
-        ) -> f64 {
-            let k = self.0;
-            let d: Vec<f64> = (0..4).map(|i| x[i + 1] - x[i]).collect();
-            if let Some(g) = grad {
-                for i in 0..4 {
-                    let f = k[i] * (d[i] + d[i].powi(3));
-                    g[i] -= f;
-                    g[i + 1] += f;
-                }
-            }
-            if let Some(h) = hess {
-                for i in 0..4 {
-                    let s = k[i] * (1.0 + 3.0 * d[i] * d[i]);
-                    h.extend([(i, i, s), (i + 1, i + 1, s), (i, i + 1, -s), (i + 1, i, -s)]);
-                }
-            }
-            (0..4)
-                .map(|i| k[i] * (d[i].powi(2) / 2.0 + d[i].powi(4) / 4.0))
-                .sum()
-        }
-    }
-
     /// Load continuation on a chain of hardening springs (k = 1, 3, 0.5, 2), x0 pinned and
     /// x4 held by the constraint x4 = d. From the equilibrium at x0 = 0, d = 1 the load jumps
     /// to x0 = −1, d = 30: with 4 Newton iterations allowed the direct solve stops at the
@@ -1036,7 +1013,7 @@ mod tests {
     #[test]
     fn load_increments_converge_where_the_direct_solve_does_not() {
         let k = [1.0, 3.0, 0.5, 2.0];
-        let chain = HardeningChain(k);
+        let chain = SpringChain { k, quartic: 1.0 };
         let problem = |x4: f64| StaticProblem {
             pinned: vec![0],
             constraints: LinearConstraints {
@@ -1070,10 +1047,6 @@ mod tests {
         x[0] = -1.0;
         let rep = direct.solve(&chain, &problem(30.0), &mut x).unwrap();
         assert_eq!(rep.status, SolveStatus::IterationLimit, "{rep:?}");
-        println!(
-            "direct: residual {} from {}",
-            rep.residual, rep.initial_residual
-        );
         assert!(rep.residual > 0.1 * rep.initial_residual, "{rep:?}");
         // The same jump in increments.
         let mut solver = StaticSolver::new(StaticSettings {

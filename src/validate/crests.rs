@@ -289,17 +289,6 @@ pub fn facet_slab_settings(order: ElementOrder) -> SlabSettings {
     s
 }
 
-/// The prescribed bend height (m) at rest position `x` (m) of a slab run with settings `s`
-/// and predicted wavelength `lambda` (m): bend · λ · sin(2π (x / (bend_period · λ) +
-/// bend_phase)); 0 when `s.bend` is 0.
-pub fn bend_height(s: &SlabSettings, lambda: f64, x: f64) -> f64 {
-    if s.bend <= 0.0 {
-        return 0.0;
-    }
-    let period = s.bend_period * lambda;
-    s.bend * lambda * (2.0 * PI * (x / period + s.bend_phase)).sin()
-}
-
 /// Slope jumps (rad, small-angle: right slope − left slope, in the deformed frame) of the
 /// trilinear interpolant of the bend at the interior faces i = 1 ..= cells_along − 1 of a
 /// held, affinely compressed slab: (b_{i+1} − 2 b_i + b_{i−1}) / (cell (1 − ε)), b_i the bend
@@ -307,7 +296,7 @@ pub fn bend_height(s: &SlabSettings, lambda: f64, x: f64) -> f64 {
 /// quadratic B-spline surfaces have none.
 pub fn trilinear_slope_jumps(s: &SlabSettings, r: &SlabResult) -> Vec<f64> {
     let eps = r.strains.last().copied().unwrap_or(0.0);
-    let b = |i: usize| bend_height(s, r.predicted, i as f64 * r.cell);
+    let b = |i: usize| s.bend_height(r.predicted, i as f64 * r.cell);
     (1..s.cells_along)
         .map(|i| (b(i + 1) - 2.0 * b(i) + b(i - 1)) / (r.cell * (1.0 - eps)))
         .collect()
@@ -482,16 +471,17 @@ pub fn run_facets(s: &SlabSettings) -> anyhow::Result<FacetRun> {
             per_face,
         }
     };
+    let (at_faces, at_centres) = (probe(0.0), probe(0.5));
     Ok(FacetRun {
         order: s.order,
         predicted: r.predicted,
         measured,
         lambda_over_cell: measured / mean_cell,
         amplitude: m.map(|m| m.amplitude).unwrap_or(f64::NAN),
-        jumps: jumps.clone(),
+        jumps,
         window: half,
-        at_faces: probe(0.0),
-        at_centres: probe(0.5),
+        at_faces,
+        at_centres,
         converged: r.converged,
         seconds: r.seconds,
     })
@@ -562,10 +552,10 @@ mod tests {
         // sin(2π (x/P + φ)) at x = 0 is sin(2π · 0.3); a quarter period later it is cos.
         let p = s.bend_period * lambda;
         let a = s.bend * lambda;
-        assert!((bend_height(&s, lambda, 0.0) - a * (2.0 * PI * 0.3).sin()).abs() < 1e-15);
-        assert!((bend_height(&s, lambda, 0.25 * p) - a * (2.0 * PI * 0.3).cos()).abs() < 1e-15);
+        assert!((s.bend_height(lambda, 0.0) - a * (2.0 * PI * 0.3).sin()).abs() < 1e-15);
+        assert!((s.bend_height(lambda, 0.25 * p) - a * (2.0 * PI * 0.3).cos()).abs() < 1e-15);
         s.bend = 0.0;
-        assert_eq!(bend_height(&s, lambda, 0.3), 0.0);
+        assert_eq!(s.bend_height(lambda, 0.3), 0.0);
     }
 
     #[test]

@@ -118,6 +118,17 @@ impl SlabSettings {
         }
     }
 
+    /// The prescribed bend height (m) at rest position `x` (m) for predicted wavelength
+    /// `lambda` (m): bend · λ · sin(2π (x / (bend_period · λ) + bend_phase)); 0 when `bend`
+    /// is 0.
+    pub fn bend_height(&self, lambda: f64, x: f64) -> f64 {
+        if self.bend <= 0.0 {
+            return 0.0;
+        }
+        let period = self.bend_period * lambda;
+        self.bend * lambda * (2.0 * std::f64::consts::PI * (x / period + self.bend_phase)).sin()
+    }
+
     /// Check the settings; the error names the field.
     pub fn validate(&self) -> anyhow::Result<()> {
         self.bilayer.validate().map_err(anyhow::Error::msg)?;
@@ -405,10 +416,8 @@ pub fn run_slab(s: &SlabSettings) -> anyhow::Result<SlabResult> {
         }
     }
     if s.bend > 0.0 {
-        let (amp, period) = (s.bend * lambda, s.bend_period * lambda);
         for n in 0..lattice.node_count() {
-            let x = lattice.rest[n].x;
-            q[3 * n + 2] += amp * (2.0 * std::f64::consts::PI * (x / period + s.bend_phase)).sin();
+            q[3 * n + 2] += s.bend_height(lambda, lattice.rest[n].x);
         }
     }
     // Loading ramp (geometric), starting just past the buckling strain at λ.
