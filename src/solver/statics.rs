@@ -1029,35 +1029,29 @@ mod tests {
             gamma: Some(1.0),
             ..Default::default()
         };
-        let start = |solver: &mut StaticSolver| {
+        // A solver at the equilibrium of x0 = 0, d = 1 (found with up to 50 iterations),
+        // then allowed 4 iterations, and the jumped start x0 = −1 (d moves with the problem).
+        let start = || {
+            let mut solver = StaticSolver::new(StaticSettings {
+                max_iterations: 50,
+                ..settings
+            })
+            .unwrap();
             let mut x = vec![0.0, 0.2, 0.4, 0.6, 0.8];
-            let rep = StaticSolver::solve(solver, &chain, &problem(1.0), &mut x).unwrap();
+            let rep = solver.solve(&chain, &problem(1.0), &mut x).unwrap();
             assert_eq!(rep.status, SolveStatus::Converged, "{rep:?}");
-            x
+            solver.settings.max_iterations = 4;
+            let x_start = x.clone();
+            x[0] = -1.0;
+            (solver, x_start, x)
         };
         // The direct solve fails within 4 iterations.
-        let mut direct = StaticSolver::new(StaticSettings {
-            max_iterations: 50,
-            ..settings
-        })
-        .unwrap();
-        let x_start = start(&mut direct);
-        direct.settings.max_iterations = 4;
-        let mut x = x_start.clone();
-        x[0] = -1.0;
+        let (mut direct, _, mut x) = start();
         let rep = direct.solve(&chain, &problem(30.0), &mut x).unwrap();
         assert_eq!(rep.status, SolveStatus::IterationLimit, "{rep:?}");
         assert!(rep.residual > 0.1 * rep.initial_residual, "{rep:?}");
         // The same jump in increments.
-        let mut solver = StaticSolver::new(StaticSettings {
-            max_iterations: 50,
-            ..settings
-        })
-        .unwrap();
-        let x_start = start(&mut solver);
-        solver.settings.max_iterations = 4;
-        let mut x = x_start.clone();
-        x[0] = -1.0;
+        let (mut solver, x_start, mut x) = start();
         let rep = solver
             .solve_in_increments(
                 &chain,
