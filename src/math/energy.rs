@@ -20,4 +20,16 @@ pub trait Energy: Sync {
         hess: Option<&mut Vec<(usize, usize, f64)>>,
         project_psd: bool,
     ) -> f64;
+
+    /// Hessian values only (J/m²), in exactly the order and number of the triplets `eval`
+    /// appends at the same `x`, written over `values` (resized). A solver that has kept the
+    /// triplet indices refills its matrix from these without the index traffic. The default
+    /// evaluates the triplets and copies their values; energies with many elements override
+    /// it.
+    fn hessian_values(&self, x: &[f64], values: &mut Vec<f64>, project_psd: bool) {
+        let mut t = Vec::new();
+        self.eval(x, None, Some(&mut t), project_psd);
+        values.clear();
+        values.extend(t.iter().map(|e| e.2));
+    }
 }

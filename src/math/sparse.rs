@@ -159,6 +159,13 @@ pub fn dense_from_triplets(n: usize, triplets: &[(usize, usize, f64)]) -> Vec<f6
 /// y = A x for a compressed matrix.
 pub fn mul_vec(a: &SparseColMat<usize, f64>, x: &[f64]) -> Vec<f64> {
     let mut y = vec![0.0; a.nrows()];
+    mul_vec_into(a, x, &mut y);
+    y
+}
+
+/// y = A x into `y` (overwritten; length `a.nrows()`).
+pub fn mul_vec_into(a: &SparseColMat<usize, f64>, x: &[f64], y: &mut [f64]) {
+    y.fill(0.0);
     let ar = a.as_ref();
     for j in 0..a.ncols() {
         let xj = x[j];
@@ -169,7 +176,6 @@ pub fn mul_vec(a: &SparseColMat<usize, f64>, x: &[f64]) -> Vec<f64> {
             y[i] += v * xj;
         }
     }
-    y
 }
 
 #[cfg(test)]

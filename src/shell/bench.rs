@@ -129,7 +129,7 @@ fn report_json(r: &SolveReport) -> serde_json::Value {
         "newton_iterations": r.iterations,
         "factorizations": r.factorizations,
         "linear_solves": r.linear_solves,
-        "reused_factorizations": r.reused_factorizations,
+        "lagged_directions": r.lagged_directions,
         "modified_hessian_steps": r.modified_hessian_steps,
         "residual": r.residual,
         "assembly_s": r.assembly_s,

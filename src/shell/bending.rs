@@ -346,6 +346,27 @@ impl BendingEnergy {
     pub fn triplet_count(&self) -> usize {
         144 * self.hinges.len()
     }
+
+    /// The Hessian values of [`Energy::eval`]'s triplets at `x` (J/m²), in their order,
+    /// written into `values` (exactly [`Self::triplet_count`] long); element Hessians are
+    /// projected to PSD when `project` is set.
+    pub fn hessian_values_into(&self, x: &[f64], values: &mut [f64], project: bool) {
+        assert_eq!(
+            values.len(),
+            self.triplet_count(),
+            "Hessian value buffer size"
+        );
+        values
+            .par_chunks_mut(144)
+            .zip(self.hinges.par_iter())
+            .for_each(|(he, el)| {
+                let he: &mut [f64; 144] = he.try_into().expect("144 values per hinge");
+                hinge_element(el, gather4(x, el.v), None, Some(he));
+                if project {
+                    project_psd(he, 12);
+                }
+            });
+    }
 }
 
 fn gather4(x: &[f64], v: [usize; 4]) -> [[f64; 3]; 4] {
@@ -428,6 +449,11 @@ impl Energy for BendingEnergy {
             }
         }
         energy
+    }
+
+    fn hessian_values(&self, x: &[f64], values: &mut Vec<f64>, project: bool) {
+        values.resize(self.triplet_count(), 0.0);
+        self.hessian_values_into(x, values, project);
     }
 }
 

@@ -227,6 +227,27 @@ impl MembraneEnergy {
     pub fn triplet_count(&self) -> usize {
         81 * self.elements.len()
     }
+
+    /// The Hessian values of [`Energy::eval`]'s triplets at `x` (J/m²), in their order,
+    /// written into `values` (exactly [`Self::triplet_count`] long); element Hessians are
+    /// projected to PSD when `project` is set.
+    pub fn hessian_values_into(&self, x: &[f64], values: &mut [f64], project: bool) {
+        assert_eq!(
+            values.len(),
+            self.triplet_count(),
+            "Hessian value buffer size"
+        );
+        values
+            .par_chunks_mut(81)
+            .zip(self.elements.par_iter().zip(self.element_lame.par_iter()))
+            .for_each(|(he, (el, &(mu_h, lambda_h)))| {
+                let he: &mut [f64; 81] = he.try_into().expect("81 values per element");
+                membrane_element(el, gather3(x, el.v), mu_h, lambda_h, None, Some(he));
+                if project {
+                    project_psd(he, 9);
+                }
+            });
+    }
 }
 
 /// Check a per-triangle thickness list (m): one positive finite value per triangle.
@@ -346,5 +367,10 @@ impl Energy for MembraneEnergy {
             }
         }
         energy
+    }
+
+    fn hessian_values(&self, x: &[f64], values: &mut Vec<f64>, project: bool) {
+        values.resize(self.triplet_count(), 0.0);
+        self.hessian_values_into(x, values, project);
     }
 }

@@ -16,8 +16,10 @@
 //! an AMD fill-reducing ordering computed once (the symbolic analysis is cached here and
 //! reused across Newton iterations and frames). It costs the same as a Cholesky of the same
 //! pattern, about half of a sparse LU with partial pivoting, and unlike a null-space method
-//! it keeps the sparsity of the cluster constraints. The error δ introduces is removed by a
-//! few steps of iterative refinement against the unregularised matrix. A bonus: by
+//! it keeps the sparsity of the cluster constraints. The error δ introduces is removed by
+//! GMRES on the unregularised matrix preconditioned with the factor ([`super::gmres`]); the
+//! same GMRES lets a factor of an earlier Newton iterate serve later ones (a lagged factor).
+//! A bonus: by
 //! Sylvester's law of inertia the signs of D tell whether K is positive definite on the null
 //! space of C (exactly m negative pivots), i.e. whether the equilibrium is stable; Newton
 //! uses that to decide between the exact and a projected Hessian.
@@ -25,7 +27,8 @@
 /// faer tasks for large factorisations (fixed, so results do not depend on the thread count).
 const FAER_TASKS: usize = 2;
 
-use crate::math::sparse::{mul_vec, Pattern, SparseError};
+use super::gmres::{fgmres, GmresReport};
+use crate::math::sparse::{mul_vec_into, Pattern, SparseError};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
 use faer::sparse::linalg::cholesky::{
@@ -34,6 +37,7 @@ use faer::sparse::linalg::cholesky::{
 };
 use faer::sparse::SparseColMat;
 use faer::{Conj, MatMut, Side};
+use rayon::prelude::*;
 
 /// Outcome of one numeric KKT factorisation.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -55,8 +59,15 @@ pub struct KktFactorInfo {
 #[derive(Default)]
 pub struct KktSolver {
     fingerprint: Option<(usize, usize, u64)>,
-    kmap: Vec<usize>,
-    cmap: Vec<(usize, usize)>,
+    /// For each compressed slot, the range in `gather_src` of the Hessian triplets summed
+    /// into it (lower-triangle slots only; upper slots are mirrored).
+    gather_ptr: Vec<usize>,
+    /// Hessian triplet indices, grouped by the lower-triangle slot they sum into.
+    gather_src: Vec<u32>,
+    /// (upper slot, its lower mirror) for every strictly upper slot.
+    mirror: Vec<(usize, usize)>,
+    /// Lower slot of each constraint triplet.
+    cmap: Vec<usize>,
     symbolic: Option<SymbolicCholesky<usize>>,
     values: Vec<f64>,
     mem: Option<MemBuffer>,
@@ -66,7 +77,10 @@ pub struct KktSolver {
     n_free: usize,
     n_cons: usize,
     shift: f64,
+    /// δ of the assembled matrix `base`.
     delta: f64,
+    /// δ of the factored matrix `matrix`.
+    factor_delta: f64,
     factored: bool,
     /// Factorisation flops of the current symbolic analysis (decides sequential or parallel).
     flops: f64,
@@ -120,7 +134,8 @@ impl KktSolver {
         delta: f64,
     ) -> Result<KktFactorInfo, SparseError> {
         let identity: Vec<usize> = (0..n_free).collect();
-        let symbolic_s = self.assemble(&identity, n_free, n_cons, k, c, gamma, delta, None)?;
+        let symbolic_s =
+            self.assemble(&identity, n_free, n_cons, k, None, c, gamma, delta, None)?;
         let mut info = self.factor(shift);
         info.symbolic_s = symbolic_s;
         Ok(info)
@@ -131,6 +146,8 @@ impl KktSolver {
     /// `k` holds the Hessian triplets over all dofs (both triangles, as an [`Energy`]
     /// emits them); `free_of[dof]` is the free index of a dof or `usize::MAX` when it is
     /// pinned. `c` holds the constraint triplets `(row, free dof, value)`, unscaled.
+    /// `k_values`, when given, replaces the values of `k` (same order and length: the
+    /// values of [`Energy::hessian_values`] for the layout of `k`).
     ///
     /// The first call (or a call whose layout differs) builds the pattern, the AMD
     /// ordering and symbolic factorisation, and a scatter map from each triplet to its slot
@@ -150,11 +167,20 @@ impl KktSolver {
         n_free: usize,
         n_cons: usize,
         k: &[(usize, usize, f64)],
+        k_values: Option<&[f64]>,
         c: &[(usize, usize, f64)],
         gamma: f64,
         delta: f64,
         positions: Option<&[f64]>,
     ) -> Result<f64, SparseError> {
+        if let Some(v) = k_values {
+            if v.len() != k.len() {
+                return Err(SparseError::PatternMismatch {
+                    expected: k.len(),
+                    got: v.len(),
+                });
+            }
+        }
         let n = n_free + n_cons;
         let fp = layout_fingerprint(n, free_of, k, c);
         let mut symbolic_s = 0.0;
@@ -224,45 +250,82 @@ impl KktSolver {
                 })
             };
             self.diag_pos = (0..n).map(|j| slot(j, j)).collect::<Result<_, _>>()?;
-            self.kmap = k
-                .iter()
-                .map(|&(r, cc, _)| {
-                    let (fr, fc) = (free_of[r], free_of[cc]);
-                    if fr != usize::MAX && fc != usize::MAX {
-                        slot(fr, fc)
-                    } else {
-                        Ok(usize::MAX)
+            // Gather lists: each lower-triangle Hessian triplet goes to its slot; the upper
+            // ones are skipped (an energy emits both triangles of its symmetric Hessian) and
+            // the upper triangle is copied from the lower one, so the matrix is exactly
+            // symmetric.
+            let mut count = vec![0usize; a.val().len() + 1];
+            let mut lower_slot = Vec::with_capacity(k.len());
+            for &(r, cc, _) in k {
+                let (fr, fc) = (free_of[r], free_of[cc]);
+                if fr != usize::MAX && fc != usize::MAX && fr >= fc {
+                    let q = slot(fr, fc)?;
+                    count[q + 1] += 1;
+                    lower_slot.push(q);
+                } else {
+                    lower_slot.push(usize::MAX);
+                }
+            }
+            for q in 0..a.val().len() {
+                count[q + 1] += count[q];
+            }
+            let mut next = count.clone();
+            let mut src = vec![0u32; count[a.val().len()]];
+            for (i, &q) in lower_slot.iter().enumerate() {
+                if q != usize::MAX {
+                    src[next[q]] = u32::try_from(i)
+                        .map_err(|_| SparseError::Build("more than 2³² Hessian triplets".into()))?;
+                    next[q] += 1;
+                }
+            }
+            self.gather_ptr = count;
+            self.gather_src = src;
+            self.mirror = Vec::new();
+            for col in 0..n {
+                for q in cp[col]..cp[col + 1] {
+                    let r = ri[q];
+                    if r < col {
+                        self.mirror.push((q, slot(col, r)?));
                     }
-                })
-                .collect::<Result<_, _>>()?;
+                }
+            }
             self.cmap = c
                 .iter()
-                .map(|&(r, j, _)| Ok((slot(n_free + r, j)?, slot(j, n_free + r)?)))
+                .map(|&(r, j, _)| slot(n_free + r, j))
                 .collect::<Result<_, SparseError>>()?;
             self.symbolic = Some(sym);
             self.base = Some(a);
             self.fingerprint = Some(fp);
             self.matrix = None;
             self.symbolic_count += 1;
+            // A new analysis invalidates the factor.
+            self.factored = false;
             symbolic_s = t0.elapsed().as_secs_f64();
         }
         let base = self.base.as_mut().expect("base set");
         let vals = base.val_mut();
-        vals.fill(0.0);
-        for (&q, t) in self.kmap.iter().zip(k) {
-            if q != usize::MAX {
-                vals[q] += t.2;
+        let (ptr, src) = (&self.gather_ptr, &self.gather_src);
+        let sum = |q: usize| -> f64 {
+            let idx = &src[ptr[q]..ptr[q + 1]];
+            match k_values {
+                Some(v) => idx.iter().map(|&i| v[i as usize]).sum(),
+                None => idx.iter().map(|&i| k[i as usize].2).sum(),
             }
-        }
-        for (&(lo, hi), t) in self.cmap.iter().zip(c) {
+        };
+        vals.par_iter_mut()
+            .with_min_len(4096)
+            .enumerate()
+            .for_each(|(q, v)| *v = sum(q));
+        for (&lo, t) in self.cmap.iter().zip(c) {
             vals[lo] += gamma * t.2;
-            vals[hi] += gamma * t.2;
         }
         for &q in &self.diag_pos[n_free..] {
             vals[q] -= delta;
         }
+        for &(up, lo) in &self.mirror {
+            vals[up] = vals[lo];
+        }
         self.delta = delta;
-        self.factored = false;
         Ok(symbolic_s)
     }
 
@@ -306,6 +369,7 @@ impl KktSolver {
             Default::default(),
         );
         self.shift = shift;
+        self.factor_delta = self.delta;
         self.matrix = Some(a);
         let numeric_s = t1.elapsed().as_secs_f64();
         if res.is_err() {
@@ -355,36 +419,100 @@ impl KktSolver {
         self.factored
     }
 
-    /// Solve the *unregularised* KKT system (τ kept, δ removed) for `rhs` in place, with
-    /// up to `refine` steps of iterative refinement, stopping once the residual is below
-    /// `rel_tol` of ‖rhs‖ (or at round-off, 1e-15 of ‖rhs‖). Returns the linear solves with
-    /// the factor that were used (1 + refinement steps).
+    /// Solve the *unregularised* KKT system (τ kept, δ removed) of the last factorised
+    /// matrix for `rhs` in place by GMRES preconditioned with its factor (see
+    /// [`super::gmres`]), with at most `refine` + 1 factor solves, stopping once the residual
+    /// is below `rel_tol` of ‖rhs‖. Returns the linear solves with the factor that were used.
     pub fn solve(&mut self, rhs: &mut [f64], refine: usize, rel_tol: f64) -> usize {
         assert!(
             self.factored,
             "KktSolver::solve before a successful factorize"
         );
+        self.krylov(rhs, false, refine + 1, rel_tol)
+            .iterations
+            .max(1)
+    }
+
+    /// Solve the unregularised, unshifted KKT system of the matrix last *assembled* (which
+    /// may be newer than the last factorisation: a later Newton iterate's Hessian) for `rhs`
+    /// in place by GMRES preconditioned with the last factor (a lagged factor), with at most
+    /// `max_solves` factor solves and relative tolerance `rel_tol`.
+    pub fn solve_lagged(
+        &mut self,
+        rhs: &mut [f64],
+        max_solves: usize,
+        rel_tol: f64,
+    ) -> GmresReport {
+        assert!(
+            self.factored,
+            "KktSolver::solve_lagged before a successful factorize"
+        );
+        self.krylov(rhs, true, max_solves, rel_tol)
+    }
+
+    /// GMRES on the factored (`assembled = false`) or the last assembled matrix with δ
+    /// removed, preconditioned by the current factor.
+    fn krylov(
+        &mut self,
+        rhs: &mut [f64],
+        assembled: bool,
+        max_solves: usize,
+        rel_tol: f64,
+    ) -> GmresReport {
         let b = rhs.to_vec();
-        let b_norm = norm2(&b);
-        self.raw_solve(rhs);
-        let mut solves = 1;
-        for _ in 0..refine {
-            // r = b − A x, A = A_reg + δ I on the constraint block.
-            let ax = mul_vec(self.matrix.as_ref().expect("matrix"), rhs);
-            let mut r: Vec<f64> = b.iter().zip(&ax).map(|(bi, ai)| bi - ai).collect();
-            for i in self.n_free..self.n_free + self.n_cons {
-                r[i] -= self.delta * rhs[i];
-            }
-            if norm2(&r) <= rel_tol.max(1e-15) * b_norm {
-                break;
-            }
-            self.raw_solve(&mut r);
-            solves += 1;
-            for (x, d) in rhs.iter_mut().zip(&r) {
-                *x += d;
+        let (nf, nc) = (self.n_free, self.n_cons);
+        let delta = if assembled {
+            self.delta
+        } else {
+            self.factor_delta
+        };
+        let a = if assembled {
+            self.base.take().expect("assembled matrix")
+        } else {
+            self.matrix.take().expect("factored matrix")
+        };
+        let rep = {
+            let this = &mut *self;
+            fgmres(
+                |v, out| {
+                    mul_vec_into(&a, v, out);
+                    for i in nf..nf + nc {
+                        out[i] += delta * v[i];
+                    }
+                },
+                |v| this.raw_solve(v),
+                &b,
+                rhs,
+                rel_tol.max(1e-15),
+                max_solves.max(1),
+                assembled,
+            )
+        };
+        if assembled {
+            self.base = Some(a);
+        } else {
+            self.matrix = Some(a);
+        }
+        rep
+    }
+
+    /// Curvature dᵀ K d (J/m² times the units of d²) of the last assembled Hessian along
+    /// `d`, a vector over the free dofs.
+    pub fn curvature(&self, d: &[f64]) -> f64 {
+        let a = self
+            .base
+            .as_ref()
+            .expect("KktSolver::curvature before assemble");
+        let ar = a.as_ref();
+        let mut sum = 0.0;
+        for (j, &dj) in d.iter().enumerate().take(self.n_free) {
+            for (i, v) in ar.row_idx_of_col(j).zip(ar.val_of_col(j)) {
+                if i < self.n_free {
+                    sum += d[i] * v * dj;
+                }
             }
         }
-        solves
+        sum
     }
 
     fn raw_solve(&mut self, rhs: &mut [f64]) {
@@ -510,11 +638,6 @@ fn nd_permutation(
     (fwd, inv)
 }
 
-/// Euclidean norm.
-fn norm2(v: &[f64]) -> f64 {
-    v.iter().map(|a| a * a).sum::<f64>().sqrt()
-}
-
 /// Count negative entries of D in an LDLᵀ factor (D is stored on the factor's diagonal).
 fn negative_pivots(sym: &SymbolicCholesky<usize>, values: &[f64]) -> usize {
     match sym.raw() {
@@ -617,7 +740,7 @@ mod ordering_tests {
         let solve = |positions: bool| {
             let mut s = KktSolver::new();
             let geometry = positions.then_some(x.as_slice());
-            s.assemble(&free_of, n, 1, &t, &c, 1.0, 1e-8, geometry)
+            s.assemble(&free_of, n, 1, &t, None, &c, 1.0, 1e-8, geometry)
                 .unwrap();
             assert!(s.factor(0.0).inertia_ok);
             let mut r = rhs.clone();

@@ -1,5 +1,6 @@
 //! Nonlinear solvers: Newton with line search, sparse KKT systems, quasi-static equilibrium.
 
+pub mod gmres;
 pub mod kkt;
 pub mod linesearch;
 pub mod ordering;

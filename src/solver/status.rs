@@ -46,10 +46,12 @@ pub struct SolveReport {
     pub modified_hessian_steps: usize,
     /// Numeric factorisations done (more than `iterations` when inertia correction retried).
     pub factorizations: usize,
-    /// Newton directions computed with the previous solve's factorisation instead of a new
-    /// one (the first direction of a warm-started solve, see `StaticSolver::solve`).
-    pub reused_factorizations: usize,
-    /// Linear solves with a factor (one per Newton direction plus its refinement steps).
+    /// Newton directions (and pinned-motion predictor steps) solved by GMRES with a lagged
+    /// factorisation, of an earlier iterate or of the previous solve, instead of a new one
+    /// (see `StaticSettings::lagged_solves`).
+    #[serde(default)]
+    pub lagged_directions: usize,
+    /// Solves with a factor (one per GMRES iteration).
     pub linear_solves: usize,
     /// Seconds evaluating Hessians and assembling the KKT matrix.
     pub assembly_s: f64,
@@ -57,7 +59,7 @@ pub struct SolveReport {
     pub symbolic_s: f64,
     /// Seconds in numeric factorisations (including the symbolic analysis).
     pub factor_s: f64,
-    /// Seconds in triangular solves and iterative refinement.
+    /// Seconds in GMRES (triangular solves with a factor and matrix products).
     pub solve_s: f64,
     /// Seconds in energy/gradient evaluations of the line search and residuals.
     pub line_search_s: f64,
@@ -77,7 +79,7 @@ impl SolveReport {
         self.iterations += other.iterations;
         self.modified_hessian_steps += other.modified_hessian_steps;
         self.factorizations += other.factorizations;
-        self.reused_factorizations += other.reused_factorizations;
+        self.lagged_directions += other.lagged_directions;
         self.linear_solves += other.linear_solves;
         self.assembly_s += other.assembly_s;
         self.symbolic_s += other.symbolic_s;
