@@ -31,7 +31,7 @@
 //! closed form (12 directional passes), which the finite-difference tests check.
 
 use super::material::ShellMaterial;
-use super::psd::project_psd;
+use super::psd::{element_hessians, project_psd};
 use crate::math::Energy;
 use crate::mesh::topology::Topology;
 use crate::mesh::TriMesh;
@@ -356,16 +356,11 @@ impl BendingEnergy {
             self.triplet_count(),
             "Hessian value buffer size"
         );
-        values
-            .par_chunks_mut(144)
-            .zip(self.hinges.par_iter())
-            .for_each(|(he, el)| {
-                let he: &mut [f64; 144] = he.try_into().expect("144 values per hinge");
-                hinge_element(el, gather4(x, el.v), None, Some(he));
-                if project {
-                    project_psd(he, 12);
-                }
-            });
+        element_hessians(values, 12, project, |i, h| {
+            let el = &self.hinges[i];
+            let h: &mut [f64; 144] = h.try_into().expect("144 values per hinge");
+            hinge_element(el, gather4(x, el.v), None, Some(h));
+        });
     }
 }
 

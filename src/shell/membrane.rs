@@ -11,7 +11,7 @@
 //! is linear in h). A uniform thickness gives bit-identical values to [`MembraneEnergy::new`].
 
 use super::material::ShellMaterial;
-use super::psd::project_psd;
+use super::psd::{element_hessians, project_psd};
 use crate::math::Energy;
 use crate::mesh::TriMesh;
 use nalgebra::Vector3;
@@ -237,16 +237,11 @@ impl MembraneEnergy {
             self.triplet_count(),
             "Hessian value buffer size"
         );
-        values
-            .par_chunks_mut(81)
-            .zip(self.elements.par_iter().zip(self.element_lame.par_iter()))
-            .for_each(|(he, (el, &(mu_h, lambda_h)))| {
-                let he: &mut [f64; 81] = he.try_into().expect("81 values per element");
-                membrane_element(el, gather3(x, el.v), mu_h, lambda_h, None, Some(he));
-                if project {
-                    project_psd(he, 9);
-                }
-            });
+        element_hessians(values, 9, project, |i, h| {
+            let (el, (mu_h, lambda_h)) = (&self.elements[i], self.element_lame[i]);
+            let h: &mut [f64; 81] = h.try_into().expect("81 values per element");
+            membrane_element(el, gather3(x, el.v), mu_h, lambda_h, None, Some(h));
+        });
     }
 }
 

@@ -1,6 +1,27 @@
 //! Projection of small symmetric element matrices to positive semi-definite.
 
 use nalgebra::{DMatrix, SymmetricEigen};
+use rayon::prelude::*;
+
+/// Fill `values` with one dense `dim × dim` element Hessian (J/m²) per element, in element
+/// order and in parallel: `block(i, h)` writes element i's block into `h` (row-major),
+/// which is then projected to PSD when `project` is set.
+pub fn element_hessians(
+    values: &mut [f64],
+    dim: usize,
+    project: bool,
+    block: impl Fn(usize, &mut [f64]) + Sync + Send,
+) {
+    values
+        .par_chunks_mut(dim * dim)
+        .enumerate()
+        .for_each(|(i, h)| {
+            block(i, h);
+            if project {
+                project_psd(h, dim);
+            }
+        });
+}
 
 /// Replace the `n × n` symmetric row-major matrix `h` by its projection onto the positive
 /// semi-definite cone (negative eigenvalues set to zero).
