@@ -11,7 +11,7 @@
 //!
 //! The gradient is exact, including the derivative of R_e: with f = K₀ u (rotated frame),
 //! τ = Σ_a (R_eᵀ x_a) × f_a and S = R_eᵀ F_c, ∂E/∂x_a = R_e f_a − R_e (c × ∇N_a(centre)),
-//! c = (tr S · I − S)⁻¹ τ (δR = R [ω]×, skew(Rᵀ δF) = [½ (tr S · I − S) ω]×). τ is second
+//! c = (tr S · I − S)⁻¹ τ (δR = R \[ω\]×, skew(Rᵀ δF) = \[½ (tr S · I − S) ω\]×). τ is second
 //! order in u (K₀ annihilates infinitesimal rotations), so the term is small but kept.
 //!
 //! Hessian (what Newton uses, and what [`Energy::eval`] emits): H_e = R_e K₀ R_eᵀ, the exact

@@ -177,7 +177,7 @@ pub struct TradeoffRun {
     pub status: String,
 }
 
-/// The CSV header written by [`write_csv`].
+/// The CSV header written by [`to_csv`].
 pub const CSV_HEADER: &str = "case,knob,value,default,reference,wall_s,rms_m,max_m,wrinkle_m,measured_wavelength_m,predicted_wavelength_m,wavelength_error,amplitude_error,phase_free_error,frames_not_converged,pareto,status";
 
 /// How big a sweep to run.

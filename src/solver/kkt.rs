@@ -147,7 +147,7 @@ impl KktSolver {
     /// emits them); `free_of[dof]` is the free index of a dof or `usize::MAX` when it is
     /// pinned. `c` holds the constraint triplets `(row, free dof, value)`, unscaled.
     /// `k_values`, when given, replaces the values of `k` (same order and length: the
-    /// values of [`Energy::hessian_values`] for the layout of `k`).
+    /// values of [`Energy::hessian_values`](crate::math::Energy::hessian_values) for the layout of `k`).
     ///
     /// The first call (or a call whose layout differs) builds the pattern, the AMD
     /// ordering and symbolic factorisation, and a scatter map from each triplet to its slot

@@ -17,7 +17,7 @@
 //!
 //! Statistics of N phases (circular, angle θ = 2π u):
 //! - the mean resultant length R = |Σ e^{iθ}| / N: 1 when every crest sits at the same phase,
-//!   ~1/√N for uniform phases (E[R²] = 1/N; Rayleigh: P(R ≥ r) ≈ e^{−N r²});
+//!   ~1/√N for uniform phases (E\[R²\] = 1/N; Rayleigh: P(R ≥ r) ≈ e^{−N r²});
 //! - the boundary alignment V = Σ cos θ / N: +1 when every crest is on a boundary, −1 at cell
 //!   centres, 0 on average for uniform phases with standard deviation 1/√(2N) (so √(2N) V is
 //!   a z-score of locking to boundaries);
