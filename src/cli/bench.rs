@@ -1,6 +1,7 @@
 //! `furrow bench …`: benchmarks printing their measurements (text or JSON).
 
 use super::Output;
+use crate::solver::StaticSettings;
 
 /// `furrow bench …` subcommands.
 #[derive(Debug, clap::Subcommand)]
@@ -8,12 +9,16 @@ pub enum BenchCommand {
     /// Skin solve: a square sheet of about N triangles under in-plane compression, centre
     /// clamped by constraints, solved to equilibrium from a warm start.
     #[command(
-        after_help = "Example:\n  furrow bench shell --faces 20000\n  furrow bench shell --faces 2000 --json"
+        after_help = "Example:\n  furrow bench shell --faces 20000\n  furrow bench shell --faces 2000 --json\n  furrow bench shell --faces 20000 --lagged-solves 0"
     )]
     Shell {
         /// Approximate triangle count.
         #[arg(long, default_value_t = 20_000)]
         faces: usize,
+        /// Most GMRES solves a Newton direction may spend with a lagged factorisation before
+        /// a fresh one (0: factorise every direction); default: the solver's (5).
+        #[arg(long)]
+        lagged_solves: Option<usize>,
     },
     /// Interior step: one backward Euler step of a lattice of about N quadratic elements.
     #[command(after_help = "Example:\n  furrow bench lattice --elements 1000")]
@@ -73,15 +78,23 @@ fn print(out: &Output, title: &str, v: &serde_json::Value) {
 /// Run a benchmark.
 pub fn run(c: BenchCommand, out: &Output) -> anyhow::Result<()> {
     match c {
-        BenchCommand::Shell { faces } => {
+        BenchCommand::Shell {
+            faces,
+            lagged_solves,
+        } => {
             anyhow::ensure!(
                 (2..=5_000_000).contains(&faces),
                 "--faces must be between 2 and 5,000,000, got {faces}"
             );
+            let lagged = lagged_solves.unwrap_or(StaticSettings::default().lagged_solves);
+            anyhow::ensure!(
+                lagged <= 1000,
+                "--lagged-solves must be between 0 and 1000, got {lagged}"
+            );
             print(
                 out,
                 "bench shell",
-                &crate::shell::bench::bench_shell(faces)?,
+                &crate::shell::bench::bench_shell_with(faces, lagged)?,
             );
         }
         BenchCommand::Lattice { elements } => {

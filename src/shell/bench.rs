@@ -269,6 +269,13 @@ fn prepare(
 /// iterations, residual in N, times in seconds, status) and `prep_*` fields for the
 /// preparation solve from the flat sheet.
 pub fn bench_shell(faces: usize) -> anyhow::Result<serde_json::Value> {
+    bench_shell_with(faces, StaticSettings::default().lagged_solves)
+}
+
+/// [`bench_shell`] with the lagged-factor cap `lagged_solves` (see
+/// [`StaticSettings::lagged_solves`]; 0 factorises every direction), reported as
+/// `lagged_solves`.
+pub fn bench_shell_with(faces: usize, lagged_solves: usize) -> anyhow::Result<serde_json::Value> {
     let t_build = Instant::now();
     let b = bench_sheet(faces)?;
     let build_s = t_build.elapsed().as_secs_f64();
@@ -276,6 +283,7 @@ pub fn bench_shell(faces: usize) -> anyhow::Result<serde_json::Value> {
         tolerance: b.tolerance(),
         max_iterations: 400,
         energy_merit: true,
+        lagged_solves,
         ..Default::default()
     };
     let t_prep = Instant::now();
@@ -301,6 +309,7 @@ pub fn bench_shell(faces: usize) -> anyhow::Result<serde_json::Value> {
     obj.insert("prep_levels".into(), json!(levels));
     obj.insert("prep_wall_s".into(), json!(prep_wall_s));
     obj.insert("threads".into(), json!(rayon::current_num_threads()));
+    obj.insert("lagged_solves".into(), json!(lagged_solves));
     Ok(out)
 }
 
