@@ -150,10 +150,11 @@ impl KktSolver {
     /// values of [`Energy::hessian_values`](crate::math::Energy::hessian_values) for the layout of `k`).
     ///
     /// The first call (or a call whose layout differs) builds the pattern, the AMD
-    /// ordering and symbolic factorisation, and a scatter map from each triplet to its slot
-    /// in the compressed values; later calls only scatter-add the values (one pass over
-    /// the triplets, no sorting or copying). The layout check compares the sizes, the
-    /// pinned set, the constraints and every 31st Hessian triplet index.
+    /// ordering and symbolic factorisation, and gather lists: for each lower-triangle slot
+    /// the Hessian triplets that sum into it (the upper-triangle triplets are not read; the
+    /// upper triangle is copied from the lower one). Later calls only sum the values into
+    /// the slots, in parallel (no sorting or copying of triplets). The layout check compares
+    /// the sizes, the pinned set, the constraints and every 31st Hessian triplet index.
     /// `positions` (the dofs' coordinates, 3 per vertex: dof `d` belongs to vertex `d / 3`),
     /// when given, are read only by a new analysis: it then also tries the geometric
     /// nested-dissection ordering ([`super::ordering`]) and keeps it if it is cheaper.
@@ -451,7 +452,8 @@ impl KktSolver {
     }
 
     /// GMRES on the factored (`assembled = false`) or the last assembled matrix with δ
-    /// removed, preconditioned by the current factor.
+    /// removed, preconditioned by the current factor. Only the lagged solve (on the
+    /// assembled matrix) may give up early: a fresh factor is as good as it gets.
     fn krylov(
         &mut self,
         rhs: &mut [f64],

@@ -511,22 +511,18 @@ impl StaticSolver {
     }
 
     /// Try the Newton direction for the assembled (exact) KKT matrix by GMRES with the lagged
-    /// factor: `rhs` becomes the direction and true is returned when that factor may be used
-    /// ([`StaticSettings::lagged_solves`]), GMRES converged within that many solves and the
-    /// direction has positive curvature dᵀK d on the free dofs; else `rhs` is left alone.
+    /// factor, which the caller has found usable ([`Self::lag_usable`]): `rhs` becomes the
+    /// direction and true is returned when GMRES converged within
+    /// [`StaticSettings::lagged_solves`] solves and the direction has positive curvature
+    /// dᵀK d on the free dofs; else `rhs` is left alone.
     fn lagged_direction(
         &mut self,
         s: &Setup,
-        p: &StaticProblem,
-        gamma: f64,
         lin_tol: f64,
         rhs: &mut [f64],
         rep: &mut SolveReport,
     ) -> bool {
         let cap = self.settings.lagged_solves;
-        if !self.lag_usable(s, p, gamma) {
-            return false;
-        }
         let t = Instant::now();
         let mut d = rhs.to_vec();
         let g = self.kkt.solve_lagged(&mut d, cap, lin_tol);
@@ -614,7 +610,7 @@ impl StaticSolver {
         rep.symbolic_s += sym_s;
         rep.factor_s += sym_s;
         rep.assembly_s += t.elapsed().as_secs_f64() - sym_s;
-        if !self.lagged_direction(s, p, gamma, lin_tol, &mut rhs, rep) {
+        if !(self.lag_usable(s, p, gamma) && self.lagged_direction(s, lin_tol, &mut rhs, rep)) {
             let info = self.factor_fresh(0.0, false, s, p, gamma);
             rep.factor_s += info.numeric_s;
             rep.factorizations += 1;
@@ -763,13 +759,10 @@ impl StaticSolver {
             // The multiplier block solves for μ⁺ directly: rhs is −γ(Cx − d) there.
             // First the lagged factor (exact Hessian), when it may be used.
             let mut lagged = false;
-            if st.lagged_solves > 0
-                && st.hessian != HessianMode::Projected
-                && self.lag_layout.is_some()
-            {
+            if st.hessian != HessianMode::Projected && self.lag_usable(&s, p, gamma) {
                 self.assemble_hessian(e, x, &s, nc, gamma, false, &mut have_hessian, &mut rep)?;
                 assembled = Some(false);
-                lagged = self.lagged_direction(&s, p, gamma, lin_tol, &mut step, &mut rep);
+                lagged = self.lagged_direction(&s, lin_tol, &mut step, &mut rep);
                 if lagged {
                     modes.clear();
                     used = true;
