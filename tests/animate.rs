@@ -333,11 +333,9 @@ fn write_scene(dir: &Path, name: &str, text: &str) -> PathBuf {
 
 #[test]
 fn robot_expressive_head_is_animated_to_a_valid_file() {
-    let robot = common::shared_data("RobotExpressive.glb");
-    if !robot.exists() {
-        eprintln!("skipped: {} not found", robot.display());
+    let Some(robot) = common::shared_data("RobotExpressive.glb") else {
         return;
-    }
+    };
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("robot.glb");
     let report = dir.path().join("robot.json");
@@ -379,10 +377,9 @@ fn robot_expressive_head_is_animated_to_a_valid_file() {
 
 #[test]
 fn a_too_coarse_skin_is_refused_with_the_numbers() {
-    let robot = common::shared_data("RobotExpressive.glb");
-    if !robot.exists() {
+    let Some(robot) = common::shared_data("RobotExpressive.glb") else {
         return;
-    }
+    };
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("r.glb");
     let o = furrow()

@@ -18,7 +18,11 @@ fn write_glb(dir: &Path, name: &str, j: &serde_json::Value, b: &[u8]) -> PathBuf
 /// Counts from ../shared/data/README.md (the files' own documentation).
 #[test]
 fn shared_files_have_their_documented_contents() {
-    let s = summarize(&common::shared_data("SimpleMorph.glb")).unwrap();
+    let Some(files) = common::shared_glbs() else {
+        return;
+    };
+    let file = |name: &str| files.iter().find(|p| p.ends_with(name)).unwrap().clone();
+    let s = summarize(&file("SimpleMorph.glb")).unwrap();
     assert_eq!(
         (
             s.meshes[0].vertices,
@@ -27,11 +31,11 @@ fn shared_files_have_their_documented_contents() {
         ),
         (3, 2, 1)
     );
-    let s = summarize(&common::shared_data("AnimatedMorphCube.glb")).unwrap();
+    let s = summarize(&file("AnimatedMorphCube.glb")).unwrap();
     assert_eq!((s.meshes[0].vertices, s.meshes[0].targets.len()), (24, 2));
-    let s = summarize(&common::shared_data("AnimatedMorphSphere.glb")).unwrap();
+    let s = summarize(&file("AnimatedMorphSphere.glb")).unwrap();
     assert_eq!((s.meshes[0].vertices, s.meshes[0].targets.len()), (1876, 2));
-    let s = summarize(&common::shared_data("MorphStressTest.glb")).unwrap();
+    let s = summarize(&file("MorphStressTest.glb")).unwrap();
     assert_eq!(
         (
             s.meshes[0].vertices,
@@ -41,7 +45,7 @@ fn shared_files_have_their_documented_contents() {
         ),
         (1504 + 24, 2, 8, 3)
     );
-    let s = summarize(&common::shared_data("RobotExpressive.glb")).unwrap();
+    let s = summarize(&file("RobotExpressive.glb")).unwrap();
     let heads: Vec<usize> = s
         .meshes
         .iter()
@@ -73,11 +77,7 @@ fn shared_files_have_their_documented_contents() {
     assert_eq!(face.meshes[0].slivers, 0);
     assert!(face.meshes[0].worst_quality > 0.5);
     // Face choice: ties on target count go to the first; --mesh picks by name.
-    let r = load(
-        &common::shared_data("RobotExpressive.glb"),
-        &LoadOptions::default(),
-    )
-    .unwrap();
+    let r = load(&file("RobotExpressive.glb"), &LoadOptions::default()).unwrap();
     assert_eq!(r.face().name, "Head_2");
     assert!(
         r.face_reason.contains("most morph targets"),
@@ -85,7 +85,7 @@ fn shared_files_have_their_documented_contents() {
         r.face_reason
     );
     let r = load(
-        &common::shared_data("RobotExpressive.glb"),
+        &file("RobotExpressive.glb"),
         &LoadOptions {
             mesh: Some("Head_3".into()),
             animation: Some("Yes".into()),
@@ -95,7 +95,7 @@ fn shared_files_have_their_documented_contents() {
     assert_eq!(r.face().positions.len(), 876);
     assert!(r.track.is_some());
     let e = load(
-        &common::shared_data("RobotExpressive.glb"),
+        &file("RobotExpressive.glb"),
         &LoadOptions {
             mesh: Some("Nose".into()),
             animation: None,
@@ -268,16 +268,31 @@ fn step_and_cubicspline_weight_channels_sample_per_spec() {
 /// the same meshes, triangles, targets, animations and sizes as the original.
 #[test]
 fn gltfpack_compressed_copies_read_the_same() {
+    let Some(files) = common::shared_glbs() else {
+        return;
+    };
+    gltfpack_copies_read_the_same(files);
+}
+
+/// The same on the project's own face rig (what a clone without `../shared` still covers).
+#[test]
+fn gltfpack_copy_of_the_face_rig_reads_the_same() {
+    gltfpack_copies_read_the_same(vec![
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("rigs/face.glb")
+    ]);
+}
+
+fn gltfpack_copies_read_the_same(files: Vec<PathBuf>) {
     let Some(nm) = common::node_modules() else {
         assert!(
             !common::tools_required(),
             "gltfpack is not installed: npm ci --prefix .ci"
         );
-        eprintln!("note: gltfpack not installed; skipped");
+        common::note("gltfpack not installed (npm ci --prefix .ci); skipped");
         return;
     };
     let d = tempfile::tempdir().unwrap();
-    for src in common::shared_glbs() {
+    for src in files {
         let out = d.path().join(src.file_name().unwrap());
         let st = std::process::Command::new("node")
             .arg(nm.join("gltfpack/cli.js"))
@@ -379,5 +394,91 @@ fn gltfpack_compressed_copies_read_the_same() {
                 );
             }
         }
+    }
+}
+
+/// A skinned face (what RobotExpressive carries; here built by hand so a clone without
+/// `../shared` covers it): the rest pose is joint world × inverse bind matrix, blended per
+/// vertex by the skin weights, and the face's targets move with the same matrices. The
+/// animated export keeps the skin, moves the skinned mesh to a root node, and validates.
+#[test]
+fn skinned_face_loads_in_its_rest_pose_and_exports_valid() {
+    let d = tempfile::tempdir().unwrap();
+    let (mut j, mut b) = common::tiny_rig();
+    // Vertices 0 and 1 follow joint 0 (at +1 m in x); 2 and 3 joint 1 (rotated 90° about z,
+    // at +2 m in y); inverse bind matrices are the identity.
+    let joints: [u8; 16] = [0, 0, 0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0];
+    let wts: [f32; 16] = [
+        1., 0., 0., 0., 1., 0., 0., 0., 1., 0., 0., 0., 1., 0., 0., 0.,
+    ];
+    let ibm: Vec<f32> = (0..2)
+        .flat_map(|_| {
+            [
+                1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1.,
+            ]
+        })
+        .collect();
+    let off = b.len();
+    b.extend(joints);
+    b.extend(wts.iter().flat_map(|v| v.to_le_bytes()));
+    b.extend(ibm.iter().flat_map(|v| v.to_le_bytes()));
+    let s = std::f64::consts::FRAC_1_SQRT_2;
+    j["buffers"][0]["byteLength"] = json!(b.len());
+    let views = j["bufferViews"].as_array_mut().unwrap();
+    views.push(json!({ "buffer": 0, "byteOffset": off, "byteLength": 16 }));
+    views.push(json!({ "buffer": 0, "byteOffset": off + 16, "byteLength": 64 }));
+    views.push(json!({ "buffer": 0, "byteOffset": off + 80, "byteLength": 128 }));
+    let acc = j["accessors"].as_array_mut().unwrap();
+    acc.push(json!({ "bufferView": 5, "componentType": 5121, "count": 4, "type": "VEC4" }));
+    acc.push(json!({ "bufferView": 6, "componentType": 5126, "count": 4, "type": "VEC4" }));
+    acc.push(json!({ "bufferView": 7, "componentType": 5126, "count": 2, "type": "MAT4" }));
+    let attrs = &mut j["meshes"][0]["primitives"][0]["attributes"];
+    attrs["JOINTS_0"] = json!(5);
+    attrs["WEIGHTS_0"] = json!(6);
+    // The skinned mesh sits under a translated parent (which skinning ignores, §3.7.3).
+    j["nodes"] = json!([
+        { "children": [1, 2, 3], "translation": [0.0, 0.0, 5.0] },
+        { "mesh": 0, "skin": 0, "name": "face" },
+        { "name": "j0", "translation": [1.0, 0.0, 0.0] },
+        { "name": "j1", "translation": [0.0, 2.0, 0.0], "rotation": [0.0, 0.0, s, s] }
+    ]);
+    j["skins"] = json!([{ "joints": [2, 3], "inverseBindMatrices": 7 }]);
+    j["animations"][0]["channels"][0]["target"]["node"] = json!(1);
+    let p = write_glb(d.path(), "skinned.glb", &j, &b);
+    let r = load(&p, &LoadOptions::default()).unwrap();
+    let f = r.face();
+    // Joint worlds include the root's +5 m in z. Vertex 1 (1,0,0) → (2,0,5); vertex 2
+    // (1,1,0) rotated 90° → (−1,1,0) → (−1,3,5); its target (0,0,0.1) stays along z.
+    let expect = [
+        (1, Vector3::new(2.0, 0.0, 5.0)),
+        (2, Vector3::new(-1.0, 3.0, 5.0)),
+    ];
+    for (v, e) in expect {
+        assert!(
+            (f.positions[v] - e).norm() < 1e-6,
+            "{v}: {:?}",
+            f.positions[v]
+        );
+    }
+    assert!((f.targets[0].positions[2] - Vector3::new(0.0, 0.0, 0.1)).norm() < 1e-6);
+    assert!(summarize(&p).unwrap().meshes[0].skinned);
+    // The export keeps the skin and validates.
+    let frames: Vec<_> = r.frame_weights(4.0).iter().map(|w| r.blend(w)).collect();
+    let origin: Vec<_> = (0..f.positions.len())
+        .map(furrow::io::export::VertexOrigin::same)
+        .collect();
+    let set = furrow::io::export::FrameSet {
+        triangles: &f.triangles,
+        frames: &frames,
+        origin: &origin,
+        fps: 4.0,
+    };
+    let out = d.path().join("skinned_out.glb");
+    furrow::io::export::write_animated(&r, &set, &out, furrow::io::atomic::Overwrite::Refuse)
+        .unwrap();
+    let back = summarize(&out).unwrap();
+    assert!(back.meshes.iter().any(|m| m.skinned), "{back:?}");
+    if let Some(v) = common::validate(&[out]) {
+        common::assert_valid(&v);
     }
 }

@@ -4,22 +4,56 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-/// `../shared/data/NAME` (outside test data; never copied into the project).
-pub fn shared_data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/data")
-        .join(name)
+/// The sample files the tests read from `../shared/data/` (README, "Test data"): Khronos glTF
+/// sample models and RobotExpressive. Under CI every one must be present.
+pub const SHARED_FILES: [&str; 5] = [
+    "AnimatedMorphCube.glb",
+    "AnimatedMorphSphere.glb",
+    "MorphStressTest.glb",
+    "RobotExpressive.glb",
+    "SimpleMorph.glb",
+];
+
+/// The folder of outside test data, `../shared/data/` beside the project (never copied in).
+pub fn shared_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data")
 }
 
-/// All `.glb` files in `../shared/data/`.
-pub fn shared_glbs() -> Vec<PathBuf> {
-    let mut v: Vec<PathBuf> = std::fs::read_dir(shared_data(""))
-        .expect("../shared/data exists")
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|e| e == "glb"))
-        .collect();
-    v.sort();
-    v
+/// A one-line note on the terminal, past the test harness' output capture (so a passing
+/// test's skip still shows in `cargo test`).
+pub fn note(text: &str) {
+    use std::io::Write;
+    let test = std::thread::current()
+        .name()
+        .unwrap_or("a test")
+        .to_string();
+    let _ = writeln!(std::io::stderr(), "note: {test}: {text}");
+}
+
+/// `../shared/data/NAME`, when it is there. When it is not: under CI (`CI=true`) the test fails
+/// (a broken layout must not pass as a skip); elsewhere it prints one line saying what was
+/// skipped and why, and returns None.
+pub fn shared_data(name: &str) -> Option<PathBuf> {
+    let p = shared_dir().join(name);
+    if p.is_file() {
+        return Some(p);
+    }
+    assert!(
+        !tools_required(),
+        "{} is missing: CI runs every test on the outside sample files (README, \"Test data\")",
+        p.display()
+    );
+    note(&format!(
+        "skipped: {} not found (outside sample file; README, \"Test data\", says where it comes from)",
+        p.display()
+    ));
+    None
+}
+
+/// All of [`SHARED_FILES`], when every one is there (same rule as [`shared_data`]: a missing
+/// file fails under CI, skips with a note elsewhere).
+pub fn shared_glbs() -> Option<Vec<PathBuf>> {
+    SHARED_FILES.iter().map(|n| shared_data(n)).collect()
 }
 
 /// The Node tools folder (`.ci/node_modules`), if installed.
@@ -41,7 +75,7 @@ pub fn validate(files: &[PathBuf]) -> Option<Vec<serde_json::Value>> {
             !tools_required(),
             "gltf-validator is not installed: run `npm ci --prefix .ci`"
         );
-        eprintln!("note: gltf-validator not installed (npm ci --prefix .ci); validation skipped");
+        note("gltf-validator not installed (npm ci --prefix .ci); validation skipped");
         return None;
     }
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join(".ci/validate.mjs");
@@ -141,7 +175,7 @@ pub fn gltfpack(src: &Path, out: &Path) -> bool {
             !tools_required(),
             "gltfpack is not installed: npm ci --prefix .ci"
         );
-        eprintln!("note: gltfpack not installed; skipped");
+        note("gltfpack not installed (npm ci --prefix .ci); skipped");
         return false;
     };
     let st = Command::new("node")
