@@ -3,17 +3,17 @@
 //! `REPORT_OUT=/tmp/report cargo test --test report` keeps the images for a person to look at.
 
 use furrow::mesh::TriMesh;
-use furrow::report::colormap::{diverging, symmetric_range};
-use furrow::report::contour::Grid;
-use furrow::report::plot::{
+use furrow::render::colormap::{diverging, symmetric_range};
+use furrow::render::contour::Grid;
+use furrow::render::plot::{
     contour_chart, line_chart, series_color, tradeoff_chart, Chart, ContourChart, ContourSet,
     LegendAt, Series, Style, DEFAULT_SIZE,
 };
-use furrow::report::preview::{
+use furrow::render::preview::{
     contact_sheet, render, render_scalar, side_by_side, union_bounds, wrinkle_depth_mm, Camera,
     View,
 };
-use furrow::report::write_png;
+use furrow::render::write_png;
 use image::RgbImage;
 use nalgebra::Vector3;
 use std::path::PathBuf;
@@ -624,6 +624,6 @@ fn bad_geometry_is_skipped_and_missing_values_are_grey() {
     let values = vec![0.0, 0.0, 0.0, f64::NAN, 0.0];
     let img = render_scalar(&mesh, &values, (-1.0, 1.0), &view, (50, 50)).unwrap();
     // Triangle [0, 2, 3] (upper left in the image) touches the NaN vertex; [0, 1, 2] does not.
-    assert_eq!(img.get_pixel(5, 25).0, furrow::report::colormap::MISSING);
+    assert_eq!(img.get_pixel(5, 25).0, furrow::render::colormap::MISSING);
     assert_eq!(img.get_pixel(45, 25).0, diverging(0.5));
 }

@@ -1,9 +1,9 @@
 //! `furrow report tradeoff` and `furrow report stability` on a reduced set: small sheet rigs,
 //! few frames. Run with `cargo test --release --test reports`.
 
-use furrow::report::stability::{self, run_all};
-use furrow::report::tradeoff::{self, sheet_rig, SheetRig};
 use furrow::scene::Scene;
+use furrow::studies::stability::{self, run_all};
+use furrow::studies::tradeoff::{self, sheet_rig, SheetRig};
 use std::process::Command;
 
 /// Every stability case ends with a named outcome, no output is non-finite, and a case that

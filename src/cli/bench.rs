@@ -146,7 +146,7 @@ fn suite(
     out: &Output,
 ) -> anyhow::Result<()> {
     use crate::io::atomic::{self, Overwrite};
-    use crate::report::benchmarks::{self, BenchRow, SuiteSettings};
+    use crate::studies::benchmarks::{self, BenchRow, SuiteSettings};
     anyhow::ensure!(!faces.is_empty(), "--faces needs at least one face count");
     for &f in &faces {
         anyhow::ensure!(

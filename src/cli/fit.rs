@@ -186,7 +186,7 @@ pub fn run(a: FitArgs, out: &Output) -> anyhow::Result<()> {
         },
     )?;
     if let Some(p) = &a.plot {
-        use crate::report::plot::{line_chart, Chart, Series, Style};
+        use crate::render::plot::{line_chart, Chart, Series, Style};
         let chart = Chart {
             title: format!("muscle activations of {}", a.rig.display()),
             x_label: "time (s)".into(),

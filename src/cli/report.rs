@@ -5,9 +5,9 @@ use super::Output;
 use crate::io::atomic::{self, Overwrite};
 use crate::io::LoadOptions;
 use crate::pipeline::frames::FrameRange;
-use crate::report::stability;
-use crate::report::tradeoff::{self, Pick, SheetRig, TradeoffRun};
 use crate::scene::Scene;
+use crate::studies::stability;
+use crate::studies::tradeoff::{self, Pick, SheetRig, TradeoffRun};
 use anyhow::{bail, Context};
 use std::path::{Path, PathBuf};
 

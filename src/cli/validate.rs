@@ -4,8 +4,8 @@
 
 use super::Output;
 use crate::io::atomic::{self, Overwrite};
-use crate::report::contour::Grid;
-use crate::report::plot::{self, Chart, ContourChart, ContourSet, Series, Style};
+use crate::render::contour::Grid;
+use crate::render::plot::{self, Chart, ContourChart, ContourSet, Series, Style};
 use crate::validate::dense::{self, DenseCase};
 use crate::validate::slab::SlabSettings;
 use crate::validate::wavelength::{self, bilayer};

@@ -4,7 +4,7 @@
 use super::RunOutput;
 use crate::io::atomic::Overwrite;
 use crate::mesh::TriMesh;
-use crate::report::preview::{self, View};
+use crate::render::preview::{self, View};
 use std::path::{Path, PathBuf};
 
 /// Most tiles on the contact sheet (frames are subsampled evenly beyond that).

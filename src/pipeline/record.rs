@@ -96,6 +96,23 @@ pub struct Totals {
     pub wall_s: f64,
 }
 
+impl Totals {
+    /// Count a simulated frame: its stages' milliseconds, and whether the interior or the
+    /// shell did not converge (the fit's QP status is reported per frame only).
+    pub fn add(&mut self, frame: &FrameRecord) {
+        let unconverged =
+            |r: &Option<StageRecord>| r.as_ref().is_some_and(|r| r.status != "converged");
+        if unconverged(&frame.interior) || unconverged(&frame.shell) {
+            self.frames_not_converged += 1;
+        }
+        self.frames_simulated += 1;
+        let ms = |r: &Option<StageRecord>| r.as_ref().map_or(0.0, |r| r.ms);
+        self.fit_ms += ms(&frame.fit);
+        self.interior_ms += ms(&frame.interior);
+        self.shell_ms += ms(&frame.shell);
+    }
+}
+
 /// `REPORT.json`.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct RunReport {

@@ -20,9 +20,9 @@
 use crate::coupling::embedded::{sigma_for_wavelength, two_step_with, EmbeddedShell, InteriorMode};
 use crate::coupling::wavelength::Bilayer;
 use crate::fem::{BackwardEuler, Interior, LinearSolver, StepSettings, GRAVITY};
-use crate::lattice::{shape, ElementOrder};
+use crate::lattice::{shape, ElementOrder, Lattice};
 use crate::mesh::TriMesh;
-use crate::scene::{Scene, SkinSection};
+use crate::scene::{Load, Scene, SkinSection};
 use crate::shell::sheet::equilateral_sheet;
 use crate::solver::{HessianMode, StaticSettings};
 use crate::validate::measure;
@@ -128,28 +128,56 @@ pub fn run_scene(scene: &Scene, progress: &dyn Fn(usize, usize)) -> anyhow::Resu
 
 type CopyResult = (TriMesh, Vec<Vec<Vector3<f64>>>, CopyReport);
 
-fn run_copy(
+/// Embedding triplets (skin vertex, node, weight).
+type Embedding = Vec<(usize, usize, f64)>;
+
+/// One copy's box: the interior's lattice, pins and stepper, and the skin on its top face.
+struct CopyModel {
+    /// The skin sheet on the top face (z up, m).
+    skin_mesh: TriMesh,
+    /// Skin vertices of the sheet's middle row (for the wavelength measurement).
+    middle_row: Vec<usize>,
+    /// Lattice nodes.
+    nodes: usize,
+    /// Lattice extent (m).
+    extent: [f64; 3],
+    /// Rest node positions (flat, m).
+    rest: Vec<f64>,
+    /// Pinned nodes (glued to the ground, or held at the compressed ends).
+    pinned: Vec<bool>,
+    /// Embedding rows of each skin vertex: (node, weight).
+    rows: Vec<Vec<(usize, f64)>>,
+    /// Skin vertices under the weight.
+    loaded: Vec<usize>,
+}
+
+/// One copy's materials and predicted wavelength.
+struct CopyMaterials {
+    skin: crate::shell::ShellMaterial,
+    interior: crate::fem::Material,
+    /// Predicted critical wavelength (m).
+    lambda: f64,
+}
+
+/// The copy's skin and interior materials and λ; refuses a skin too coarse for λ.
+fn copy_materials(
     scene: &Scene,
     skin_section: &SkinSection,
     copy: usize,
-    progress: &dyn Fn(usize),
-) -> anyhow::Result<CopyResult> {
-    let t0 = Instant::now();
+) -> anyhow::Result<CopyMaterials> {
     let g = scene.geometry.as_ref().expect("checked");
-    let load = scene.load.as_ref().expect("checked");
-    let skin_mat = skin_section
+    let skin = skin_section
         .material()
         .with_context(|| format!("copy {copy}: skin"))?;
-    let int_mat = scene.interior.material()?;
+    let interior = scene.interior.material()?;
     let lambda = Bilayer {
-        thickness: skin_mat.thickness,
-        skin_modulus: skin_mat.young,
-        skin_poisson: skin_mat.poisson,
-        interior_modulus: int_mat.young,
-        interior_poisson: int_mat.poisson,
+        thickness: skin.thickness,
+        skin_modulus: skin.young,
+        skin_poisson: skin.poisson,
+        interior_modulus: interior.young,
+        interior_poisson: interior.poisson,
     }
     .critical_wavelength();
-    let [l, w, d] = g.size;
     let edge = g.skin_edge;
     if lambda < 3.0 * edge {
         bail!(
@@ -160,6 +188,18 @@ fn run_copy(
             lambda / 6.0 * 1e3
         );
     }
+    Ok(CopyMaterials {
+        skin,
+        interior,
+        lambda,
+    })
+}
+
+/// The block lattice of the copy's box (cubic cells of `interior.cell_size`, default D/2) and
+/// its cell counts per axis.
+fn copy_lattice(scene: &Scene) -> anyhow::Result<(Lattice, [usize; 3], f64)> {
+    let g = scene.geometry.as_ref().expect("checked");
+    let [l, w, d] = g.size;
     let cell = scene.interior.cell_size.unwrap_or(d / 2.0);
     let dims = [
         (l / cell).round().max(1.0) as usize,
@@ -174,7 +214,20 @@ fn run_copy(
     if cells > 20_000 {
         bail!("the lattice would have {cells} cells; increase `interior.cell_size`");
     }
-    let lattice = block_lattice(Vector3::zeros(), cell, dims, order);
+    Ok((
+        block_lattice(Vector3::zeros(), cell, dims, order),
+        dims,
+        cell,
+    ))
+}
+
+/// The copy's geometry: lattice, pins, and the equilateral skin sheet on its top face
+/// embedded in it. Returns the model, the lattice and the embedding triplets.
+fn copy_model(scene: &Scene, copy: usize) -> anyhow::Result<(CopyModel, Embedding, Lattice)> {
+    let g = scene.geometry.as_ref().expect("checked");
+    let load = scene.load.as_ref().expect("checked");
+    let (lattice, dims, cell) = copy_lattice(scene)?;
+    let edge = g.skin_edge;
     let (lx, ly, lz) = (
         dims[0] as f64 * cell,
         dims[1] as f64 * cell,
@@ -198,25 +251,7 @@ fn run_copy(
             }
         }
     }
-    let mut skin = EmbeddedShell::new(
-        skin_mesh.clone(),
-        skin_mat,
-        embedding.clone(),
-        lattice.node_count(),
-        sigma_for_wavelength(&skin_mesh, lambda),
-        StaticSettings {
-            tolerance: scene.solver.shell_tolerance.unwrap_or(1e-6)
-                * skin_mat.stretch_stiffness()
-                * edge,
-            max_iterations: scene.solver.shell_iterations.unwrap_or(100),
-            hessian: HessianMode::Auto,
-            energy_merit: true,
-            ..Default::default()
-        },
-    )
-    .with_context(|| format!("copy {copy}: building the skin"))?;
-    let interior = Interior::new(&lattice, &int_mat)?;
-    let k = order.per_axis();
+    let k = lattice.order.per_axis();
     let nn = [dims[0] + k - 1, dims[1] + k - 1, dims[2] + k - 1];
     let layers = k - 1;
     let compression = load.compression.unwrap_or(0.0);
@@ -227,25 +262,6 @@ fn run_copy(
             gp[2] < layers || (compression > 0.0 && (gp[0] < layers || gp[0] >= nn[0] - layers))
         })
         .collect();
-    let dynamics = scene.dynamics.enabled.unwrap_or(false);
-    let gravity = if scene.dynamics.gravity.unwrap_or(false) {
-        [0.0, 0.0, -GRAVITY]
-    } else {
-        [0.0; 3]
-    };
-    let rest = lattice.rest_flat();
-    let mut be = BackwardEuler::new(
-        interior,
-        rest.clone(),
-        pinned.clone(),
-        StepSettings {
-            dt: scene.dynamics.dt.unwrap_or(0.02),
-            max_newton: scene.solver.interior_iterations.unwrap_or(20),
-            gravity,
-            linear_solver: LinearSolver::Auto,
-            ..Default::default()
-        },
-    )?;
     // Weight: spread over the skin vertices of the middle third of the top face.
     let loaded: Vec<usize> = skin_mesh
         .positions
@@ -261,8 +277,155 @@ fn run_copy(
     for &(v, n, wgt) in &embedding {
         rows[v].push((n, wgt));
     }
-    let xc = lx / 2.0;
-    let mode = if dynamics {
+    let model = CopyModel {
+        skin_mesh,
+        middle_row: sheet.rows[ny / 2].clone(),
+        nodes: lattice.node_count(),
+        extent: [lx, ly, lz],
+        rest: lattice.rest_flat(),
+        pinned,
+        rows,
+        loaded,
+    };
+    Ok((model, embedding, lattice))
+}
+
+/// The copy's skin: an embedded shell with clusters for λ and the scene's statics settings.
+fn copy_skin(
+    scene: &Scene,
+    model: &CopyModel,
+    materials: &CopyMaterials,
+    embedding: Vec<(usize, usize, f64)>,
+    copy: usize,
+) -> anyhow::Result<EmbeddedShell> {
+    let edge = scene.geometry.as_ref().expect("checked").skin_edge;
+    let skin_mat = materials.skin;
+    EmbeddedShell::new(
+        model.skin_mesh.clone(),
+        skin_mat,
+        embedding,
+        model.nodes,
+        sigma_for_wavelength(&model.skin_mesh, materials.lambda),
+        StaticSettings {
+            tolerance: scene.solver.shell_tolerance.unwrap_or(1e-6)
+                * skin_mat.stretch_stiffness()
+                * edge,
+            max_iterations: scene.solver.shell_iterations.unwrap_or(100),
+            hessian: HessianMode::Auto,
+            energy_merit: true,
+            ..Default::default()
+        },
+    )
+    .with_context(|| format!("copy {copy}: building the skin"))
+}
+
+/// The copy's interior: backward Euler on the lattice with its pins and the scene's gravity.
+fn copy_interior(
+    scene: &Scene,
+    lattice: &Lattice,
+    model: &CopyModel,
+    materials: &CopyMaterials,
+) -> anyhow::Result<BackwardEuler> {
+    let interior = Interior::new(lattice, &materials.interior)?;
+    let gravity = if scene.dynamics.gravity.unwrap_or(false) {
+        [0.0, 0.0, -GRAVITY]
+    } else {
+        [0.0; 3]
+    };
+    Ok(BackwardEuler::new(
+        interior,
+        model.rest.clone(),
+        model.pinned.clone(),
+        StepSettings {
+            dt: scene.dynamics.dt.unwrap_or(0.02),
+            max_newton: scene.solver.interior_iterations.unwrap_or(20),
+            gravity,
+            linear_solver: LinearSolver::Auto,
+            ..Default::default()
+        },
+    )?)
+}
+
+/// The load of frame `f` of `frames` (ramped linearly): the compressed ends placed (and on the
+/// first frame the free nodes too, a good first guess), and the weight's force through Bᵀ
+/// (flat over node dofs, N).
+fn apply_load(load: &Load, model: &CopyModel, be: &mut BackwardEuler, f: usize) -> Vec<f64> {
+    let s = (f + 1) as f64 / load.frames as f64;
+    let compression = load.compression.unwrap_or(0.0);
+    let xc = model.extent[0] / 2.0;
+    let rest = &model.rest;
+    if compression > 0.0 {
+        let factor = 1.0 - compression * s;
+        for (n, &p) in model.pinned.iter().enumerate() {
+            if p {
+                be.q[3 * n] = xc + factor * (rest[3 * n] - xc);
+            }
+        }
+    }
+    let mut f_ext = vec![0.0; be.q.len()];
+    if let Some(m) = load.weight {
+        let per = m * GRAVITY * s / model.loaded.len() as f64;
+        for &v in &model.loaded {
+            for &(n, wgt) in &model.rows[v] {
+                f_ext[3 * n + 2] -= per * wgt;
+            }
+        }
+    }
+    if f == 0 && compression > 0.0 {
+        // Free nodes start on the affinely compressed state (a good first guess).
+        let factor = 1.0 - compression * s;
+        for (n, &p) in model.pinned.iter().enumerate() {
+            if !p {
+                be.q[3 * n] = xc + factor * (rest[3 * n] - xc);
+            }
+        }
+    }
+    f_ext
+}
+
+/// Wavelength and amplitude along the middle row and the centre's sag, on the last frame.
+fn measure_copy(
+    model: &CopyModel,
+    skin: &EmbeddedShell,
+    q: &[f64],
+    last: &[Vector3<f64>],
+) -> (Option<measure::Measured>, f64) {
+    let [lx, ly, lz] = model.extent;
+    let bq = skin.embedded_positions(q);
+    let profile: Vec<(f64, f64)> = model
+        .middle_row
+        .iter()
+        .map(|&v| (last[v].x, last[v].z - bq[v].z))
+        .collect();
+    let measured = measure::wavelength(&profile);
+    let centre = model
+        .skin_mesh
+        .positions
+        .iter()
+        .enumerate()
+        .min_by(|a, b| {
+            let da = (a.1.x - lx / 2.0).powi(2) + (a.1.y - ly / 2.0).powi(2);
+            let db = (b.1.x - lx / 2.0).powi(2) + (b.1.y - ly / 2.0).powi(2);
+            da.total_cmp(&db)
+        })
+        .map_or(0, |(v, _)| v);
+    (measured, lz - last[centre].z)
+}
+
+/// Simulate one copy frame by frame (two-step: interior, then skin) and measure it.
+fn run_copy(
+    scene: &Scene,
+    skin_section: &SkinSection,
+    copy: usize,
+    progress: &dyn Fn(usize),
+) -> anyhow::Result<CopyResult> {
+    let t0 = Instant::now();
+    let load = scene.load.as_ref().expect("checked");
+    let materials = copy_materials(scene, skin_section, copy)?;
+    let (model, embedding, lattice) = copy_model(scene, copy)?;
+    let mut skin = copy_skin(scene, &model, &materials, embedding, copy)?;
+    let mut be = copy_interior(scene, &lattice, &model, &materials)?;
+    let mode = if scene.dynamics.enabled.unwrap_or(false) {
         InteriorMode::Dynamic
     } else {
         InteriorMode::QuasiStatic
@@ -271,33 +434,7 @@ fn run_copy(
     let mut not_converged = 0;
     for f in 0..load.frames {
         progress(f);
-        let s = (f + 1) as f64 / load.frames as f64;
-        if compression > 0.0 {
-            let factor = 1.0 - compression * s;
-            for (n, &p) in pinned.iter().enumerate() {
-                if p {
-                    be.q[3 * n] = xc + factor * (rest[3 * n] - xc);
-                }
-            }
-        }
-        let mut f_ext = vec![0.0; be.q.len()];
-        if let Some(m) = load.weight {
-            let per = m * GRAVITY * s / loaded.len() as f64;
-            for &v in &loaded {
-                for &(n, wgt) in &rows[v] {
-                    f_ext[3 * n + 2] -= per * wgt;
-                }
-            }
-        }
-        if f == 0 && compression > 0.0 {
-            // Free nodes start on the affinely compressed state (a good first guess).
-            let factor = 1.0 - compression * s;
-            for (n, &p) in pinned.iter().enumerate() {
-                if !p {
-                    be.q[3 * n] = xc + factor * (rest[3 * n] - xc);
-                }
-            }
-        }
+        let f_ext = apply_load(load, &model, &mut be, f);
         let rep = two_step_with(&mut be, &mut skin, &f_ext, mode)?;
         // The interior moved after the shell solve: re-solve the skin on the final state.
         let last = skin.solve(&be.q)?;
@@ -311,41 +448,24 @@ fn run_copy(
             bail!("copy {copy}, frame {f}: the skin became non-finite");
         }
         frames.push(
-            (0..skin_mesh.positions.len())
+            (0..model.skin_mesh.positions.len())
                 .map(|v| Vector3::new(x[3 * v], x[3 * v + 1], x[3 * v + 2]))
                 .collect::<Vec<_>>(),
         );
     }
-    // Measure on the last frame along the middle row.
     let last = frames.last().expect("at least one frame");
-    let bq = skin.embedded_positions(&be.q);
-    let row = &sheet.rows[ny / 2];
-    let profile: Vec<(f64, f64)> = row
-        .iter()
-        .map(|&v| (last[v].x, last[v].z - bq[v].z))
-        .collect();
-    let measured = measure::wavelength(&profile);
-    let centre = skin_mesh
-        .positions
-        .iter()
-        .enumerate()
-        .min_by(|a, b| {
-            let da = (a.1.x - lx / 2.0).powi(2) + (a.1.y - ly / 2.0).powi(2);
-            let db = (b.1.x - lx / 2.0).powi(2) + (b.1.y - ly / 2.0).powi(2);
-            da.total_cmp(&db)
-        })
-        .map_or(0, |(v, _)| v);
+    let (measured, sag) = measure_copy(&model, &skin, &be.q, last);
     let report = CopyReport {
         copy,
-        skin: skin_mat,
-        predicted_wavelength_m: lambda,
+        skin: materials.skin,
+        predicted_wavelength_m: materials.lambda,
         measured_wavelength_m: measured.as_ref().map(|m| m.wavelength),
         amplitude_m: measured.as_ref().map(|m| m.amplitude),
-        sag_m: lz - last[centre].z,
+        sag_m: sag,
         frames_not_converged: not_converged,
-        skin_vertices: skin_mesh.positions.len(),
-        lattice_nodes: lattice.node_count(),
+        skin_vertices: model.skin_mesh.positions.len(),
+        lattice_nodes: model.nodes,
         seconds: t0.elapsed().as_secs_f64(),
     };
-    Ok((skin_mesh, frames, report))
+    Ok((model.skin_mesh, frames, report))
 }

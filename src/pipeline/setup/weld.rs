@@ -1,9 +1,47 @@
 //! Welding a loaded face into one manifold skin: glTF splits vertices along texture seams and
 //! normal creases, but the skin must be one connected sheet to carry stress across them.
 
+use crate::io::mesh::MeshInstance;
 use crate::mesh::TriMesh;
+use crate::pipeline::record::StagePlan;
+use anyhow::{bail, Context};
 use nalgebra::Vector3;
 use std::collections::HashMap;
+use std::time::Instant;
+
+/// Relative weld tolerance: vertices closer than this fraction of the face's bounding-box
+/// diagonal are one skin vertex.
+pub const WELD_TOLERANCE: f64 = 1e-7;
+
+/// The `weld` stage: the loaded face welded into one skin (tolerance [`WELD_TOLERANCE`] of its
+/// diagonal), with its record; `path` names the rig in errors (no vertices, no extent, no
+/// triangles left).
+pub fn weld_face(face: &MeshInstance, path: &str) -> anyhow::Result<(Welded, StagePlan)> {
+    let t = Instant::now();
+    let raw = TriMesh::new(face.positions.clone(), face.triangles.clone());
+    let (lo, hi) = raw
+        .bounding_box()
+        .with_context(|| format!("{path}: the face '{}' has no vertices", face.name))?;
+    let diag = (hi - lo).norm();
+    if !(diag.is_finite() && diag > 0.0) {
+        bail!("{path}: the face '{}' has no extent", face.name);
+    }
+    let welded = weld(&face.positions, &face.triangles, WELD_TOLERANCE * diag);
+    if welded.mesh.triangles.is_empty() {
+        bail!("{path}: the face '{}' has no triangles", face.name);
+    }
+    let record = StagePlan::ran(
+        "weld",
+        format!(
+            "{} loaded vertices → {} skin vertices ({} triangles dropped as collapsed)",
+            face.positions.len(),
+            welded.mesh.positions.len(),
+            welded.dropped_triangles
+        ),
+        t.elapsed().as_secs_f64() * 1e3,
+    );
+    Ok((welded, record))
+}
 
 /// A welded mesh and the maps between it and the loaded vertices.
 #[derive(Debug, Clone)]

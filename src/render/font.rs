@@ -17,7 +17,7 @@ pub const FAMILY: &str = "sans-serif";
 static REGISTER: Once = Once::new();
 
 /// Register the shipped font with plotters (once per process; later calls do nothing). Every
-/// drawing function in [`crate::report`] calls this first, so callers normally need not.
+/// drawing function in [`crate::render`] calls this first, so callers normally need not.
 pub fn ensure_registered() {
     REGISTER.call_once(|| {
         // The font is compiled in and known to parse; a failure here is a broken build.

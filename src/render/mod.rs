@@ -1,21 +1,19 @@
-//! Pictures a person looks at: charts (PNG) of measurements and software-rendered preview
-//! images of meshes (shaded, or coloured by a per-vertex quantity such as wrinkle depth),
-//! composed side by side or as a contact sheet. No GPU and no system fonts: text uses the
-//! shipped DejaVu Sans ([`font`]). All output is deterministic and written atomically.
+//! Drawing: charts (PNG) of measurements and software-rendered preview images of meshes
+//! (shaded, or coloured by a per-vertex quantity such as wrinkle depth), composed side by side
+//! or as a contact sheet. No GPU and no system fonts: text uses the shipped DejaVu Sans
+//! ([`font`]). All output is deterministic and written atomically. This layer sits below the
+//! pipeline (which draws previews with it) and never runs it; the studies that run the
+//! pipeline and chart the results are [`crate::studies`].
 
 #![warn(missing_docs)]
 
-pub mod benchmarks;
 pub mod colormap;
 pub mod contour;
-pub mod fit;
 pub mod font;
 pub mod pareto;
 pub mod plot;
 pub mod preview;
 pub mod raster;
-pub mod stability;
-pub mod tradeoff;
 
 use anyhow::{anyhow, Result};
 use image::RgbImage;

@@ -1,0 +1,234 @@
+//! The plan of a run: every check on the rig and the options before any work starts, and what
+//! follows from them (the frames to simulate, the materials, the skin's thickness and critical
+//! wavelength, whether the interior is dynamic and in how many sub-steps per frame). Nothing
+//! here builds a mesh or a solver: a plan that exists is a run that may start.
+
+use super::frames::FrameRange;
+use super::record::StagePlan;
+use super::RunOptions;
+use crate::coupling::wavelength::Bilayer;
+use crate::io::load::Rig;
+use crate::scene::{Materials, Scene};
+use anyhow::bail;
+
+/// How the interior is driven towards each frame's blend-shape target.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Driver {
+    /// A stiff quadratic tracking energy pulls the embedded surface to the target.
+    Tracking,
+    /// Muscle activations fitted per frame (a QP) drive it; `source` is `auto` (generated from
+    /// the blend shapes) or a muscle file's path.
+    Muscles {
+        /// `auto` or a muscle TOML file.
+        source: String,
+    },
+}
+
+impl Driver {
+    /// The driver a scene asks for (`muscles.source`, default `none`: tracking).
+    pub fn of(scene: &Scene) -> Self {
+        match scene.muscles.source.as_deref().unwrap_or("none") {
+            "none" => Self::Tracking,
+            s => Self::Muscles {
+                source: s.to_string(),
+            },
+        }
+    }
+
+    /// The driver's name in the report.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Tracking => "tracking of the blended surface",
+            Self::Muscles { .. } => "muscle activations",
+        }
+    }
+}
+
+/// Skin thickness over the face and the critical wavelengths it gives.
+#[derive(Debug, Clone)]
+pub struct SkinScale {
+    /// Skin thickness per loaded face triangle (m), when the scene varies it.
+    pub face_thickness: Option<Vec<f64>>,
+    /// Thinnest and thickest skin (m).
+    pub thickness: [f64; 2],
+    /// Critical wavelength of the thinnest skin (m): the refinement and the clusters use it.
+    pub lambda: f64,
+    /// Critical wavelength of the thickest skin (m).
+    pub lambda_max: f64,
+}
+
+/// A checked run: what to simulate and with what.
+#[derive(Debug, Clone)]
+pub struct Plan {
+    /// Blend-shape weights per frame of the clip, sampled at the run's fps.
+    pub weights: Vec<Vec<f64>>,
+    /// Frames to write; frames 0..`range.end` are simulated (the clip's history).
+    pub range: FrameRange,
+    /// Frames per second (Hz).
+    pub fps: f64,
+    /// Whether the rig has an animation of more than one frame.
+    pub animated: bool,
+    /// Materials (SI).
+    pub materials: Materials,
+    /// The skin's thickness and wavelengths.
+    pub skin: SkinScale,
+    /// Interior sub-steps per frame under backward Euler; 0 when the interior is quasi-static.
+    pub substeps: usize,
+    /// What drives the interior.
+    pub driver: Driver,
+}
+
+impl Plan {
+    /// Check the rig and the options (scene settings, fps, frame range, skin mesh names,
+    /// materials, thickness) and derive the plan; an `Err` names the file and what is wrong.
+    pub fn new(rig: &Rig, opts: &RunOptions) -> anyhow::Result<Self> {
+        let scene = &opts.scene;
+        scene.validate()?;
+        if !(opts.fps.is_finite() && opts.fps > 0.0 && opts.fps <= 1000.0) {
+            bail!("fps must lie in (0, 1000], got {}", opts.fps);
+        }
+        if scene.geometry.is_some() {
+            bail!(
+                "this scene describes synthetic geometry; run it with `furrow scene`, not on a rig"
+            );
+        }
+        let weights = rig.frame_weights(opts.fps);
+        let range = opts.frames.unwrap_or(FrameRange::all(weights.len()));
+        if range.end > weights.len() || range.is_empty() {
+            bail!(
+                "{}: frames {}:{} are outside the clip's {} frames",
+                rig.path.display(),
+                range.start,
+                range.end,
+                weights.len()
+            );
+        }
+        let animated = rig.track.is_some() && weights.len() > 1;
+        let materials = scene.materials()?;
+        let skin = skin_scale(rig, scene, &materials)?;
+        check_skin_meshes(rig, scene)?;
+        let dynamics = scene.dynamics.enabled.unwrap_or(animated);
+        let substeps = if dynamics {
+            substeps_per_frame(opts.fps, scene.dynamics.dt.unwrap_or(DEFAULT_DT))
+        } else {
+            0
+        };
+        Ok(Self {
+            weights,
+            range,
+            fps: opts.fps,
+            animated,
+            materials,
+            skin,
+            substeps,
+            driver: Driver::of(scene),
+        })
+    }
+
+    /// Whether the interior runs backward Euler (otherwise it is quasi-static).
+    pub fn dynamics(&self) -> bool {
+        self.substeps > 0
+    }
+
+    /// The `load` stage's record: the face chosen and the clip.
+    pub fn load_stage(&self, rig: &Rig) -> StagePlan {
+        StagePlan::ran(
+            "load",
+            format!(
+                "{}; {} frames at {} fps",
+                rig.face_reason,
+                self.weights.len(),
+                self.fps
+            ),
+            0.0,
+        )
+    }
+}
+
+/// Backward Euler sub-steps per frame at `fps` (Hz) so that none is longer than `dt` (s).
+pub fn substeps_per_frame(fps: f64, dt: f64) -> usize {
+    (1.0 / fps / dt - 1e-9).ceil().max(1.0) as usize
+}
+
+/// Backward Euler's largest time step when the scene gives none (s).
+pub const DEFAULT_DT: f64 = 0.02;
+
+/// Skin thickness per loaded face triangle when the scene varies it (regions, attribute,
+/// texture), and the critical wavelengths of the thinnest and thickest skin (λ ∝ h): the
+/// refinement and the clusters use the thinnest skin's λ, the most demanding.
+fn skin_scale(rig: &Rig, scene: &Scene, materials: &Materials) -> anyhow::Result<SkinScale> {
+    let h0 = materials.skin.thickness;
+    let face_thickness = if crate::scene::thickness::varies(&scene.skin) {
+        Some(crate::scene::thickness::rig_face_thickness(
+            rig,
+            &scene.skin,
+            h0,
+            None,
+        )?)
+    } else {
+        None
+    };
+    let (h_min, h_max) = face_thickness.as_deref().map_or((h0, h0), |h| {
+        h.iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &x| {
+                (lo.min(x), hi.max(x))
+            })
+    });
+    let wavelength_of = |h: f64| {
+        Bilayer {
+            thickness: h,
+            skin_modulus: materials.skin.young,
+            skin_poisson: materials.skin.poisson,
+            interior_modulus: materials.interior.young,
+            interior_poisson: materials.interior.poisson,
+        }
+        .critical_wavelength()
+    };
+    Ok(SkinScale {
+        face_thickness,
+        thickness: [h_min, h_max],
+        lambda: wavelength_of(h_min),
+        lambda_max: wavelength_of(h_max),
+    })
+}
+
+/// A scene that names its skin meshes must name the face furrow simulates.
+fn check_skin_meshes(rig: &Rig, scene: &Scene) -> anyhow::Result<()> {
+    let face = rig.face();
+    if !scene.skin.meshes.is_empty() && !scene.skin.meshes.contains(&face.name) {
+        bail!(
+            "{}: the scene names skin meshes {:?} but the face furrow simulates is '{}' (pick it with --mesh)",
+            rig.path.display(),
+            scene.skin.meshes,
+            face.name
+        );
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sub_steps_cover_the_frame_without_exceeding_dt() {
+        assert_eq!(substeps_per_frame(30.0, 0.02), 2);
+        assert_eq!(substeps_per_frame(50.0, 0.02), 1);
+        assert_eq!(substeps_per_frame(24.0, 0.01), 5);
+        assert_eq!(substeps_per_frame(1000.0, 0.02), 1);
+    }
+
+    #[test]
+    fn the_driver_follows_the_muscle_source() {
+        let mut scene = Scene::default();
+        assert_eq!(Driver::of(&scene), Driver::Tracking);
+        scene.muscles.source = Some("auto".into());
+        assert_eq!(
+            Driver::of(&scene),
+            Driver::Muscles {
+                source: "auto".into()
+            }
+        );
+        assert_eq!(Driver::of(&scene).name(), "muscle activations");
+    }
+}

@@ -1,0 +1,78 @@
+//! The `lattice` stage: the coarse volumetric lattice of the interior, built over the welded
+//! (unrefined) skin from the scene's `[interior]` settings.
+
+use crate::lattice::{ElementOrder, Lattice, LatticeSettings};
+use crate::mesh::TriMesh;
+use crate::pipeline::record::StagePlan;
+use crate::scene::InteriorSection;
+use anyhow::Context;
+use std::time::Instant;
+
+/// The lattice's element order from `interior.elements` (quadratic B-splines unless
+/// `"trilinear"`).
+pub fn element_order(interior: &InteriorSection) -> ElementOrder {
+    match interior.elements.as_deref() {
+        Some("trilinear") => ElementOrder::Trilinear,
+        _ => ElementOrder::Quadratic,
+    }
+}
+
+/// The `lattice` stage: the lattice embedding `skin` (m), with its record; `path` names the
+/// rig in errors.
+pub fn build_lattice(
+    skin: &TriMesh,
+    interior: &InteriorSection,
+    path: &str,
+) -> anyhow::Result<(Lattice, StagePlan)> {
+    let t = Instant::now();
+    let lattice = Lattice::build(
+        skin,
+        &LatticeSettings {
+            cell_size: interior.cell_size,
+            target_cells: interior.target_cells,
+            order: element_order(interior),
+            depth: interior.depth,
+        },
+    )
+    .with_context(|| format!("{path}: building the lattice"))?;
+    let record = StagePlan::ran(
+        "lattice",
+        format!(
+            "{} elements, {} nodes ({} bone), cell {:.1} mm",
+            lattice.elements.len(),
+            lattice.node_count(),
+            lattice.pinned_count(),
+            lattice.cell_size * 1e3
+        ),
+        t.elapsed().as_secs_f64() * 1e3,
+    );
+    Ok((lattice, record))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pipeline::setup::test_support::bump_sheet;
+
+    #[test]
+    fn builds_a_lattice_under_a_small_sheet_and_records_it() {
+        let sheet = bump_sheet(6);
+        let interior = InteriorSection {
+            cell_size: Some(0.01),
+            ..Default::default()
+        };
+        let (lattice, record) = build_lattice(&sheet, &interior, "sheet.glb").unwrap();
+        assert!(record.is_ran());
+        assert_eq!(record.stage, "lattice");
+        assert!(!lattice.elements.is_empty());
+        assert!((lattice.cell_size - 0.01).abs() < 1e-12);
+        assert!(record
+            .why
+            .contains(&format!("{} elements", lattice.elements.len())));
+        let trilinear = InteriorSection {
+            elements: Some("trilinear".into()),
+            ..interior
+        };
+        assert_eq!(element_order(&trilinear), ElementOrder::Trilinear);
+    }
+}

@@ -1,0 +1,302 @@
+//! The set-up: everything built once before the frame loop, one stage per module, in the order
+//! they run: [`weld`] the loaded face into one skin, build the [`lattice`] over it, [`refine`]
+//! the skin for the critical wavelength and embed it, select the simulated [`skin`] and build
+//! its shell and clusters, the [`interior`] stepper and tracking energy, and the [`muscles`].
+//! Each stage returns its result and its record for the report.
+//!
+//! What the set-up builds splits in two: the [`Model`], fixed for the run (meshes, maps,
+//! lattice, embedding, tracking energy), and the [`State`] that each frame step advances (the
+//! interior's positions and velocities, the skin, the muscle activations).
+
+pub mod interior;
+pub mod lattice;
+pub mod muscles;
+pub mod refine;
+pub mod skin;
+pub mod weld;
+
+use super::plan::{Driver, Plan};
+use super::record::StagePlan;
+use super::Progress;
+use crate::coupling::embedded::EmbeddedShell;
+use crate::fem::BackwardEuler;
+use crate::io::export::VertexOrigin;
+use crate::io::load::Rig;
+use crate::lattice::Lattice;
+use crate::mesh::TriMesh;
+use crate::scene::Scene;
+use interior::Tracking;
+use muscles::MuscleDrive;
+
+/// What a run keeps fixed: the exported skin and its maps, the lattice and the embedding.
+pub struct Model {
+    /// The exported skin (the welded face refined; m).
+    pub skin_mesh: TriMesh,
+    /// For each export vertex, (welded vertex, weight) pairs whose blend is its target.
+    pub target_of: Vec<Vec<(usize, f64)>>,
+    /// For each export vertex, its origin in the loaded face.
+    pub origin: Vec<VertexOrigin>,
+    /// Loaded vertex → welded vertex.
+    pub welded_of_loaded: Vec<usize>,
+    /// Welded vertex → one loaded vertex at the same place.
+    pub welded_loaded: Vec<usize>,
+    /// Number of welded vertices (they come first among the export vertices).
+    pub welded_count: usize,
+    /// The interior's lattice.
+    pub lattice: Lattice,
+    /// Embedding rows of every export vertex: (node, weight), x = Σ w q_node.
+    pub rows: Vec<Vec<(usize, f64)>>,
+    /// Export vertex of each shell vertex (empty when no skin is simulated).
+    pub sim_vertices: Vec<usize>,
+    /// Cluster width σ (m); NaN when no skin is simulated.
+    pub sigma: f64,
+    /// The tracking energy towards the blend-shape target.
+    pub tracking: Tracking,
+}
+
+/// What the frame step advances.
+pub struct State {
+    /// The interior: lattice node positions q (m) and velocities (m/s), with its stepper.
+    pub interior: BackwardEuler,
+    /// The simulated skin (its positions x, m), when any.
+    pub skin: Option<EmbeddedShell>,
+    /// The muscles and their activations, when muscles drive the interior.
+    pub muscles: Option<MuscleDrive>,
+}
+
+/// The run's log: each stage's record in the order they were planned, and the warnings.
+#[derive(Debug, Default)]
+pub struct Log {
+    /// Stage records, in order.
+    pub stages: Vec<StagePlan>,
+    /// Warnings for the user.
+    pub warnings: Vec<String>,
+}
+
+/// Build the model and the initial state, recording each stage in `log`.
+pub fn set_up(
+    rig: &Rig,
+    scene: &Scene,
+    plan: &Plan,
+    log: &mut Log,
+    progress: Progress,
+) -> anyhow::Result<(Model, State)> {
+    let face = rig.face();
+    let path = rig.path.display().to_string();
+    progress("setup", 0, 4);
+    let (welded, record) = weld::weld_face(face, &path)?;
+    log.stages.push(record);
+    let (lattice, record) = lattice::build_lattice(&welded.mesh, &scene.interior, &path)?;
+    log.stages.push(record);
+    progress("setup", 1, 4);
+    let input = refine::RefineInput {
+        face,
+        welded: &welded,
+        lattice: &lattice,
+        scale: &plan.skin,
+    };
+    let (refined, record) = refine::refine_skin(&input, &scene.skin, &path)?;
+    log.stages.push(record);
+    progress("setup", 2, 4);
+    let triangles = skin::select_triangles(&refined.mesh, scene, &path, &mut log.warnings);
+    let simulated = if triangles.is_empty() {
+        log.stages.push(skin::skipped_shell(scene));
+        None
+    } else {
+        let nodes = lattice.node_count();
+        let lambda = plan.skin.lambda;
+        let (s, record) = skin::build_shell(&refined, &triangles, nodes, scene, lambda, &path)?;
+        log.stages.push(record);
+        Some(s)
+    };
+    progress("setup", 3, 4);
+    let stepper = interior::stepper(&lattice, scene, plan)?;
+    let young = scene.interior.material()?.young;
+    let tracking = interior::tracking(
+        &welded.mesh,
+        &refined.rows,
+        &plan.driver,
+        young,
+        lattice.cell_size,
+    );
+    progress("setup", 4, 4);
+    log.stages.push(interior::record(plan, &stepper));
+    let muscles = match &plan.driver {
+        Driver::Tracking => {
+            log.stages.extend(muscles::skipped());
+            None
+        }
+        Driver::Muscles { source } => {
+            let (m, records) =
+                muscles::build_muscles(face, &path, scene, &lattice, &welded.loaded_of, source)?;
+            log.stages.extend(records);
+            Some(m)
+        }
+    };
+    let (skin, sim_vertices, sigma) = match simulated {
+        Some(s) => (Some(s.shell), s.vertices, s.sigma),
+        None => (None, Vec::new(), f64::NAN),
+    };
+    let model = Model {
+        skin_mesh: refined.mesh,
+        target_of: refined.target_of,
+        origin: refined.origin,
+        welded_of_loaded: welded.of_loaded,
+        welded_loaded: welded.loaded_of,
+        welded_count: welded.mesh.positions.len(),
+        lattice,
+        rows: refined.rows,
+        sim_vertices,
+        sigma,
+        tracking,
+    };
+    let state = State {
+        interior: stepper,
+        skin,
+        muscles,
+    };
+    Ok((model, state))
+}
+
+/// Small inputs for the stages' unit tests.
+#[cfg(test)]
+pub(crate) mod test_support {
+    use crate::io::mesh::{MeshInstance, VertexTransform};
+    use crate::mesh::TriMesh;
+    use crate::pipeline::plan::Driver;
+    use nalgebra::{Matrix4, Vector3};
+
+    /// An n × n vertex grid over 4 cm × 4 cm with a gentle 4 mm bump (m), like a patch of cheek.
+    pub fn bump_sheet(n: usize) -> TriMesh {
+        let h = 0.04 / (n - 1) as f64;
+        let mut p = Vec::new();
+        for j in 0..n {
+            for i in 0..n {
+                let (x, y) = (i as f64 * h - 0.02, j as f64 * h - 0.02);
+                p.push(Vector3::new(x, y, 0.004 * (-(x * x + y * y) / 2e-4).exp()));
+            }
+        }
+        let mut t = Vec::new();
+        for j in 0..n - 1 {
+            for i in 0..n - 1 {
+                let a = j * n + i;
+                t.push([a, a + 1, a + n + 1]);
+                t.push([a, a + n + 1, a + n]);
+            }
+        }
+        TriMesh::new(p, t)
+    }
+
+    /// A loaded face of `mesh` with one morph target that lifts the middle by up to 2 mm.
+    pub fn face_of(mesh: TriMesh) -> MeshInstance {
+        let lift = mesh
+            .positions
+            .iter()
+            .map(|p| Vector3::new(0.0, 0.0, 0.002 * (-(p.x * p.x + p.y * p.y) / 1e-4).exp()))
+            .collect();
+        MeshInstance {
+            node: 0,
+            mesh: 0,
+            name: "sheet".into(),
+            normals: None,
+            targets: vec![crate::io::model::MorphTarget {
+                name: "lift".into(),
+                positions: lift,
+                normals: None,
+            }],
+            default_weights: vec![0.0],
+            to_world: VertexTransform::Node(Matrix4::identity()),
+            primitive_ranges: vec![(0, mesh.positions.len())],
+            skipped_primitives: 0,
+            positions: mesh.positions,
+            triangles: mesh.triangles,
+        }
+    }
+
+    /// The welded target of `face` with its lift at weight `w` (m).
+    pub fn lifted_target(face: &MeshInstance, model: &super::Model, w: f64) -> Vec<Vector3<f64>> {
+        let loaded: Vec<Vector3<f64>> = face
+            .positions
+            .iter()
+            .zip(&face.targets[0].positions)
+            .map(|(p, d)| p + d * w)
+            .collect();
+        crate::pipeline::step::blend::weld_positions(
+            &loaded,
+            &model.welded_of_loaded,
+            model.welded_count,
+        )
+    }
+
+    /// A small model and state, built stage by stage as `set_up` does (without a rig file):
+    /// the lifted 7 × 7 bump sheet, 1 cm cells, refined for λ = 1 cm, a default skin, driven by
+    /// `driver`, with `substeps` backward Euler steps per frame at 30 fps (0: quasi-static).
+    pub fn small_model(
+        driver: Driver,
+        substeps: usize,
+    ) -> (super::Model, super::State, MeshInstance) {
+        use super::*;
+        let face = face_of(bump_sheet(7));
+        let path = "sheet.glb";
+        let mut scene = Scene::default();
+        scene.interior.cell_size = Some(0.01);
+        let (welded, _) = weld::weld_face(&face, path).unwrap();
+        let (lattice, _) = lattice::build_lattice(&welded.mesh, &scene.interior, path).unwrap();
+        let plan = crate::pipeline::plan::Plan {
+            weights: vec![vec![1.0]],
+            range: crate::pipeline::frames::FrameRange::all(1),
+            fps: 30.0,
+            animated: substeps > 0,
+            materials: scene.materials().unwrap(),
+            skin: crate::pipeline::plan::SkinScale {
+                face_thickness: None,
+                thickness: [1e-3; 2],
+                lambda: 0.01,
+                lambda_max: 0.01,
+            },
+            substeps,
+            driver: driver.clone(),
+        };
+        let input = refine::RefineInput {
+            face: &face,
+            welded: &welded,
+            lattice: &lattice,
+            scale: &plan.skin,
+        };
+        let (refined, _) = refine::refine_skin(&input, &scene.skin, path).unwrap();
+        let triangles = skin::select_triangles(&refined.mesh, &scene, path, &mut Vec::new());
+        let nodes = lattice.node_count();
+        let (sim, _) = skin::build_shell(&refined, &triangles, nodes, &scene, 0.01, path).unwrap();
+        let stepper = interior::stepper(&lattice, &scene, &plan).unwrap();
+        let young = scene.interior.material().unwrap().young;
+        let cell = lattice.cell_size;
+        let tracking = interior::tracking(&welded.mesh, &refined.rows, &driver, young, cell);
+        let muscles = match &driver {
+            Driver::Tracking => None,
+            Driver::Muscles { source } => Some(
+                muscles::build_muscles(&face, path, &scene, &lattice, &welded.loaded_of, source)
+                    .unwrap()
+                    .0,
+            ),
+        };
+        let model = Model {
+            skin_mesh: refined.mesh,
+            target_of: refined.target_of,
+            origin: refined.origin,
+            welded_of_loaded: welded.of_loaded,
+            welded_loaded: welded.loaded_of,
+            welded_count: welded.mesh.positions.len(),
+            lattice,
+            rows: refined.rows,
+            sim_vertices: sim.vertices,
+            sigma: sim.sigma,
+            tracking,
+        };
+        let state = State {
+            interior: stepper,
+            skin: Some(sim.shell),
+            muscles,
+        };
+        (model, state, face)
+    }
+}

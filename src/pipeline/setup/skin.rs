@@ -1,0 +1,198 @@
+//! The skin stages of the set-up: which refined triangles the thin shell simulates (the scene's
+//! mask minus degenerate triangles; the rest follows the interior), and the embedded shell over
+//! them with its constraint clusters of width σ (the `clusters` stage).
+
+use super::refine::RefinedSkin;
+use crate::coupling::embedded::{sigma_for_wavelength, EmbeddedShell};
+use crate::coupling::refine;
+use crate::mesh::TriMesh;
+use crate::pipeline::record::StagePlan;
+use crate::scene::Scene;
+use crate::solver::statics::{HessianMode, StaticSettings};
+use anyhow::Context;
+use std::collections::HashSet;
+use std::time::Instant;
+
+/// Quality (2 r_in / r_circ) below which a skin triangle is left out of the shell (it still
+/// follows the interior): such triangles have no usable rest shape.
+pub const DEGENERATE_QUALITY: f64 = 1e-3;
+
+/// The simulated skin: the embedded shell and which refined vertices it moves.
+pub struct SimulatedSkin {
+    /// The thin shell tied to the lattice by its clusters.
+    pub shell: EmbeddedShell,
+    /// Refined (export) vertex of each shell vertex.
+    pub vertices: Vec<usize>,
+    /// Cluster width σ (m).
+    pub sigma: f64,
+}
+
+/// Refined triangles the shell simulates: inside every box of `scene.skin.mask` (all when it
+/// is empty) and not degenerate; degenerate ones are reported in `warnings`.
+pub fn select_triangles(
+    mesh: &TriMesh,
+    scene: &Scene,
+    path: &str,
+    warnings: &mut Vec<String>,
+) -> Vec<usize> {
+    let mask = &scene.skin.mask;
+    let quality = crate::mesh::quality::check(mesh, DEGENERATE_QUALITY);
+    let degenerate: HashSet<usize> = quality.slivers.iter().map(|s| s.triangle).collect();
+    if !degenerate.is_empty() {
+        warnings.push(format!(
+            "{path}: {} degenerate skin triangles are left out of the shell and follow the interior. {}",
+            degenerate.len(),
+            quality.message()
+        ));
+    }
+    (0..mesh.triangles.len())
+        .filter(|t| !degenerate.contains(t))
+        .filter(|&t| {
+            mask.is_empty()
+                || mesh.triangles[t]
+                    .iter()
+                    .all(|&v| mask.iter().any(|b| b.contains(&mesh.positions[v])))
+        })
+        .collect()
+}
+
+/// The record of a run whose shell simulates nothing.
+pub fn skipped_shell(scene: &Scene) -> StagePlan {
+    StagePlan::skipped(
+        "shell",
+        if scene.skin.mask.is_empty() {
+            "every skin triangle is degenerate".to_string()
+        } else {
+            "the skin mask selects no triangle: the whole skin follows the interior".to_string()
+        },
+    )
+}
+
+/// The sub-mesh of `triangles` with its own vertex numbering, and the refined vertex of each
+/// of its vertices.
+fn sub_mesh(mesh: &TriMesh, triangles: &[usize]) -> (TriMesh, Vec<usize>) {
+    let mut local = vec![usize::MAX; mesh.positions.len()];
+    let mut verts = Vec::new();
+    let mut tris = Vec::with_capacity(triangles.len());
+    for &t in triangles {
+        let tri = mesh.triangles[t].map(|v| {
+            if local[v] == usize::MAX {
+                local[v] = verts.len();
+                verts.push(v);
+            }
+            local[v]
+        });
+        tris.push(tri);
+    }
+    let sub = TriMesh::new(verts.iter().map(|&v| mesh.positions[v]).collect(), tris);
+    (sub, verts)
+}
+
+/// The `clusters` stage: the embedded shell over `triangles` of the refined skin, its clusters
+/// of the σ that puts wrinkles at `lambda` (m), and the skin statics settings of the scene.
+pub fn build_shell(
+    skin: &RefinedSkin,
+    triangles: &[usize],
+    nodes: usize,
+    scene: &Scene,
+    lambda: f64,
+    path: &str,
+) -> anyhow::Result<(SimulatedSkin, StagePlan)> {
+    let t = Instant::now();
+    let (sub, vertices) = sub_mesh(&skin.mesh, triangles);
+    let emb: Vec<(usize, usize, f64)> = vertices
+        .iter()
+        .enumerate()
+        .flat_map(|(i, &v)| skin.rows[v].iter().map(move |&(n, w)| (i, n, w)))
+        .collect();
+    // σ that puts the wrinkles at λ on this mesh (the truncated kernel's first zero,
+    // corrected for edge-path distances; see `coupling::embedded`).
+    let sigma = sigma_for_wavelength(&sub, lambda);
+    let edge = refine::mean_edge(&sub);
+    let stretch = scene.skin.material()?.stretch_stiffness();
+    let settings = StaticSettings {
+        tolerance: scene.solver.shell_tolerance.unwrap_or(1e-6) * stretch * edge,
+        max_iterations: scene.solver.shell_iterations.unwrap_or(60),
+        hessian: HessianMode::Auto,
+        energy_merit: true,
+        ..StaticSettings::default()
+    };
+    let mut shell = EmbeddedShell::new(sub, scene.skin.material()?, emb, nodes, sigma, settings)
+        .with_context(|| format!("{path}: setting up the skin"))?;
+    if let Some(h) = &skin.thickness {
+        // The skin's own thickness per simulated triangle; the clusters widen with it
+        // (σ ∝ λ ∝ h, from σ of the thinnest skin above).
+        let sub_h: Vec<f64> = triangles.iter().map(|&t| h[t]).collect();
+        shell
+            .set_thickness(sub_h)
+            .with_context(|| format!("{path}: setting up the skin thickness"))?;
+    }
+    let st = shell.cluster_stats();
+    let record = StagePlan::ran(
+        "clusters",
+        format!(
+            "{} clusters of σ = {:.2} mm, {:.0} vertices each on average, {:.1} per vertex",
+            st.clusters,
+            sigma * 1e3,
+            st.vertices_per_cluster[1],
+            st.clusters_per_vertex[1]
+        ),
+        t.elapsed().as_secs_f64() * 1e3,
+    );
+    let simulated = SimulatedSkin {
+        shell,
+        vertices,
+        sigma,
+    };
+    Ok((simulated, record))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::Aabb;
+
+    fn two_triangles() -> TriMesh {
+        use nalgebra::Vector3;
+        TriMesh::new(
+            vec![
+                Vector3::new(0.0, 0.0, 0.0),
+                Vector3::new(1.0, 0.0, 0.0),
+                Vector3::new(0.0, 1.0, 0.0),
+                Vector3::new(1.0, 1.0, 0.0),
+                Vector3::new(1.0, 2.0, 0.0),
+            ],
+            // The second triangle is collinear (degenerate).
+            vec![[0, 1, 2], [1, 3, 4], [1, 3, 2]],
+        )
+    }
+
+    #[test]
+    fn selection_drops_degenerate_triangles_and_respects_the_mask() {
+        let mesh = two_triangles();
+        let mut scene = Scene::default();
+        let mut warnings = Vec::new();
+        assert_eq!(
+            select_triangles(&mesh, &scene, "f.glb", &mut warnings),
+            vec![0, 2]
+        );
+        assert_eq!(warnings.len(), 1);
+        assert!(warnings[0].starts_with("f.glb: 1 degenerate"));
+        scene.skin.mask = vec![Aabb {
+            min: [-0.1, -0.1, -0.1],
+            max: [0.5, 1.1, 0.1],
+        }];
+        assert!(select_triangles(&mesh, &scene, "f.glb", &mut warnings).is_empty());
+        assert!(skipped_shell(&scene)
+            .why
+            .contains("mask selects no triangle"));
+    }
+
+    #[test]
+    fn sub_mesh_renumbers_in_order_of_first_use() {
+        let (sub, verts) = sub_mesh(&two_triangles(), &[2]);
+        assert_eq!(verts, vec![1, 3, 2]);
+        assert_eq!(sub.triangles, vec![[0, 1, 2]]);
+        assert_eq!(sub.positions[1], two_triangles().positions[3]);
+    }
+}

@@ -1,0 +1,119 @@
+//! The `record` step's geometry: the exported surface of a frame. It is the blend-shape target
+//! plus the skin's high-frequency part, t + (x − B q): H (x − B q) = 0, so this adds exactly
+//! the wrinkles (what the constraints leave free) to the artist's shape; with
+//! `export.surface = "simulated"` it is x itself (B q where no skin is simulated).
+
+use anyhow::bail;
+use nalgebra::Vector3;
+
+/// One frame's exported surfaces.
+#[derive(Debug, Clone)]
+pub struct Composed {
+    /// The wrinkled surface per export vertex (m).
+    pub wrinkled: Vec<Vector3<f64>>,
+    /// The blend-shape target per export vertex (m).
+    pub target: Vec<Vector3<f64>>,
+    /// Largest wrinkle displacement ‖x − B q‖ over the skin (m).
+    pub depth_max: f64,
+}
+
+/// How the export vertices follow the lattice, the target and the skin.
+#[derive(Debug, Clone, Copy)]
+pub struct SurfaceMaps<'a> {
+    /// Embedding rows of every export vertex: (node, weight).
+    pub rows: &'a [Vec<(usize, f64)>],
+    /// For each export vertex, (welded vertex, weight) pairs whose blend is its target.
+    pub target_of: &'a [Vec<(usize, f64)>],
+    /// Export vertex of each shell vertex.
+    pub sim_vertices: &'a [usize],
+}
+
+/// The frame's surfaces from the welded target (m), node positions `q` (flat, m) and the
+/// skin's positions `x` (flat per shell vertex, m; `None` without a simulated skin).
+pub fn compose(
+    maps: SurfaceMaps,
+    welded_target: &[Vector3<f64>],
+    q: &[f64],
+    x: Option<&[f64]>,
+    simulated_surface: bool,
+    k: usize,
+) -> anyhow::Result<Composed> {
+    let embedded = embed_rows(maps.rows, q);
+    let target: Vec<Vector3<f64>> = maps
+        .target_of
+        .iter()
+        .map(|o| o.iter().map(|&(w, a)| welded_target[w] * a).sum())
+        .collect();
+    let mut out = if simulated_surface {
+        embedded.clone()
+    } else {
+        target.clone()
+    };
+    let mut depth_max = 0.0f64;
+    if let Some(x) = x {
+        for (i, &v) in maps.sim_vertices.iter().enumerate() {
+            let xv = Vector3::new(x[3 * i], x[3 * i + 1], x[3 * i + 2]);
+            let detail = xv - embedded[v];
+            depth_max = depth_max.max(detail.norm());
+            out[v] = if simulated_surface {
+                xv
+            } else {
+                target[v] + detail
+            };
+        }
+    }
+    if out.iter().any(|p| !p.iter().all(|c| c.is_finite())) {
+        bail!("frame {k}: a non-finite position reached the output; nothing was written");
+    }
+    Ok(Composed {
+        wrinkled: out,
+        target,
+        depth_max,
+    })
+}
+
+/// x = B q per export vertex (m), from embedding rows and node positions `q` (flat, m).
+pub fn embed_rows(rows: &[Vec<(usize, f64)>], q: &[f64]) -> Vec<Vector3<f64>> {
+    rows.iter()
+        .map(|r| {
+            r.iter()
+                .map(|&(n, w)| Vector3::new(q[3 * n], q[3 * n + 1], q[3 * n + 2]) * w)
+                .sum()
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_wrinkle_is_added_to_the_target_or_the_skin_is_taken_as_is() {
+        // Two export vertices (the welded vertex 0, and a midpoint of welded 0 and 1) on one
+        // node; only the second is simulated.
+        let rows = vec![vec![(0, 1.0)], vec![(0, 1.0)]];
+        let target_of = vec![vec![(0, 1.0)], vec![(0, 0.5), (1, 0.5)]];
+        let maps = SurfaceMaps {
+            rows: &rows,
+            target_of: &target_of,
+            sim_vertices: &[1],
+        };
+        let welded = [Vector3::new(0.0, 0.0, 0.0), Vector3::new(2.0, 0.0, 0.0)];
+        let q = [0.5, 0.0, 0.0];
+        let x = [0.5, 0.0, 0.003];
+        let c = compose(maps, &welded, &q, Some(&x), false, 0).unwrap();
+        assert_eq!(c.target, vec![welded[0], Vector3::new(1.0, 0.0, 0.0)]);
+        assert_eq!(c.wrinkled, vec![welded[0], Vector3::new(1.0, 0.0, 0.003)]);
+        assert!((c.depth_max - 0.003).abs() < 1e-15);
+        let s = compose(maps, &welded, &q, Some(&x), true, 0).unwrap();
+        assert_eq!(
+            s.wrinkled,
+            vec![Vector3::new(0.5, 0.0, 0.0), Vector3::new(0.5, 0.0, 0.003)]
+        );
+        let bad = compose(maps, &welded, &[f64::NAN, 0.0, 0.0], None, true, 7);
+        assert!(bad
+            .unwrap_err()
+            .to_string()
+            .starts_with("frame 7: a non-finite"));
+    }
+}

@@ -1,0 +1,105 @@
+//! The `drive` step: what pulls the interior towards the frame's target. With tracking, the
+//! force of the tracking energy Bᵀ k (t − B q) (its stiffness Bᵀ k B is constant, in the
+//! model); with muscles, first the activations fitted to the target (the `fit` stage, a QP),
+//! then their active energy linearised at the interior's state.
+
+use crate::fem::BackwardEuler;
+use crate::pipeline::record::StageRecord;
+use crate::pipeline::setup::interior::Tracking;
+use crate::pipeline::setup::muscles::MuscleDrive;
+use nalgebra::Vector3;
+use std::time::Instant;
+
+/// Fit the muscle activations to the welded `target` (m) and record the QP's outcome.
+pub fn fit_activations(
+    muscles: &mut MuscleDrive,
+    target: &[Vector3<f64>],
+) -> anyhow::Result<StageRecord> {
+    let t = Instant::now();
+    let f = muscles.fitter.fit_frame(target)?;
+    muscles.activations = f.activations.clone();
+    Ok(StageRecord {
+        status: if f.status == crate::muscle::FrameStatus::Fitted {
+            "converged".into()
+        } else {
+            format!("{:?} ({})", f.status, f.clarabel_status).to_lowercase()
+        },
+        iterations: f.gauss_newton + 1,
+        residual: f.rms_residual,
+        ms: t.elapsed().as_secs_f64() * 1e3,
+    })
+}
+
+/// The tracking energy's force Bᵀ k (t − B q) at node positions `q` (flat over node dofs, N);
+/// welded vertex v has embedding `rows[v]` and target `target[v]` (m).
+pub fn tracking_force(
+    tracking: &Tracking,
+    rows: &[Vec<(usize, f64)>],
+    q: &[f64],
+    target: &[Vector3<f64>],
+) -> Vec<f64> {
+    let mut force = vec![0.0; q.len()];
+    for (v, &k) in tracking.k.iter().enumerate() {
+        let row = &rows[v];
+        let mut bq = Vector3::zeros();
+        for &(n, w) in row {
+            bq += Vector3::new(q[3 * n], q[3 * n + 1], q[3 * n + 2]) * w;
+        }
+        let f = (target[v] - bq) * k;
+        for &(n, w) in row {
+            for a in 0..3 {
+                force[3 * n + a] += w * f[a];
+            }
+        }
+    }
+    force
+}
+
+/// Add the muscles' active energy, linearised at the stepper's state (PSD stiffness, like the
+/// skin's terms), to `force` (N) and to `stiffness` after its first `base_len` triplets (N/m;
+/// the triplet layout is the same every step).
+pub fn add_muscle_terms(
+    muscles: &MuscleDrive,
+    stepper: &BackwardEuler,
+    stiffness: &mut Vec<(usize, usize, f64)>,
+    base_len: usize,
+    force: &mut [f64],
+) {
+    let act = crate::muscle::ActiveEnergy::new(
+        &stepper.interior,
+        muscles.fitter.muscles(),
+        &muscles.activations,
+    );
+    let (k, f) = crate::muscle::linearised_terms(&act, &stepper.q);
+    stiffness.truncate(base_len);
+    stiffness.extend_from_slice(&k);
+    for (a, b) in force.iter_mut().zip(&f) {
+        *a += b;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tracking_force_pulls_the_embedded_point_to_its_target() {
+        // One vertex halfway between nodes 0 and 1, both at the origin; target 2 m up x.
+        let tracking = Tracking {
+            k: vec![3.0],
+            stiffness: Vec::new(),
+        };
+        let rows = vec![vec![(0, 0.5), (1, 0.5)]];
+        let q = vec![0.0; 6];
+        let f = tracking_force(&tracking, &rows, &q, &[Vector3::new(2.0, 0.0, 0.0)]);
+        // k (t − Bq) = 6 N, split by the weights.
+        assert_eq!(f, vec![3.0, 0.0, 0.0, 3.0, 0.0, 0.0]);
+        let at_target = tracking_force(
+            &tracking,
+            &rows,
+            &[2.0, 0.0, 0.0, 2.0, 0.0, 0.0],
+            &[Vector3::new(2.0, 0.0, 0.0)],
+        );
+        assert_eq!(at_target, vec![0.0; 6]);
+    }
+}

@@ -1,0 +1,12 @@
+//! Studies: runs of furrow's own stages and pipeline that measure it, with their charts and
+//! tables: error against run time over the settings ([`tradeoff`]), numerical stability on
+//! stiff and extreme cases ([`stability`]), and the solver benchmarks ([`benchmarks`], with
+//! the scaling fits of [`fit`]). This layer sits above the pipeline; it draws with
+//! [`crate::render`].
+
+#![warn(missing_docs)]
+
+pub mod benchmarks;
+pub mod fit;
+pub mod stability;
+pub mod tradeoff;
