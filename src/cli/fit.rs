@@ -3,12 +3,13 @@
 use super::Output;
 use crate::fem::{Interior, Material};
 use crate::io::atomic::{self, Overwrite};
-use crate::io::{self as fio, LoadOptions};
+use crate::io::mesh::MeshInstance;
+use crate::io::{self as fio, LoadOptions, Rig};
 use crate::lattice::{Lattice, LatticeSettings};
 use crate::mesh::TriMesh;
-use crate::muscle::{self, FitSettings, Fitter, FrameStatus, GenerateSettings};
+use crate::muscle::{self, FitSettings, Fitter, FrameStatus, GenerateSettings, Muscle};
 use std::fmt::Write as _;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// Arguments of `furrow fit`.
@@ -79,6 +80,96 @@ fn csv_field(s: &str) -> String {
 
 /// Run `furrow fit`.
 pub fn run(a: FitArgs, out: &Output) -> anyhow::Result<()> {
+    check_args(&a)?;
+    let outputs: Vec<&PathBuf> = std::iter::once(&a.output).chain(a.plot.as_ref()).collect();
+    atomic::check_free(&outputs, Overwrite::from_force(a.force))?;
+    let t0 = Instant::now();
+    let rig = fio::load(&a.rig, &LoadOptions::default())?;
+    out.note(&rig.face_reason);
+    let face = rig.face();
+    let mesh = TriMesh::new(face.positions.clone(), face.triangles.clone());
+    let lattice = Lattice::build(
+        &mesh,
+        &LatticeSettings {
+            cell_size: a.cell_size,
+            ..Default::default()
+        },
+    )?;
+    let material = Material::default();
+    let (muscles, origin) =
+        muscle_rig(a.muscles.as_deref(), &lattice, &mesh, &material, face, out)?;
+    anyhow::ensure!(
+        !muscles.is_empty(),
+        "{}: no muscles (every blend shape is empty); give a muscle file with --muscles",
+        a.rig.display()
+    );
+    let settings = FitSettings {
+        gauss_newton: a.gauss_newton,
+        ..Default::default()
+    };
+    let mut fitter = Fitter::new(&lattice, &material, muscles, settings)?;
+    let weights = rig.frame_weights(a.fps);
+    let range = frame_range(a.frames.as_deref(), weights.len())?;
+    let names: Vec<String> = fitter.muscles().iter().map(|m| m.name.clone()).collect();
+    let pb = out.progress(range.len() as u64, "fitting");
+    let fits = fit_frames(
+        &mut fitter,
+        &rig,
+        &weights,
+        range.clone(),
+        a.fps,
+        &names,
+        &|| pb.inc(1),
+    )?;
+    pb.finish_and_clear();
+    atomic::write(
+        &a.output,
+        fits.csv.as_bytes(),
+        if a.force {
+            Overwrite::Replace
+        } else {
+            Overwrite::Refuse
+        },
+    )?;
+    if let Some(p) = &a.plot {
+        plot_activations(p, &a.rig, &names, fits.curves)?;
+    }
+    let nf = range.len();
+    let mean = if nf > 0 {
+        fits.rms_sum / nf as f64
+    } else {
+        0.0
+    };
+    let secs = t0.elapsed().as_secs_f64();
+    out.json_result(&serde_json::json!({
+        "ok": true, "rig": a.rig, "output": a.output, "frames": nf,
+        "first_frame": range.start, "fps": a.fps,
+        "elements": lattice.elements.len(), "muscles": names, "muscle_origin": origin,
+        "gauss_newton": a.gauss_newton,
+        "rms_residual_mean_m": mean, "rms_residual_max_m": fits.rms_max,
+        "frames_not_fitted": fits.not_fitted.iter().map(|(k, s)| serde_json::json!({"frame": k, "status": format!("{s:?}")})).collect::<Vec<_>>(),
+        "jacobian_s": fitter.jacobian_s, "qp_s": fits.qp_s, "seconds": secs,
+    }));
+    out.say(format!(
+        "{nf} frames of '{}' fitted with {} muscles ({origin}) on {} lattice elements in {secs:.2} s",
+        face.name,
+        names.len(),
+        lattice.elements.len()
+    ));
+    out.say(format!(
+        "  RMS residual mean {:.3} mm, max {:.3} mm; wrote {}",
+        mean * 1e3,
+        fits.rms_max * 1e3,
+        a.output.display()
+    ));
+    for (k, s) in &fits.not_fitted {
+        out.note(format!("frame {k}: {s:?}"));
+    }
+    Ok(())
+}
+
+/// Refuse out-of-range `--fps`, `--cell-size` and `--gauss-newton`.
+fn check_args(a: &FitArgs) -> anyhow::Result<()> {
     anyhow::ensure!(
         a.fps.is_finite() && a.fps > 0.0 && a.fps <= 1000.0,
         "--fps must be in (0, 1000], got {}",
@@ -95,30 +186,28 @@ pub fn run(a: FitArgs, out: &Output) -> anyhow::Result<()> {
         "--gauss-newton must be at most 50, got {}",
         a.gauss_newton
     );
-    let outputs: Vec<&PathBuf> = std::iter::once(&a.output).chain(a.plot.as_ref()).collect();
-    atomic::check_free(&outputs, Overwrite::from_force(a.force))?;
-    let t0 = Instant::now();
-    let rig = fio::load(&a.rig, &LoadOptions::default())?;
-    out.note(&rig.face_reason);
-    let face = rig.face();
-    let mesh = TriMesh::new(face.positions.clone(), face.triangles.clone());
-    let lattice = Lattice::build(
-        &mesh,
-        &LatticeSettings {
-            cell_size: a.cell_size,
-            ..Default::default()
-        },
-    )?;
-    let material = Material::default();
-    let (muscles, origin) = match &a.muscles {
+    Ok(())
+}
+
+/// The muscles to fit and where they came from: read from the rig file `file`, or one
+/// generated per blend shape of `face` (saying which make none).
+fn muscle_rig(
+    file: Option<&Path>,
+    lattice: &Lattice,
+    mesh: &TriMesh,
+    material: &Material,
+    face: &MeshInstance,
+    out: &Output,
+) -> anyhow::Result<(Vec<Muscle>, String)> {
+    Ok(match file {
         Some(p) => (
-            muscle::rigfile::load(p, &lattice, &mesh)?,
+            muscle::rigfile::load(p, lattice, mesh)?,
             format!("from {}", p.display()),
         ),
         None => {
-            let interior = Interior::new(&lattice, &material)?;
+            let interior = Interior::new(lattice, material)?;
             let g = muscle::generate_muscles(
-                &lattice,
+                lattice,
                 &interior,
                 &face.targets,
                 &GenerateSettings::default(),
@@ -128,104 +217,95 @@ pub fn run(a: FitArgs, out: &Output) -> anyhow::Result<()> {
             }
             (g.muscles, "generated from the blend shapes".to_string())
         }
-    };
-    anyhow::ensure!(
-        !muscles.is_empty(),
-        "{}: no muscles (every blend shape is empty); give a muscle file with --muscles",
-        a.rig.display()
-    );
-    let settings = FitSettings {
-        gauss_newton: a.gauss_newton,
-        ..Default::default()
-    };
-    let mut fitter = Fitter::new(&lattice, &material, muscles, settings)?;
-    let weights = rig.frame_weights(a.fps);
-    let range = frame_range(a.frames.as_deref(), weights.len())?;
-    let names: Vec<String> = fitter.muscles().iter().map(|m| m.name.clone()).collect();
+    })
+}
+
+/// The fitted frames: the CSV (header included), the activation curves and residual totals.
+struct FittedFrames {
+    /// The CSV text: one row per frame with the activations and the RMS residual (m).
+    csv: String,
+    /// Per muscle, (time in s, activation) per frame.
+    curves: Vec<Vec<(f64, f64)>>,
+    /// Largest finite RMS residual (m).
+    rms_max: f64,
+    /// Sum of the finite RMS residuals (m).
+    rms_sum: f64,
+    /// Seconds spent in the QP solves.
+    qp_s: f64,
+    /// Frames whose fit did not end `Fitted`, with their status.
+    not_fitted: Vec<(usize, FrameStatus)>,
+}
+
+/// Fit the blend of each frame of `range` (morph weights per frame `weights`, sampled at
+/// `fps`) with muscles `names`; `progress()` after each frame.
+fn fit_frames(
+    fitter: &mut Fitter,
+    rig: &Rig,
+    weights: &[Vec<f64>],
+    range: std::ops::Range<usize>,
+    fps: f64,
+    names: &[String],
+    progress: &dyn Fn(),
+) -> anyhow::Result<FittedFrames> {
     let mut csv = String::from("frame,time_s");
-    for n in &names {
+    for n in names {
         csv.push(',');
         csv.push_str(&csv_field(n));
     }
     csv.push_str(",rms_residual_m,status,clarabel_status\n");
-    let pb = out.progress(range.len() as u64, "fitting");
-    let (mut rms_max, mut rms_sum, mut qp_s) = (0.0f64, 0.0, 0.0);
-    let mut not_fitted: Vec<(usize, FrameStatus)> = Vec::new();
-    let mut curves: Vec<Vec<(f64, f64)>> = vec![Vec::new(); names.len()];
-    for k in range.clone() {
+    let mut done = FittedFrames {
+        csv,
+        curves: vec![Vec::new(); names.len()],
+        rms_max: 0.0,
+        rms_sum: 0.0,
+        qp_s: 0.0,
+        not_fitted: Vec::new(),
+    };
+    for k in range {
         let target = rig.blend(&weights[k]);
         let f = fitter.fit_frame(&target)?;
-        let _ = write!(csv, "{k},{:.6}", k as f64 / a.fps);
-        for (c, v) in curves.iter_mut().zip(&f.activations) {
-            let _ = write!(csv, ",{v:.9}");
-            c.push((k as f64 / a.fps, *v));
+        let _ = write!(done.csv, "{k},{:.6}", k as f64 / fps);
+        for (c, v) in done.curves.iter_mut().zip(&f.activations) {
+            let _ = write!(done.csv, ",{v:.9}");
+            c.push((k as f64 / fps, *v));
         }
         let _ = writeln!(
-            csv,
+            done.csv,
             ",{:.9e},{:?},{}",
             f.rms_residual, f.status, f.clarabel_status
         );
         if f.status != FrameStatus::Fitted {
-            not_fitted.push((k, f.status));
+            done.not_fitted.push((k, f.status));
         }
         if f.rms_residual.is_finite() {
-            rms_max = rms_max.max(f.rms_residual);
-            rms_sum += f.rms_residual;
+            done.rms_max = done.rms_max.max(f.rms_residual);
+            done.rms_sum += f.rms_residual;
         }
-        qp_s += f.qp_s;
-        pb.inc(1);
+        done.qp_s += f.qp_s;
+        progress();
     }
-    pb.finish_and_clear();
-    atomic::write(
-        &a.output,
-        csv.as_bytes(),
-        if a.force {
-            Overwrite::Replace
-        } else {
-            Overwrite::Refuse
-        },
-    )?;
-    if let Some(p) = &a.plot {
-        use crate::render::plot::{line_chart, Chart, Series, Style};
-        let chart = Chart {
-            title: format!("muscle activations of {}", a.rig.display()),
-            x_label: "time (s)".into(),
-            y_label: "activation (0 = relaxed, 1 = fully contracted)".into(),
-            series: names
-                .iter()
-                .zip(curves)
-                .map(|(n, pts)| Series::new(n.clone(), pts, Style::Line))
-                .collect(),
-            ..Default::default()
-        };
-        line_chart(p, &chart)?;
-    }
-    let nf = range.len();
-    let mean = if nf > 0 { rms_sum / nf as f64 } else { 0.0 };
-    let secs = t0.elapsed().as_secs_f64();
-    out.json_result(&serde_json::json!({
-        "ok": true, "rig": a.rig, "output": a.output, "frames": nf,
-        "first_frame": range.start, "fps": a.fps,
-        "elements": lattice.elements.len(), "muscles": names, "muscle_origin": origin,
-        "gauss_newton": a.gauss_newton,
-        "rms_residual_mean_m": mean, "rms_residual_max_m": rms_max,
-        "frames_not_fitted": not_fitted.iter().map(|(k, s)| serde_json::json!({"frame": k, "status": format!("{s:?}")})).collect::<Vec<_>>(),
-        "jacobian_s": fitter.jacobian_s, "qp_s": qp_s, "seconds": secs,
-    }));
-    out.say(format!(
-        "{nf} frames of '{}' fitted with {} muscles ({origin}) on {} lattice elements in {secs:.2} s",
-        face.name,
-        names.len(),
-        lattice.elements.len()
-    ));
-    out.say(format!(
-        "  RMS residual mean {:.3} mm, max {:.3} mm; wrote {}",
-        mean * 1e3,
-        rms_max * 1e3,
-        a.output.display()
-    ));
-    for (k, s) in &not_fitted {
-        out.note(format!("frame {k}: {s:?}"));
-    }
+    Ok(done)
+}
+
+/// Write the PNG of the activation `curves` of muscles `names` over time to `png`.
+fn plot_activations(
+    png: &Path,
+    rig: &Path,
+    names: &[String],
+    curves: Vec<Vec<(f64, f64)>>,
+) -> anyhow::Result<()> {
+    use crate::render::plot::{line_chart, Chart, Series, Style};
+    let chart = Chart {
+        title: format!("muscle activations of {}", rig.display()),
+        x_label: "time (s)".into(),
+        y_label: "activation (0 = relaxed, 1 = fully contracted)".into(),
+        series: names
+            .iter()
+            .zip(curves)
+            .map(|(n, pts)| Series::new(n.clone(), pts, Style::Line))
+            .collect(),
+        ..Default::default()
+    };
+    line_chart(png, &chart)?;
     Ok(())
 }

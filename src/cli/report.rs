@@ -3,7 +3,7 @@
 
 use super::Output;
 use crate::io::atomic::{self, Overwrite};
-use crate::io::LoadOptions;
+use crate::io::{LoadOptions, Rig};
 use crate::pipeline::frames::FrameRange;
 use crate::scene::Scene;
 use crate::studies::stability;
@@ -120,22 +120,7 @@ fn run_tradeoff(a: TradeoffArgs, out: &Output) -> anyhow::Result<()> {
         Some(p) => Scene::load(p)?,
         None => Scene::default(),
     };
-    let rig = match &a.rig {
-        Some(p) => crate::io::load(
-            p,
-            &LoadOptions {
-                mesh: a.mesh.clone(),
-                animation: None,
-            },
-        )?,
-        None => tradeoff::sheet_rig(&SheetRig::default())?,
-    };
-    let rig_name = a
-        .rig
-        .as_ref()
-        .map_or("built-in sheet rig".to_string(), |p| {
-            p.display().to_string()
-        });
+    let (rig, rig_name) = tradeoff_rig(&a)?;
     let frames = match &a.frames {
         Some(t) => Some(FrameRange::parse(t, rig.frame_weights(a.fps).len())?),
         None => None,
@@ -156,21 +141,8 @@ fn run_tradeoff(a: TradeoffArgs, out: &Output) -> anyhow::Result<()> {
         tradeoff::picks(&rig_rows, phase_free, PREVIEW_TOL, FINAL_TOL, "(relative)");
     let mut picks_slab: Vec<Pick> = Vec::new();
     if !a.no_slab {
-        let pb = out.progress(1, "slab sweep");
-        let slab = tradeoff::slab_sweep(&tradeoff::slab_scene(a.quick), a.quick, &|k, n| {
-            pb.set_length(n as u64);
-            pb.set_position(k as u64);
-        })
-        .context("the slab sweep")?;
-        pb.finish_and_clear();
+        let slab = slab_sweep(a.quick, &slab_png, out)?;
         picks_slab = tradeoff::picks(&slab, phase_free, PREVIEW_TOL, FINAL_TOL, "(relative)");
-        tradeoff::write_chart(
-            &slab_png,
-            &slab,
-            "validation slab: phase-free error against wall time",
-            "max(|A/A_ref − 1|, |λ/λ_ref − 1|)",
-            phase_free,
-        )?;
         rows.extend(slab);
     }
     tradeoff::write_chart(
@@ -199,11 +171,70 @@ fn run_tradeoff(a: TradeoffArgs, out: &Output) -> anyhow::Result<()> {
     });
     atomic::write(&json, &serde_json::to_vec_pretty(&doc)?, ow)?;
     out.json_result(&doc);
+    say_runs(out, &rows);
+    say_picks(out, amp, &all_picks);
+    out.say(format!(
+        "wrote {}, {}, {}{}",
+        csv.display(),
+        json.display(),
+        rig_png.display(),
+        if a.no_slab {
+            String::new()
+        } else {
+            format!(", {}", slab_png.display())
+        }
+    ));
+    Ok(())
+}
+
+/// The rig the tradeoff sweeps (the file given, or the built-in sheet rig) and its name for
+/// messages.
+fn tradeoff_rig(a: &TradeoffArgs) -> anyhow::Result<(Rig, String)> {
+    let rig = match &a.rig {
+        Some(p) => crate::io::load(
+            p,
+            &LoadOptions {
+                mesh: a.mesh.clone(),
+                animation: None,
+            },
+        )?,
+        None => tradeoff::sheet_rig(&SheetRig::default())?,
+    };
+    let rig_name = a
+        .rig
+        .as_ref()
+        .map_or("built-in sheet rig".to_string(), |p| {
+            p.display().to_string()
+        });
+    Ok((rig, rig_name))
+}
+
+/// The sweep on the validation slab (smaller when `quick`), with its chart written to `png`.
+fn slab_sweep(quick: bool, png: &Path, out: &Output) -> anyhow::Result<Vec<TradeoffRun>> {
+    let pb = out.progress(1, "slab sweep");
+    let slab = tradeoff::slab_sweep(&tradeoff::slab_scene(quick), quick, &|k, n| {
+        pb.set_length(n as u64);
+        pb.set_position(k as u64);
+    })
+    .context("the slab sweep")?;
+    pb.finish_and_clear();
+    tradeoff::write_chart(
+        png,
+        &slab,
+        "validation slab: phase-free error against wall time",
+        "max(|A/A_ref − 1|, |λ/λ_ref − 1|)",
+        phase_free,
+    )?;
+    Ok(slab)
+}
+
+/// Say the table of runs: knob, wall time, wrinkle sizes and errors, Pareto mark, status.
+fn say_runs(out: &Output, rows: &[TradeoffRun]) {
     out.say(format!(
         "{:<6} {:<30} {:>10} {:>9} {:>11} {:>11} {:>9} {:>9} {:>9}  status",
         "case", "setting", "value", "wall s", "RMS m", "max m", "λ err", "amp err", "pf err"
     ));
-    for r in &rows {
+    for r in rows {
         out.say(format!(
             "{:<6} {:<30} {:>10} {:>9.2} {:>11.3e} {:>11.3e} {:>9} {:>8.1}% {:>8.1}%  {}{}",
             r.case,
@@ -224,6 +255,10 @@ fn run_tradeoff(a: TradeoffArgs, out: &Output) -> anyhow::Result<()> {
             r.status
         ));
     }
+}
+
+/// Say the default rig run's wrinkle RMS `amp` (m), the pick rules and each pick.
+fn say_picks(out: &Output, amp: f64, picks: &[Pick]) {
     out.say(format!(
         "wrinkle RMS of the default rig run: {amp:.3e} m; picks by the phase-free error (pf: rig, \
          per-region wrinkle amplitude; slab, amplitude and wavelength) against the finest run: \
@@ -231,24 +266,12 @@ fn run_tradeoff(a: TradeoffArgs, out: &Output) -> anyhow::Result<()> {
         100.0 * PREVIEW_TOL,
         100.0 * FINAL_TOL
     ));
-    for p in &all_picks {
+    for p in picks {
         out.say(format!(
             "pick for {}: {} ({:.2} s, error {:.3e}; {})",
             p.purpose, p.setting, p.wall_s, p.error, p.rule
         ));
     }
-    out.say(format!(
-        "wrote {}, {}, {}{}",
-        csv.display(),
-        json.display(),
-        rig_png.display(),
-        if a.no_slab {
-            String::new()
-        } else {
-            format!(", {}", slab_png.display())
-        }
-    ));
-    Ok(())
 }
 
 fn run_stability(a: StabilityArgs, out: &Output) -> anyhow::Result<()> {

@@ -3,6 +3,7 @@
 //! simulation of the same bilayer, with CSVs and PNGs.
 
 use super::Output;
+use crate::coupling::wavelength::Bilayer;
 use crate::io::atomic::{self, Overwrite};
 use crate::render::contour::Grid;
 use crate::render::plot::{self, Chart, ContourChart, ContourSet, Series, Style};
@@ -274,6 +275,38 @@ fn run_dense(a: ValidateArgs, out: &Output) -> anyhow::Result<()> {
         ]
     };
     let pb = out.progress(points.len() as u64, "grid points");
+    let (csv, rows) = dense_against_embedded(&points, &|k| pb.set_position(k as u64))?;
+    pb.finish_and_clear();
+    atomic::write(&cmp_path, csv.as_bytes(), ow)?;
+    // Error against run time at one bilayer, both methods at four or more resolutions; the
+    // error is against the formula (the dense reference converges to within a few % of it).
+    let (r, h) = (1e3, 2e-4);
+    let b = bilayer(r, h);
+    let mut cost = String::from("method,resolution,dofs,seconds,measured_m,error\n");
+    let dense_pts = dense_cost(b, &mut cost)?;
+    let emb_series = embedded_cost(b, &mut cost)?;
+    atomic::write(&cost_path, cost.as_bytes(), ow)?;
+    plot::line_chart(&png_path, &cost_chart(r, h, dense_pts, emb_series))?;
+    out.json_result(&serde_json::json!({
+        "ok": true, "comparison_csv": cmp_path, "cost_csv": cost_path, "png": png_path, "rows": rows,
+    }));
+    out.say(format!(
+        "{} grid points: dense against embedded and the formula → {}\n  error against run time → {}, {}",
+        points.len(),
+        cmp_path.display(),
+        cost_path.display(),
+        png_path.display()
+    ));
+    Ok(())
+}
+
+/// The dense strip and the embedded shell at each (E_x/E_q, h in m) point: the rows of
+/// dense_vs_embedded.csv (with its header) and the same as JSON; `progress(done)` after
+/// each point.
+fn dense_against_embedded(
+    points: &[(f64, f64)],
+    progress: &dyn Fn(usize),
+) -> anyhow::Result<(String, Vec<serde_json::Value>)> {
     let mut csv = String::from(
         "ratio,thickness_m,predicted_m,dense_m,embedded_m,dense_error,embedded_error,dense_vs_embedded,dense_s,embedded_s\n",
     );
@@ -301,16 +334,18 @@ fn run_dense(a: ValidateArgs, out: &Output) -> anyhow::Result<()> {
             "embedded_m": e.measured, "dense_vs_embedded": rel,
             "dense_s": d.seconds, "embedded_s": e.seconds,
         }));
-        pb.set_position(k as u64 + 1);
+        progress(k + 1);
     }
-    pb.finish_and_clear();
-    atomic::write(&cmp_path, csv.as_bytes(), ow)?;
-    // Error against run time at one bilayer, both methods at four or more resolutions; the
-    // error is against the formula (the dense reference converges to within a few % of it).
-    let (r, h) = (1e3, 2e-4);
-    let b = bilayer(r, h);
+    Ok((csv, rows))
+}
+
+/// (run time in s, relative error of λ) at each resolution of one method.
+type CostPoints = Vec<(f64, f64)>;
+
+/// The dense strip of bilayer `b` at several resolutions: appends its rows to the cost CSV
+/// and returns (seconds, error against the formula) per resolution.
+fn dense_cost(b: Bilayer, cost: &mut String) -> anyhow::Result<CostPoints> {
     let study = dense::resolution_study(&DenseCase::new(b), &[3, 4, 6, 8, 12])?;
-    let mut cost = String::from("method,resolution,dofs,seconds,measured_m,error\n");
     let mut dense_pts = Vec::new();
     for row in &study {
         let err = row.error_formula.unwrap_or(f64::NAN);
@@ -325,6 +360,13 @@ fn run_dense(a: ValidateArgs, out: &Output) -> anyhow::Result<()> {
         );
         dense_pts.push((row.seconds, err));
     }
+    Ok(dense_pts)
+}
+
+/// The embedded shell on bilayer `b` at several skin resolutions, with 8 and with 2 loading
+/// steps: appends its rows to the cost CSV and returns, per step count, (seconds, error
+/// against the formula) per resolution.
+fn embedded_cost(b: Bilayer, cost: &mut String) -> anyhow::Result<Vec<(usize, CostPoints)>> {
     // The embedded shell with the validation's 8 loading steps, and with 2: its wavelength
     // does not need the slow ramp (2.25 % against 1.9 % at 4 vertices per λ), the dense strip
     // gains nothing from fewer steps (measured: 2.0 s at 8 elements per λ with 3 steps against
@@ -352,8 +394,18 @@ fn run_dense(a: ValidateArgs, out: &Output) -> anyhow::Result<()> {
         }
         emb_series.push((steps, pts));
     }
-    atomic::write(&cost_path, cost.as_bytes(), ow)?;
-    let chart = Chart {
+    Ok(emb_series)
+}
+
+/// The log-log chart of error against run time at (E_x/E_q = `r`, h = `h` m) of the dense
+/// strip and of each embedded-shell series (by loading steps).
+fn cost_chart(
+    r: f64,
+    h: f64,
+    dense_pts: CostPoints,
+    emb_series: Vec<(usize, CostPoints)>,
+) -> Chart {
+    Chart {
         title: format!(
             "wavelength error against run time (E_x/E_q = {r}, h = {} mm)",
             h * 1e3
@@ -377,19 +429,7 @@ fn run_dense(a: ValidateArgs, out: &Output) -> anyhow::Result<()> {
         }))
         .collect(),
         ..Default::default()
-    };
-    plot::line_chart(&png_path, &chart)?;
-    out.json_result(&serde_json::json!({
-        "ok": true, "comparison_csv": cmp_path, "cost_csv": cost_path, "png": png_path, "rows": rows,
-    }));
-    out.say(format!(
-        "{} grid points: dense against embedded and the formula → {}\n  error against run time → {}, {}",
-        points.len(),
-        cmp_path.display(),
-        cost_path.display(),
-        png_path.display()
-    ));
-    Ok(())
+    }
 }
 
 /// Skin vertices of a slab (for the dofs column): rows × columns of its sheet.

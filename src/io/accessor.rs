@@ -29,6 +29,26 @@ impl Decoded {
     }
 }
 
+/// Where a run of accessor elements lies in a buffer view and how its components are
+/// encoded: what [`AccessorReader::read_packed`] reads.
+#[derive(Debug, Clone, Copy)]
+struct ViewSlice {
+    /// Buffer view index.
+    view: usize,
+    /// Byte offset of the first element within the view.
+    offset: usize,
+    /// Number of elements.
+    count: usize,
+    /// Components per element (1 for SCALAR, 3 for VEC3, …).
+    components: usize,
+    /// glTF componentType (5120–5126).
+    component_type: u64,
+    /// Whether integer components are normalized to [−1, 1] or [0, 1].
+    normalized: bool,
+    /// Honour the view's byteStride (accessor data); false for tightly packed sparse arrays.
+    use_stride: bool,
+}
+
 /// Reads accessors of one parsed file, caching decompressed buffer views.
 pub struct AccessorReader<'a> {
     path: &'a Path,
@@ -161,20 +181,18 @@ impl<'a> AccessorReader<'a> {
             .or_else(|| usize_of(&view["extensions"]["EXT_meshopt_compression"]["byteStride"]))
     }
 
-    /// Read `count` elements from view `v` at `offset`, tightly packed unless the view has a
-    /// stride (`use_stride`).
-    #[allow(clippy::too_many_arguments)]
-    fn read_packed(
-        &self,
-        what: &str,
-        v: usize,
-        offset: usize,
-        count: usize,
-        ncomp: usize,
-        ct: u64,
-        normalized: bool,
-        use_stride: bool,
-    ) -> GltfResult<Vec<f64>> {
+    /// Read the elements `s` describes, tightly packed unless `s.use_stride` and the view
+    /// declares a stride; `what` names the accessor in errors.
+    fn read_packed(&self, what: &str, s: &ViewSlice) -> GltfResult<Vec<f64>> {
+        let ViewSlice {
+            view: v,
+            offset,
+            count,
+            components: ncomp,
+            component_type: ct,
+            normalized,
+            use_stride,
+        } = *s;
         let bytes = self.view_bytes(v)?;
         let cs = component_size(ct)
             .ok_or_else(|| self.err(format!("{what}: bad componentType {ct}")))?;
@@ -241,7 +259,18 @@ impl<'a> AccessorReader<'a> {
         }
         let offset = usize_of(&acc["byteOffset"]).unwrap_or(0);
         let mut data = match usize_of(&acc["bufferView"]) {
-            Some(v) => self.read_packed(&what, v, offset, count, ncomp, ct, normalized, true)?,
+            Some(view) => self.read_packed(
+                &what,
+                &ViewSlice {
+                    view,
+                    offset,
+                    count,
+                    components: ncomp,
+                    component_type: ct,
+                    normalized,
+                    use_stride: true,
+                },
+            )?,
             None => vec![0.0; count * ncomp],
         };
         let sparse = &acc["sparse"];
@@ -260,11 +289,33 @@ impl<'a> AccessorReader<'a> {
                     "{what}: sparse index componentType {ict} must be unsigned"
                 )));
             }
-            let idx = self.read_packed(&what, iv, ioff, sc, 1, ict, false, false)?;
+            let idx = self.read_packed(
+                &what,
+                &ViewSlice {
+                    view: iv,
+                    offset: ioff,
+                    count: sc,
+                    components: 1,
+                    component_type: ict,
+                    normalized: false,
+                    use_stride: false,
+                },
+            )?;
             let vv = usize_of(&sparse["values"]["bufferView"])
                 .ok_or_else(|| self.err(format!("{what}: sparse.values.bufferView missing")))?;
             let voff = usize_of(&sparse["values"]["byteOffset"]).unwrap_or(0);
-            let vals = self.read_packed(&what, vv, voff, sc, ncomp, ct, normalized, false)?;
+            let vals = self.read_packed(
+                &what,
+                &ViewSlice {
+                    view: vv,
+                    offset: voff,
+                    count: sc,
+                    components: ncomp,
+                    component_type: ct,
+                    normalized,
+                    use_stride: false,
+                },
+            )?;
             for (j, &i) in idx.iter().enumerate() {
                 let i = i as usize;
                 if i >= count {

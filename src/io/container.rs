@@ -29,6 +29,9 @@ pub const SUPPORTED_REQUIRED: &[&str] = &[
     "KHR_materials_emissive_strength",
 ];
 
+/// The byte a `.gltf` file's JSON text starts with (after white space): `{`.
+const JSON_OBJECT_START: u8 = b'{';
+
 /// Read and parse the file at `path`.
 pub fn read(path: &Path) -> GltfResult<Container> {
     let bytes = std::fs::read(path)
@@ -38,55 +41,84 @@ pub fn read(path: &Path) -> GltfResult<Container> {
 
 /// Parse glTF bytes that came from `path` (the path names errors and anchors relative URIs).
 pub fn parse(path: &Path, bytes: &[u8]) -> GltfResult<Container> {
+    let (json_bytes, bin) = split_chunks(path, bytes)?;
+    let (json, root) = parse_document(path, json_bytes)?;
+    let buffers = resolve_buffers(path, &json, &root, bin)?;
+    Ok(Container {
+        json,
+        root,
+        buffers,
+        binary: bin.is_some() || bytes.starts_with(b"glTF"),
+    })
+}
+
+/// The JSON text and the GLB binary chunk (if any) of a `.glb` or `.gltf` file's bytes.
+fn split_chunks<'b>(path: &Path, bytes: &'b [u8]) -> GltfResult<(&'b [u8], Option<&'b [u8]>)> {
+    if bytes.starts_with(b"glTF") {
+        glb_chunks(path, bytes)
+    } else {
+        let first = bytes.iter().find(|b| !b.is_ascii_whitespace());
+        if first != Some(&JSON_OBJECT_START) {
+            return Err(GltfError::new(
+                path,
+                "not a glTF file: neither a GLB header ('glTF') nor a JSON object".to_string(),
+            ));
+        }
+        Ok((bytes, None))
+    }
+}
+
+/// The JSON chunk and the binary chunk (if any) of a GLB container, refusing a corrupt
+/// header or a version other than 2.
+fn glb_chunks<'b>(path: &Path, bytes: &'b [u8]) -> GltfResult<(&'b [u8], Option<&'b [u8]>)> {
     let err = |m: String| GltfError::new(path, m);
-    let (json_bytes, bin): (&[u8], Option<&[u8]>) =
-        if bytes.starts_with(b"glTF") {
-            // The header's total length must cover at least the header itself (the gltf crate
-            // subtracts without checking; found by fuzzing).
-            let declared = bytes
-                .get(8..12)
-                .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize);
-            match declared {
-                Some(n) if n >= 12 => {}
-                Some(n) => {
-                    return Err(err(format!(
-                        "not a valid GLB container: header declares a total length of {n} bytes"
-                    )))
-                }
-                None => return Err(err(
-                    "not a valid GLB container: the file is cut short inside the 12-byte header"
-                        .into(),
-                )),
-            }
-            let glb = gltf::binary::Glb::from_slice(bytes).map_err(|e| {
-                err(format!(
-                    "not a valid GLB container (cut short or corrupt): {e}"
-                ))
-            })?;
-            if glb.header.version != 2 {
-                return Err(err(format!(
-                    "GLB version {} is not glTF 2.0",
-                    glb.header.version
-                )));
-            }
-            let json: &[u8] = match glb.json {
-                std::borrow::Cow::Borrowed(b) => b,
-                std::borrow::Cow::Owned(_) => unreachable!("Glb::from_slice borrows"),
-            };
-            let bin = glb.bin.map(|b| match b {
-                std::borrow::Cow::Borrowed(b) => b,
-                std::borrow::Cow::Owned(_) => unreachable!("Glb::from_slice borrows"),
-            });
-            (json, bin)
-        } else {
-            let first = bytes.iter().find(|b| !b.is_ascii_whitespace());
-            if first != Some(&b'{') {
-                return Err(err(
-                    "not a glTF file: neither a GLB header ('glTF') nor a JSON object".into(),
-                ));
-            }
-            (bytes, None)
-        };
+    // The header's total length must cover at least the header itself (the gltf crate
+    // subtracts without checking; found by fuzzing).
+    let declared = bytes
+        .get(8..12)
+        .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize);
+    match declared {
+        Some(n) if n >= 12 => {}
+        Some(n) => {
+            return Err(err(format!(
+                "not a valid GLB container: header declares a total length of {n} bytes"
+            )))
+        }
+        None => {
+            return Err(err(
+                "not a valid GLB container: the file is cut short inside the 12-byte header".into(),
+            ))
+        }
+    }
+    let glb = gltf::binary::Glb::from_slice(bytes).map_err(|e| {
+        err(format!(
+            "not a valid GLB container (cut short or corrupt): {e}"
+        ))
+    })?;
+    if glb.header.version != 2 {
+        return Err(err(format!(
+            "GLB version {} is not glTF 2.0",
+            glb.header.version
+        )));
+    }
+    let json: &[u8] = match glb.json {
+        std::borrow::Cow::Borrowed(b) => b,
+        std::borrow::Cow::Owned(_) => unreachable!("Glb::from_slice borrows"),
+    };
+    let bin = glb.bin.map(|b| match b {
+        std::borrow::Cow::Borrowed(b) => b,
+        std::borrow::Cow::Owned(_) => unreachable!("Glb::from_slice borrows"),
+    });
+    Ok((json, bin))
+}
+
+/// The JSON document and its typed root, refusing anything but glTF 2.0 and required
+/// extensions outside [`SUPPORTED_REQUIRED`].
+fn parse_document(
+    path: &Path,
+    json_bytes: &[u8],
+) -> GltfResult<(serde_json::Value, gltf_json::Root)> {
+    let err = |m: String| GltfError::new(path, m);
     let json: serde_json::Value =
         serde_json::from_slice(json_bytes).map_err(|e| err(format!("broken JSON: {e}")))?;
     let root: gltf_json::Root = serde_json::from_value(json.clone())
@@ -105,13 +137,7 @@ pub fn parse(path: &Path, bytes: &[u8]) -> GltfResult<Container> {
             )));
         }
     }
-    let buffers = resolve_buffers(path, &json, &root, bin)?;
-    Ok(Container {
-        json,
-        root,
-        buffers,
-        binary: bin.is_some() || bytes.starts_with(b"glTF"),
-    })
+    Ok((json, root))
 }
 
 fn is_meshopt_fallback(json: &serde_json::Value, index: usize) -> bool {

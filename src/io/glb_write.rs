@@ -112,166 +112,20 @@ impl Document {
     /// Drop accessors and buffer views that nothing references, renumbering the rest.
     pub fn prune(&mut self) {
         let j = &mut self.json;
-        // Accessors referenced by meshes, skins and animations.
         let na = j["accessors"].as_array().map_or(0, |a| a.len());
         let mut used_acc = vec![false; na];
-        let mark = |v: &Value, used: &mut Vec<bool>| {
-            if let Some(i) = v.as_u64() {
-                if let Some(u) = used.get_mut(i as usize) {
-                    *u = true;
-                }
-            }
-        };
-        for m in j["meshes"].as_array().into_iter().flatten() {
-            for p in m["primitives"].as_array().into_iter().flatten() {
-                for a in p["attributes"].as_object().into_iter().flatten() {
-                    mark(a.1, &mut used_acc);
-                }
-                mark(&p["indices"], &mut used_acc);
-                for t in p["targets"].as_array().into_iter().flatten() {
-                    for a in t.as_object().into_iter().flatten() {
-                        mark(a.1, &mut used_acc);
-                    }
-                }
-            }
-        }
-        for s in j["skins"].as_array().into_iter().flatten() {
-            mark(&s["inverseBindMatrices"], &mut used_acc);
-        }
-        for a in j["animations"].as_array().into_iter().flatten() {
-            for s in a["samplers"].as_array().into_iter().flatten() {
-                mark(&s["input"], &mut used_acc);
-                mark(&s["output"], &mut used_acc);
-            }
-        }
-        let acc_map = renumber(&used_acc);
-        let remap = |v: &mut Value, map: &[Option<usize>]| {
-            if let Some(i) = v.as_u64() {
-                *v = json!(map[i as usize].expect("referenced object is kept"));
-            }
-        };
-        for m in j
-            .get_mut("meshes")
-            .and_then(|v| v.as_array_mut())
-            .into_iter()
-            .flatten()
-        {
-            for p in m
-                .get_mut("primitives")
-                .and_then(|v| v.as_array_mut())
-                .into_iter()
-                .flatten()
-            {
-                for a in p
-                    .get_mut("attributes")
-                    .and_then(|v| v.as_object_mut())
-                    .into_iter()
-                    .flatten()
-                {
-                    remap(a.1, &acc_map);
-                }
-                if p.get("indices").is_some() {
-                    remap(&mut p["indices"], &acc_map);
-                }
-                for t in p
-                    .get_mut("targets")
-                    .and_then(|v| v.as_array_mut())
-                    .into_iter()
-                    .flatten()
-                {
-                    for a in t.as_object_mut().into_iter().flatten() {
-                        remap(a.1, &acc_map);
-                    }
-                }
-            }
-        }
-        for s in j
-            .get_mut("skins")
-            .and_then(|v| v.as_array_mut())
-            .into_iter()
-            .flatten()
-        {
-            if s.get("inverseBindMatrices").is_some() {
-                remap(&mut s["inverseBindMatrices"], &acc_map);
-            }
-        }
-        for a in j
-            .get_mut("animations")
-            .and_then(|v| v.as_array_mut())
-            .into_iter()
-            .flatten()
-        {
-            for s in a
-                .get_mut("samplers")
-                .and_then(|v| v.as_array_mut())
-                .into_iter()
-                .flatten()
-            {
-                remap(&mut s["input"], &acc_map);
-                remap(&mut s["output"], &acc_map);
-            }
-        }
+        mark_accessor_refs(j, &mut used_acc);
+        remap_accessor_refs(j, &renumber(&used_acc));
         if let Some(accs) = j.get_mut("accessors").and_then(|v| v.as_array_mut()) {
-            let kept: Vec<Value> = accs
-                .drain(..)
-                .enumerate()
-                .filter(|(i, _)| used_acc[*i])
-                .map(|(_, a)| a)
-                .collect();
-            *accs = kept;
+            *accs = keep_used(std::mem::take(accs), &used_acc);
         }
-        // Buffer views referenced by kept accessors and images.
-        let nv = self.view_bytes.len();
-        let mut used_view = vec![false; nv];
-        for a in j["accessors"].as_array().into_iter().flatten() {
-            mark(&a["bufferView"], &mut used_view);
-            mark(&a["sparse"]["indices"]["bufferView"], &mut used_view);
-            mark(&a["sparse"]["values"]["bufferView"], &mut used_view);
-        }
-        for im in j["images"].as_array().into_iter().flatten() {
-            mark(&im["bufferView"], &mut used_view);
-        }
-        let view_map = renumber(&used_view);
-        for a in j
-            .get_mut("accessors")
-            .and_then(|v| v.as_array_mut())
-            .into_iter()
-            .flatten()
-        {
-            if a.get("bufferView").is_some() {
-                remap(&mut a["bufferView"], &view_map);
-            }
-            if a["sparse"].is_object() {
-                remap(&mut a["sparse"]["indices"]["bufferView"], &view_map);
-                remap(&mut a["sparse"]["values"]["bufferView"], &view_map);
-            }
-        }
-        for im in j
-            .get_mut("images")
-            .and_then(|v| v.as_array_mut())
-            .into_iter()
-            .flatten()
-        {
-            if im.get("bufferView").is_some() {
-                remap(&mut im["bufferView"], &view_map);
-            }
-        }
+        let mut used_view = vec![false; self.view_bytes.len()];
+        mark_view_refs(j, &mut used_view);
+        remap_view_refs(j, &renumber(&used_view));
         if let Some(views) = j.get_mut("bufferViews").and_then(|v| v.as_array_mut()) {
-            let kept: Vec<Value> = views
-                .drain(..)
-                .enumerate()
-                .filter(|(i, _)| used_view[*i])
-                .map(|(_, v)| v)
-                .collect();
-            *views = kept;
+            *views = keep_used(std::mem::take(views), &used_view);
         }
-        let bytes = std::mem::take(&mut self.view_bytes);
-        self.view_bytes = bytes
-            .into_iter()
-            .enumerate()
-            .filter(|(i, _)| used_view[*i])
-            .map(|(_, b)| b)
-            .collect();
+        self.view_bytes = keep_used(std::mem::take(&mut self.view_bytes), &used_view);
     }
 
     /// Lay out the binary buffer (views 4-byte aligned), fill offsets, and write a GLB.
@@ -357,6 +211,140 @@ impl Default for Document {
 /// The `asset.generator` string furrow writes.
 pub fn generator() -> String {
     format!("furrow {}", env!("CARGO_PKG_VERSION"))
+}
+
+/// The elements of array `key` of `v` (none when it is missing or not an array).
+fn items<'a>(v: &'a Value, key: &str) -> impl Iterator<Item = &'a Value> {
+    v[key].as_array().into_iter().flatten()
+}
+
+/// The elements of array `key` of `v`, mutably (none when it is missing or not an array).
+fn items_mut<'a>(v: &'a mut Value, key: &str) -> impl Iterator<Item = &'a mut Value> {
+    v.get_mut(key)
+        .and_then(|v| v.as_array_mut())
+        .into_iter()
+        .flatten()
+}
+
+/// The values of object `key` of `v`, mutably (none when it is missing or not an object).
+fn values_mut<'a>(v: &'a mut Value, key: &str) -> impl Iterator<Item = &'a mut Value> {
+    v.get_mut(key)
+        .and_then(|v| v.as_object_mut())
+        .into_iter()
+        .flat_map(|o| o.values_mut())
+}
+
+/// Mark index `v` (when it is one and in range) as used.
+fn mark(v: &Value, used: &mut [bool]) {
+    if let Some(i) = v.as_u64() {
+        if let Some(u) = used.get_mut(i as usize) {
+            *u = true;
+        }
+    }
+}
+
+/// Replace index `v` (when it is one) by its new number in `map`.
+fn remap(v: &mut Value, map: &[Option<usize>]) {
+    if let Some(i) = v.as_u64() {
+        *v = json!(map[i as usize].expect("referenced object is kept"));
+    }
+}
+
+/// Mark the accessors referenced by meshes (attributes, indices, morph targets), skins
+/// (inverse bind matrices) and animation samplers (input and output).
+fn mark_accessor_refs(j: &Value, used: &mut [bool]) {
+    for m in items(j, "meshes") {
+        for p in items(m, "primitives") {
+            for a in p["attributes"].as_object().into_iter().flatten() {
+                mark(a.1, used);
+            }
+            mark(&p["indices"], used);
+            for t in items(p, "targets") {
+                for a in t.as_object().into_iter().flatten() {
+                    mark(a.1, used);
+                }
+            }
+        }
+    }
+    for s in items(j, "skins") {
+        mark(&s["inverseBindMatrices"], used);
+    }
+    for a in items(j, "animations") {
+        for s in items(a, "samplers") {
+            mark(&s["input"], used);
+            mark(&s["output"], used);
+        }
+    }
+}
+
+/// Renumber the accessor references [`mark_accessor_refs`] finds by `map`.
+fn remap_accessor_refs(j: &mut Value, map: &[Option<usize>]) {
+    for m in items_mut(j, "meshes") {
+        for p in items_mut(m, "primitives") {
+            for a in values_mut(p, "attributes") {
+                remap(a, map);
+            }
+            if p.get("indices").is_some() {
+                remap(&mut p["indices"], map);
+            }
+            for t in items_mut(p, "targets") {
+                for a in t.as_object_mut().into_iter().flatten() {
+                    remap(a.1, map);
+                }
+            }
+        }
+    }
+    for s in items_mut(j, "skins") {
+        if s.get("inverseBindMatrices").is_some() {
+            remap(&mut s["inverseBindMatrices"], map);
+        }
+    }
+    for a in items_mut(j, "animations") {
+        for s in items_mut(a, "samplers") {
+            remap(&mut s["input"], map);
+            remap(&mut s["output"], map);
+        }
+    }
+}
+
+/// Mark the buffer views referenced by accessors (including sparse ones) and images.
+fn mark_view_refs(j: &Value, used: &mut [bool]) {
+    for a in items(j, "accessors") {
+        mark(&a["bufferView"], used);
+        mark(&a["sparse"]["indices"]["bufferView"], used);
+        mark(&a["sparse"]["values"]["bufferView"], used);
+    }
+    for im in items(j, "images") {
+        mark(&im["bufferView"], used);
+    }
+}
+
+/// Renumber the buffer-view references [`mark_view_refs`] finds by `map`.
+fn remap_view_refs(j: &mut Value, map: &[Option<usize>]) {
+    for a in items_mut(j, "accessors") {
+        if a.get("bufferView").is_some() {
+            remap(&mut a["bufferView"], map);
+        }
+        if a["sparse"].is_object() {
+            remap(&mut a["sparse"]["indices"]["bufferView"], map);
+            remap(&mut a["sparse"]["values"]["bufferView"], map);
+        }
+    }
+    for im in items_mut(j, "images") {
+        if im.get("bufferView").is_some() {
+            remap(&mut im["bufferView"], map);
+        }
+    }
+}
+
+/// The items whose entry in `used` is true, in order.
+fn keep_used<T>(items: Vec<T>, used: &[bool]) -> Vec<T> {
+    items
+        .into_iter()
+        .enumerate()
+        .filter(|(i, _)| used[*i])
+        .map(|(_, x)| x)
+        .collect()
 }
 
 /// New index of each kept object (`None` for dropped ones).

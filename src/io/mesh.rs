@@ -1,6 +1,6 @@
 //! Mesh extraction: every primitive of a mesh instance, in world space, with morph targets.
 
-use super::accessor::{usize_of, AccessorReader};
+use super::accessor::{usize_of, AccessorReader, Decoded};
 use super::error::{GltfError, GltfResult};
 use super::model::MorphTarget;
 use super::scene::{transform_normal, transform_point, transform_vector};
@@ -183,14 +183,7 @@ pub fn extract(
     world: &[Matrix4<f64>],
 ) -> GltfResult<MeshInstance> {
     let nj = &json["nodes"][node];
-    let mesh = usize_of(&nj["mesh"])
-        .ok_or_else(|| GltfError::new(path, format!("node {node} has no mesh")))?;
-    let mj = json["meshes"].get(mesh).ok_or_else(|| {
-        GltfError::new(
-            path,
-            format!("node {node} refers to mesh {mesh}, which does not exist"),
-        )
-    })?;
+    let (mesh, mj) = instanced_mesh(path, json, node)?;
     let name = mj["name"]
         .as_str()
         .or(nj["name"].as_str())
@@ -200,7 +193,72 @@ pub fn extract(
         .as_array()
         .map(|a| a.as_slice())
         .unwrap_or(&[]);
-    let skin = usize_of(&nj["skin"]);
+    let names = target_names(path, mj, mesh, &name, prims)?;
+    let src = InstanceSource {
+        path,
+        reader,
+        json,
+        world,
+        node,
+        mesh,
+        name: &name,
+        skin: usize_of(&nj["skin"]),
+    };
+    let mut merged = Merged::new(&names);
+    for (pi, p) in prims.iter().enumerate() {
+        merged.add_primitive(&src, pi, p)?;
+    }
+    let default_weights: Vec<f64> = nj["weights"]
+        .as_array()
+        .or(mj["weights"].as_array())
+        .map(|a| a.iter().map(|v| v.as_f64().unwrap_or(0.0)).collect())
+        .unwrap_or_else(|| vec![0.0; names.len()]);
+    let to_world = if src.skin.is_some() {
+        VertexTransform::PerVertex(merged.per_vertex)
+    } else {
+        VertexTransform::Node(world[node])
+    };
+    Ok(MeshInstance {
+        node,
+        mesh,
+        name,
+        positions: merged.positions,
+        normals: merged.normals,
+        triangles: merged.triangles,
+        targets: merged.targets,
+        default_weights,
+        to_world,
+        primitive_ranges: merged.ranges,
+        skipped_primitives: merged.skipped,
+    })
+}
+
+/// The index and JSON of the mesh node `node` instances; fails when it has none.
+fn instanced_mesh<'j>(
+    path: &Path,
+    json: &'j serde_json::Value,
+    node: usize,
+) -> GltfResult<(usize, &'j serde_json::Value)> {
+    let mesh = usize_of(&json["nodes"][node]["mesh"])
+        .ok_or_else(|| GltfError::new(path, format!("node {node} has no mesh")))?;
+    let mj = json["meshes"].get(mesh).ok_or_else(|| {
+        GltfError::new(
+            path,
+            format!("node {node} refers to mesh {mesh}, which does not exist"),
+        )
+    })?;
+    Ok((mesh, mj))
+}
+
+/// Names of the morph targets of mesh `mesh` (`extras.targetNames`, else `target_N`), after
+/// checking every primitive has as many targets as the first.
+fn target_names(
+    path: &Path,
+    mj: &serde_json::Value,
+    mesh: usize,
+    name: &str,
+    prims: &[serde_json::Value],
+) -> GltfResult<Vec<String>> {
     let target_count = prims
         .first()
         .and_then(|p| p["targets"].as_array())
@@ -211,39 +269,45 @@ pub fn extract(
             return Err(GltfError::new(path, format!("mesh {mesh} ({name}): morph target counts differ between primitives (primitive 0 has {target_count}, primitive {pi} has {tc})")));
         }
     }
-    let names: Vec<String> = (0..target_count)
+    Ok((0..target_count)
         .map(|t| {
             mj["extras"]["targetNames"][t]
                 .as_str()
                 .map(String::from)
                 .unwrap_or(format!("target_{t}"))
         })
-        .collect();
-    let mut positions = Vec::new();
-    let mut normals: Option<Vec<Vector3<f64>>> = Some(Vec::new());
-    let mut triangles = Vec::new();
-    let mut targets: Vec<MorphTarget> = names
-        .iter()
-        .map(|n| MorphTarget {
-            name: n.clone(),
-            positions: Vec::new(),
-            normals: Some(Vec::new()),
-        })
-        .collect();
-    let mut per_vertex: Vec<Matrix4<f64>> = Vec::new();
-    let mut ranges = Vec::new();
-    let mut skipped = 0;
-    for (pi, p) in prims.iter().enumerate() {
-        let mode = p["mode"].as_u64().unwrap_or(4);
-        if !(4..=6).contains(&mode) {
-            skipped += 1;
-            continue;
-        }
-        let attrs = &p["attributes"];
+        .collect())
+}
+
+/// What every primitive of one mesh instance is read with: the file, the instancing node
+/// and the mesh.
+struct InstanceSource<'a> {
+    /// The file (names errors).
+    path: &'a Path,
+    /// Accessor reader of the file.
+    reader: &'a AccessorReader<'a>,
+    /// The file's glTF JSON.
+    json: &'a serde_json::Value,
+    /// World matrix of every node.
+    world: &'a [Matrix4<f64>],
+    /// The instancing node.
+    node: usize,
+    /// The mesh index.
+    mesh: usize,
+    /// The instance's name.
+    name: &'a str,
+    /// The node's skin, if it is skinned.
+    skin: Option<usize>,
+}
+
+impl InstanceSource<'_> {
+    /// The POSITION accessor of primitive `pi` (attributes `attrs`), checked VEC3 and finite.
+    fn positions(&self, pi: usize, attrs: &serde_json::Value) -> GltfResult<Decoded> {
+        let (path, mesh) = (self.path, self.mesh);
         let pa = usize_of(&attrs["POSITION"]).ok_or_else(|| {
             GltfError::new(path, format!("mesh {mesh} primitive {pi} has no POSITION"))
         })?;
-        let pos = reader.read(pa)?;
+        let pos = self.reader.read(pa)?;
         if pos.components != 3 {
             return Err(GltfError::new(
                 path,
@@ -252,104 +316,192 @@ pub fn extract(
         }
         check_finite(
             path,
-            &format!("mesh {mesh} ({name}) primitive {pi} POSITION (accessor {pa})"),
+            &format!(
+                "mesh {mesh} ({}) primitive {pi} POSITION (accessor {pa})",
+                self.name
+            ),
             &pos.data,
         )?;
-        let count = pos.count;
-        let base = positions.len();
-        let xf: Vec<Matrix4<f64>> = match skin {
-            Some(s) => skin_matrices(path, reader, json, s, world, attrs, count)?,
-            None => vec![world[node]; count],
-        };
+        Ok(pos)
+    }
+
+    /// The local-to-world matrix of each of the `count` vertices of a primitive with
+    /// attributes `attrs`: skinned in the rest pose, or the node's world matrix.
+    fn vertex_matrices(
+        &self,
+        attrs: &serde_json::Value,
+        count: usize,
+    ) -> GltfResult<Vec<Matrix4<f64>>> {
+        match self.skin {
+            Some(s) => skin_matrices(
+                self.path,
+                self.reader,
+                self.json,
+                s,
+                self.world,
+                attrs,
+                count,
+            ),
+            None => Ok(vec![self.world[self.node]; count]),
+        }
+    }
+
+    /// The vertex indices of primitive `pi` (its vertices in order when it has none),
+    /// checked below `count`.
+    fn indices(&self, pi: usize, p: &serde_json::Value, count: usize) -> GltfResult<Vec<usize>> {
         let idx: Vec<usize> = match usize_of(&p["indices"]) {
-            Some(ia) => reader.read_indices(ia)?,
+            Some(ia) => self.reader.read_indices(ia)?,
             None => (0..count).collect(),
         };
         if let Some(&bad) = idx.iter().find(|&&i| i >= count) {
             return Err(GltfError::new(
-                path,
+                self.path,
                 format!(
-                    "mesh {mesh} primitive {pi}: index {bad} is out of range ({count} vertices)"
+                    "mesh {} primitive {pi}: index {bad} is out of range ({count} vertices)",
+                    self.mesh
                 ),
             ));
         }
+        Ok(idx)
+    }
+
+    /// The world-space NORMAL of each vertex, when accessor `na` is given; checked VEC3 with
+    /// one per vertex and finite.
+    fn normals(&self, na: usize, xf: &[Matrix4<f64>]) -> GltfResult<Vec<Vector3<f64>>> {
+        let count = xf.len();
+        let n = self.reader.read(na)?;
+        if n.count != count || n.components != 3 {
+            return Err(GltfError::new(
+                self.path,
+                format!("accessor {na}: NORMAL must be VEC3 with one per vertex"),
+            ));
+        }
+        check_finite(self.path, &format!("accessor {na} (NORMAL)"), &n.data)?;
+        Ok((0..count)
+            .map(|v| transform_normal(&xf[v], &n.vec3(v)))
+            .collect())
+    }
+
+    /// The world-space `key` (POSITION or NORMAL) deltas of morph target `ti` (JSON `t`),
+    /// one per vertex of transform `xf`; `None` when the target lacks `key`.
+    fn target_delta(
+        &self,
+        t: &serde_json::Value,
+        ti: usize,
+        key: &str,
+        xf: &[Matrix4<f64>],
+    ) -> GltfResult<Option<Vec<Vector3<f64>>>> {
+        let (path, count) = (self.path, xf.len());
+        match usize_of(&t[key]) {
+            None => Ok(None),
+            Some(a) => {
+                let d = self.reader.read(a)?;
+                if d.count != count || d.components != 3 {
+                    return Err(GltfError::new(path, format!("accessor {a}: target {ti} {key} must be VEC3 with one per vertex ({count})")));
+                }
+                check_finite(
+                    path,
+                    &format!("mesh {} target {ti} {key} (accessor {a})", self.mesh),
+                    &d.data,
+                )?;
+                Ok(Some(
+                    (0..count)
+                        .map(|v| transform_vector(&xf[v], &d.vec3(v)))
+                        .collect(),
+                ))
+            }
+        }
+    }
+}
+
+/// The triangle primitives of one mesh instance merged so far (vertices concatenated).
+struct Merged {
+    /// World-space positions (m).
+    positions: Vec<Vector3<f64>>,
+    /// World-space normals, while every primitive so far has NORMAL.
+    normals: Option<Vec<Vector3<f64>>>,
+    /// Triangles in merged vertex numbering.
+    triangles: Vec<[usize; 3]>,
+    /// Morph targets with world-space deltas.
+    targets: Vec<MorphTarget>,
+    /// Per-vertex local-to-world matrices (filled for skinned meshes only).
+    per_vertex: Vec<Matrix4<f64>>,
+    /// First vertex and vertex count of each merged primitive.
+    ranges: Vec<(usize, usize)>,
+    /// Primitives skipped because they are not triangles.
+    skipped: usize,
+}
+
+impl Merged {
+    /// Nothing merged yet, with empty morph targets named `names`.
+    fn new(names: &[String]) -> Self {
+        Self {
+            positions: Vec::new(),
+            normals: Some(Vec::new()),
+            triangles: Vec::new(),
+            targets: names
+                .iter()
+                .map(|n| MorphTarget {
+                    name: n.clone(),
+                    positions: Vec::new(),
+                    normals: Some(Vec::new()),
+                })
+                .collect(),
+            per_vertex: Vec::new(),
+            ranges: Vec::new(),
+            skipped: 0,
+        }
+    }
+
+    /// Append primitive `pi` (JSON `p`) of `src`'s mesh, or count it as skipped when it is
+    /// not made of triangles.
+    fn add_primitive(
+        &mut self,
+        src: &InstanceSource,
+        pi: usize,
+        p: &serde_json::Value,
+    ) -> GltfResult<()> {
+        let mode = p["mode"].as_u64().unwrap_or(4);
+        if !(4..=6).contains(&mode) {
+            self.skipped += 1;
+            return Ok(());
+        }
+        let attrs = &p["attributes"];
+        let pos = src.positions(pi, attrs)?;
+        let count = pos.count;
+        let base = self.positions.len();
+        let xf = src.vertex_matrices(attrs, count)?;
+        let idx = src.indices(pi, p, count)?;
         for t in triangulate(mode, &idx) {
-            triangles.push([t[0] + base, t[1] + base, t[2] + base]);
+            self.triangles.push([t[0] + base, t[1] + base, t[2] + base]);
         }
         for v in 0..count {
-            positions.push(transform_point(&xf[v], &pos.vec3(v)));
+            self.positions.push(transform_point(&xf[v], &pos.vec3(v)));
         }
-        match (usize_of(&attrs["NORMAL"]), normals.as_mut()) {
-            (Some(na), Some(ns)) => {
-                let n = reader.read(na)?;
-                if n.count != count || n.components != 3 {
-                    return Err(GltfError::new(
-                        path,
-                        format!("accessor {na}: NORMAL must be VEC3 with one per vertex"),
-                    ));
-                }
-                check_finite(path, &format!("accessor {na} (NORMAL)"), &n.data)?;
-                ns.extend((0..count).map(|v| transform_normal(&xf[v], &n.vec3(v))));
-            }
-            _ => normals = None,
+        match (usize_of(&attrs["NORMAL"]), self.normals.as_mut()) {
+            (Some(na), Some(ns)) => ns.extend(src.normals(na, &xf)?),
+            _ => self.normals = None,
         }
         let tj = p["targets"].as_array().map(|a| a.as_slice()).unwrap_or(&[]);
         for (ti, t) in tj.iter().enumerate() {
-            let read_delta = |key: &str| -> GltfResult<Option<Vec<Vector3<f64>>>> {
-                match usize_of(&t[key]) {
-                    None => Ok(None),
-                    Some(a) => {
-                        let d = reader.read(a)?;
-                        if d.count != count || d.components != 3 {
-                            return Err(GltfError::new(path, format!("accessor {a}: target {ti} {key} must be VEC3 with one per vertex ({count})")));
-                        }
-                        check_finite(
-                            path,
-                            &format!("mesh {mesh} target {ti} {key} (accessor {a})"),
-                            &d.data,
-                        )?;
-                        Ok(Some(
-                            (0..count)
-                                .map(|v| transform_vector(&xf[v], &d.vec3(v)))
-                                .collect(),
-                        ))
-                    }
-                }
-            };
-            let dp = read_delta("POSITION")?.unwrap_or_else(|| vec![Vector3::zeros(); count]);
-            targets[ti].positions.extend(dp);
-            match (read_delta("NORMAL")?, targets[ti].normals.as_mut()) {
+            let dp = src
+                .target_delta(t, ti, "POSITION", &xf)?
+                .unwrap_or_else(|| vec![Vector3::zeros(); count]);
+            self.targets[ti].positions.extend(dp);
+            match (
+                src.target_delta(t, ti, "NORMAL", &xf)?,
+                self.targets[ti].normals.as_mut(),
+            ) {
                 (Some(dn), Some(tn)) => tn.extend(dn),
-                _ => targets[ti].normals = None,
+                _ => self.targets[ti].normals = None,
             }
         }
-        if skin.is_some() {
-            per_vertex.extend(xf);
+        if src.skin.is_some() {
+            self.per_vertex.extend(xf);
         }
-        ranges.push((base, count));
+        self.ranges.push((base, count));
+        Ok(())
     }
-    let default_weights: Vec<f64> = nj["weights"]
-        .as_array()
-        .or(mj["weights"].as_array())
-        .map(|a| a.iter().map(|v| v.as_f64().unwrap_or(0.0)).collect())
-        .unwrap_or_else(|| vec![0.0; target_count]);
-    Ok(MeshInstance {
-        node,
-        mesh,
-        name,
-        positions,
-        normals,
-        triangles,
-        targets,
-        default_weights,
-        to_world: if skin.is_some() {
-            VertexTransform::PerVertex(per_vertex)
-        } else {
-            VertexTransform::Node(world[node])
-        },
-        primitive_ranges: ranges,
-        skipped_primitives: skipped,
-    })
 }
 
 /// A per-vertex attribute of a mesh instance, read in the instance's vertex order

@@ -297,6 +297,14 @@ impl Scene {
     /// Check every value; the message names the key.
     pub fn validate(&self) -> anyhow::Result<()> {
         self.materials()?;
+        self.validate_skin()?;
+        self.validate_interior()?;
+        self.validate_run_settings()?;
+        self.validate_geometry()
+    }
+
+    /// Check `[skin]`: masks, regions, the thickness source, refinement and resolution.
+    fn validate_skin(&self) -> anyhow::Result<()> {
         let s = &self.skin;
         for (i, b) in s.mask.iter().enumerate() {
             check_box(&format!("skin.mask[{i}]"), b.min, b.max)?;
@@ -325,6 +333,11 @@ impl Scene {
                 bail!("`skin.vertices_per_wavelength` must lie in [2, 64], got {v}");
             }
         }
+        Ok(())
+    }
+
+    /// Check `[interior]`: cell size or count, depth and element kind.
+    fn validate_interior(&self) -> anyhow::Result<()> {
         let i = &self.interior;
         positive("interior.cell_size", i.cell_size)?;
         positive("interior.depth", i.depth)?;
@@ -344,6 +357,11 @@ impl Scene {
                 bail!("`interior.elements` must be \"quadratic\" or \"trilinear\", got \"{e}\"");
             }
         }
+        Ok(())
+    }
+
+    /// Check `[dynamics]`, `[solver]`, `[export]` and `[muscles]`.
+    fn validate_run_settings(&self) -> anyhow::Result<()> {
         positive("dynamics.dt", self.dynamics.dt)?;
         if let Some(dt) = self.dynamics.dt {
             if dt > 1.0 {
@@ -373,8 +391,14 @@ impl Scene {
         if self.solver.shell_iterations == Some(0) || self.solver.interior_iterations == Some(0) {
             bail!("`solver.*_iterations` must be at least 1");
         }
+        Ok(())
+    }
+
+    /// Check `[geometry]` (a synthetic scene) and the `[load]` it needs; a rig scene has
+    /// neither.
+    fn validate_geometry(&self) -> anyhow::Result<()> {
         if let Some(g) = &self.geometry {
-            if thickness::varies(s) || g.skins.iter().any(thickness::varies) {
+            if thickness::varies(&self.skin) || g.skins.iter().any(thickness::varies) {
                 bail!("`skin.regions`, `skin.thickness_attribute` and `skin.thickness_texture` apply to rigs; a synthetic scene gives each copy its own `[[geometry.skins]]` thickness");
             }
             if !["slab", "cushion", "cube"].contains(&g.kind.as_str()) {
@@ -403,22 +427,29 @@ impl Scene {
                     bail!("`geometry.copies` must lie in [1, 16], got {c}");
                 }
             }
-            match &self.load {
-                None => bail!("a scene with `[geometry]` needs a `[load]` section"),
-                Some(l) => {
-                    if l.frames == 0 || l.frames > 10_000 {
-                        bail!("`load.frames` must lie in [1, 10000], got {}", l.frames);
-                    }
-                    if let Some(c) = l.compression {
-                        if !(c.is_finite() && (0.0..0.6).contains(&c)) {
-                            bail!("`load.compression` is a strain in [0, 0.6), got {c}");
-                        }
-                    }
-                    positive("load.weight", l.weight)?;
-                }
-            }
+            self.validate_load()?;
         } else if self.load.is_some() {
             bail!("`[load]` needs a `[geometry]` section (rigs are driven by their animation)");
+        }
+        Ok(())
+    }
+
+    /// Check the `[load]` of a synthetic scene: it must be there, with frames, compression
+    /// and weight in range.
+    fn validate_load(&self) -> anyhow::Result<()> {
+        match &self.load {
+            None => bail!("a scene with `[geometry]` needs a `[load]` section"),
+            Some(l) => {
+                if l.frames == 0 || l.frames > 10_000 {
+                    bail!("`load.frames` must lie in [1, 10000], got {}", l.frames);
+                }
+                if let Some(c) = l.compression {
+                    if !(c.is_finite() && (0.0..0.6).contains(&c)) {
+                        bail!("`load.compression` is a strain in [0, 0.6), got {c}");
+                    }
+                }
+                positive("load.weight", l.weight)?;
+            }
         }
         Ok(())
     }

@@ -290,23 +290,8 @@ pub fn run_case(c: &Case) -> StabilityRow {
 pub fn inverted_interior(steps: usize) -> StabilityRow {
     let t = Instant::now();
     let cell = 0.02;
-    let lattice = block_lattice(Vector3::zeros(), cell, [3, 3, 2], ElementOrder::Quadratic);
+    let (lattice, pinned, q0) = squeezed_block(cell);
     let rest = lattice.rest_flat();
-    let layers = ElementOrder::Quadratic.per_axis() - 1;
-    let pinned: Vec<bool> = lattice.grid.iter().map(|g| g[2] < layers).collect();
-    let z0 = lattice
-        .grid
-        .iter()
-        .zip(lattice.rest.iter())
-        .filter(|(g, _)| g[2] == layers - 1)
-        .map(|(_, p)| p.z)
-        .fold(f64::NEG_INFINITY, f64::max);
-    let mut q0 = rest.clone();
-    for (n, &p) in pinned.iter().enumerate() {
-        if !p {
-            q0[3 * n + 2] = z0 - 0.5 * (rest[3 * n + 2] - z0);
-        }
-    }
     let mut row = StabilityRow {
         case: "inverted_start".into(),
         parameter: "interior alone, squeezed to −½ through the pinned layer".into(),
@@ -350,6 +335,47 @@ pub fn inverted_interior(steps: usize) -> StabilityRow {
             return row;
         }
     };
+    let (last, bad) = relax(&mut be, steps, &mut row);
+    row.non_finite = be.q.iter().any(|v| !v.is_finite());
+    let dist = largest_distance(&be.q, &rest);
+    row.wrinkle_depth_max_m = 0.0;
+    judge_recovery(&mut row, last, bad, dist < 0.01 * cell, dist);
+    row.wall_s = t.elapsed().as_secs_f64();
+    row
+}
+
+/// The block of [`inverted_interior`] with cells of `cell` (m): its lattice, pinned nodes
+/// (the two bottom layers) and start positions (m, flat) with the free nodes mirrored to
+/// half their height through the top pinned layer.
+fn squeezed_block(cell: f64) -> (crate::lattice::Lattice, Vec<bool>, Vec<f64>) {
+    let lattice = block_lattice(Vector3::zeros(), cell, [3, 3, 2], ElementOrder::Quadratic);
+    let rest = lattice.rest_flat();
+    let layers = ElementOrder::Quadratic.per_axis() - 1;
+    let pinned: Vec<bool> = lattice.grid.iter().map(|g| g[2] < layers).collect();
+    let z0 = lattice
+        .grid
+        .iter()
+        .zip(lattice.rest.iter())
+        .filter(|(g, _)| g[2] == layers - 1)
+        .map(|(_, p)| p.z)
+        .fold(f64::NEG_INFINITY, f64::max);
+    let mut q0 = rest.clone();
+    for (n, &p) in pinned.iter().enumerate() {
+        if !p {
+            q0[3 * n + 2] = z0 - 0.5 * (rest[3 * n + 2] - z0);
+        }
+    }
+    (lattice, pinned, q0)
+}
+
+/// Up to `steps` quasi-static solves without load, counted in `row` (frames, iterations,
+/// last residual; the message on an error, which stops them). Returns the last status and
+/// how many solves did not converge.
+fn relax(
+    be: &mut BackwardEuler,
+    steps: usize,
+    row: &mut StabilityRow,
+) -> (Option<SolveStatus>, usize) {
     let zero = vec![0.0; be.q.len()];
     let mut last = None;
     let mut bad = 0;
@@ -370,24 +396,38 @@ pub fn inverted_interior(steps: usize) -> StabilityRow {
             }
         }
     }
-    row.non_finite = be.q.iter().any(|v| !v.is_finite());
-    let dist = (0..be.q.len() / 3)
+    (last, bad)
+}
+
+/// Largest distance (m) of a node of `q` from its rest position in `rest` (both flat, m).
+fn largest_distance(q: &[f64], rest: &[f64]) -> f64 {
+    (0..q.len() / 3)
         .map(|n| {
             Vector3::new(
-                be.q[3 * n] - rest[3 * n],
-                be.q[3 * n + 1] - rest[3 * n + 1],
-                be.q[3 * n + 2] - rest[3 * n + 2],
+                q[3 * n] - rest[3 * n],
+                q[3 * n + 1] - rest[3 * n + 1],
+                q[3 * n + 2] - rest[3 * n + 2],
             )
             .norm()
         })
-        .fold(0.0, f64::max);
-    row.wrinkle_depth_max_m = 0.0;
+        .fold(0.0, f64::max)
+}
+
+/// Fill in `row`'s interior status, outcome and (unless an error message is there) the
+/// distance message, from the last solve status `last`, the `bad` solves, whether the block
+/// came `back` to rest and its largest node distance `dist` (m).
+fn judge_recovery(
+    row: &mut StabilityRow,
+    last: Option<SolveStatus>,
+    bad: usize,
+    back: bool,
+    dist: f64,
+) {
     row.interior_status = match last {
         None => "-".into(),
         Some(SolveStatus::Converged) => "converged".into(),
         Some(s) => format!("{} ({bad}/{})", format!("{s:?}").to_lowercase(), row.frames),
     };
-    let back = dist < 0.01 * cell;
     row.outcome = if row.non_finite {
         "non_finite".into()
     } else if last.is_none() {
@@ -409,8 +449,6 @@ pub fn inverted_interior(steps: usize) -> StabilityRow {
             }
         );
     }
-    row.wall_s = t.elapsed().as_secs_f64();
-    row
 }
 
 /// Run every case of [`cases`] and [`inverted_interior`]; `progress(done, total)` before each.

@@ -607,13 +607,88 @@ pub fn run(case: &DenseCase) -> anyhow::Result<DenseResult> {
     case.validate()?;
     let lambda = case.bilayer.critical_wavelength();
     let eps_c = case.critical_strain();
-    let (mut mesh, mats, depth) = build(case, lambda);
-    let top_y = depth + case.bilayer.thickness;
-    // Geometric imperfection, independent of the mesh: every sliding-compatible mode
-    // cos(mπX/L) with wavelength down to λ/4 gets the same amplitude and a random sign, so
-    // the mode that grows is chosen by the mechanics, not by the imperfection; it tapers
-    // linearly to zero at the bottom.
-    let length = case.periods * lambda;
+    let strip = Strip::new(case, lambda)?;
+    let mut x: Vec<f64> = strip.mesh.nodes.iter().flat_map(|p| [p[0], p[1]]).collect();
+    let ramp = compress_strip(&strip, case, eps_c, &mut x)?;
+    let onset = onset_fit(&ramp.steps, 0.1 * case.bilayer.thickness);
+    let (reference, current) = top_profiles(&strip.mesh, &x);
+    let finite = x.iter().all(|v| v.is_finite());
+    let m_ref = if finite {
+        measure::wavelength(&reference)
+    } else {
+        None
+    };
+    let m_cur = if finite {
+        measure::wavelength(&current)
+    } else {
+        None
+    };
+    let length = strip.length;
+    Ok(DenseResult {
+        case: *case,
+        predicted: lambda,
+        measured: m_ref.as_ref().map(|m| m.wavelength),
+        measured_current: m_cur.as_ref().map(|m| m.wavelength),
+        error: m_ref
+            .as_ref()
+            .map(|m| (m.wavelength - lambda).abs() / lambda),
+        amplitude: m_ref.as_ref().map(|m| m.amplitude),
+        measurement: m_ref,
+        nearest_admissible: 2.0 * length / (2.0 * length / lambda).round().max(1.0),
+        critical_strain: eps_c,
+        onset_strain: onset.map(|o| o.0),
+        onset_slope: onset.map(|o| o.1),
+        strain: ramp.strain,
+        length,
+        elements: strip.mesh.elements.len(),
+        dofs: 2 * strip.mesh.nodes.len(),
+        iterations: ramp.iterations,
+        seconds: t0.elapsed().as_secs_f64(),
+        status: ramp.status,
+        residual: ramp.residual,
+        steps: ramp.steps,
+    })
+}
+
+/// The dense strip of a case, ready to compress: its imperfect mesh, energy and sliding
+/// boundary conditions.
+struct Strip {
+    /// The mesh, with the geometric imperfection applied to its reference positions (m).
+    mesh: QuadMesh,
+    /// The plane-strain SVK energy of the mesh.
+    energy: PlaneStrainSvk,
+    /// Sliding sides and bottom (pinned dofs).
+    problem: StaticProblem,
+    /// Strip length L (m).
+    length: f64,
+}
+
+impl Strip {
+    /// The strip of `case` for predicted wavelength `lambda` (m).
+    fn new(case: &DenseCase, lambda: f64) -> anyhow::Result<Self> {
+        let (mut mesh, mats, depth) = build(case, lambda);
+        let length = case.periods * lambda;
+        add_imperfection(&mut mesh, case, length, depth + case.bilayer.thickness);
+        let energy = PlaneStrainSvk::new(&mesh, &mats).context("building the dense strip")?;
+        let problem = StaticProblem {
+            pinned: sliding_pins(&mesh),
+            ..Default::default()
+        };
+        Ok(Self {
+            mesh,
+            energy,
+            problem,
+            length,
+        })
+    }
+}
+
+/// Shift the mesh's reference positions by the geometric imperfection. Independent of the
+/// mesh: every sliding-compatible mode cos(mπX/L) (strip length `length`, m) with wavelength
+/// down to λ/4 gets the same amplitude and a random sign, so the mode that grows is chosen by
+/// the mechanics, not by the imperfection; it tapers linearly to zero from the top `top_y`
+/// (m) to the bottom.
+fn add_imperfection(mesh: &mut QuadMesh, case: &DenseCase, length: f64, top_y: f64) {
     let modes = (8.0 * case.periods).ceil() as usize;
     let mut rng = Lcg::from_state(
         case.seed
@@ -633,9 +708,10 @@ pub fn run(case: &DenseCase) -> anyhow::Result<DenseResult> {
     for p in mesh.nodes.iter_mut() {
         p[1] += eta(p[0]) * (p[1] / top_y);
     }
-    let energy = PlaneStrainSvk::new(&mesh, &mats).context("building the dense strip")?;
+}
 
-    // Sliding sides (x pinned) and sliding bottom (y pinned).
+/// The pinned dofs of sliding sides (x pinned) and a sliding bottom (y pinned), sorted.
+fn sliding_pins(mesh: &QuadMesh) -> Vec<usize> {
     let mut pinned = Vec::new();
     for r in 0..mesh.rows {
         pinned.push(2 * mesh.node(0, r));
@@ -646,10 +722,33 @@ pub fn run(case: &DenseCase) -> anyhow::Result<DenseResult> {
     }
     pinned.sort_unstable();
     pinned.dedup();
-    let problem = StaticProblem {
-        pinned,
-        ..Default::default()
-    };
+    pinned
+}
+
+/// What the load steps of a dense run did, together.
+struct Ramp {
+    /// One record per load step solved.
+    steps: Vec<StepRecord>,
+    /// `Converged`, or the first failing step's status.
+    status: SolveStatus,
+    /// Newton iterations summed over the steps.
+    iterations: usize,
+    /// Final residual norm (N/m) of the last step.
+    residual: f64,
+    /// Last applied compressive strain (dimensionless).
+    strain: f64,
+}
+
+/// Compress the strip in `case.load_steps` steps from 0.5 `eps_c` to `strain_factor` ×
+/// `eps_c`, solving each step to equilibrium from the previous one in `x` (flat positions,
+/// m); stops early at a non-finite state.
+fn compress_strip(
+    strip: &Strip,
+    case: &DenseCase,
+    eps_c: f64,
+    x: &mut [f64],
+) -> anyhow::Result<Ramp> {
+    let (mesh, length) = (&strip.mesh, strip.length);
     let ex_bar =
         case.bilayer.skin_modulus / (1.0 - case.bilayer.skin_poisson * case.bilayer.skin_poisson);
     let settings = StaticSettings {
@@ -660,15 +759,17 @@ pub fn run(case: &DenseCase) -> anyhow::Result<DenseResult> {
         ..Default::default()
     };
     let mut solver = StaticSolver::new(settings)?;
-    let mut x: Vec<f64> = mesh.nodes.iter().flat_map(|p| [p[0], p[1]]).collect();
-    let mut status = SolveStatus::Converged;
-    let mut iterations = 0;
-    let mut residual = 0.0;
-    let mut strain = 0.0;
-    let mut steps = Vec::with_capacity(case.load_steps);
+    let mut ramp = Ramp {
+        steps: Vec::with_capacity(case.load_steps),
+        status: SolveStatus::Converged,
+        iterations: 0,
+        residual: 0.0,
+        strain: 0.0,
+    };
     for step in 0..case.load_steps {
         let f = step as f64 / (case.load_steps - 1) as f64;
-        strain = eps_c * (0.5 + f * (case.strain_factor - 0.5));
+        let strain = eps_c * (0.5 + f * (case.strain_factor - 0.5));
+        ramp.strain = strain;
         if step == 0 {
             // Start from the uniform compression (the pre-buckling state up to the Poisson
             // bulge): moving only the right side would crush its elements and send Newton
@@ -681,8 +782,8 @@ pub fn run(case: &DenseCase) -> anyhow::Result<DenseResult> {
             let n = mesh.node(mesh.columns - 1, r);
             x[2 * n] = length * (1.0 - strain);
         }
-        let rep = solver.solve(&energy, &problem, &mut x)?;
-        steps.push(StepRecord {
+        let rep = solver.solve(&strip.energy, &strip.problem, x)?;
+        ramp.steps.push(StepRecord {
             strain,
             iterations: rep.iterations,
             modified_hessian_steps: rep.modified_hessian_steps,
@@ -690,19 +791,26 @@ pub fn run(case: &DenseCase) -> anyhow::Result<DenseResult> {
             status: rep.status,
             seconds: rep.total_s,
             assembly_factor_search_s: [rep.assembly_s, rep.factor_s, rep.line_search_s],
-            amplitude: top_amplitude(&mesh, &x, length),
+            amplitude: top_amplitude(mesh, x, length),
         });
-        iterations += rep.iterations;
-        residual = rep.residual;
-        if rep.status != SolveStatus::Converged && status == SolveStatus::Converged {
-            status = rep.status;
+        ramp.iterations += rep.iterations;
+        ramp.residual = rep.residual;
+        if rep.status != SolveStatus::Converged && ramp.status == SolveStatus::Converged {
+            ramp.status = rep.status;
         }
         if matches!(rep.status, SolveStatus::NotFinite) {
             break;
         }
     }
+    Ok(ramp)
+}
 
-    let onset = onset_fit(&steps, 0.1 * case.bilayer.thickness);
+/// A height profile along the strip: (position along the strip, height), both in m.
+type Profile = Vec<(f64, f64)>;
+
+/// The top row's height profile from flat positions `x` (m): (reference x, current y) and
+/// (current x, current y), ordered along the strip.
+fn top_profiles(mesh: &QuadMesh, x: &[f64]) -> (Profile, Profile) {
     let top = mesh.rows - 1;
     let mut reference = Vec::with_capacity(mesh.columns);
     let mut current = Vec::with_capacity(mesh.columns);
@@ -711,41 +819,7 @@ pub fn run(case: &DenseCase) -> anyhow::Result<DenseResult> {
         reference.push((mesh.nodes[n][0], x[2 * n + 1]));
         current.push((x[2 * n], x[2 * n + 1]));
     }
-    let finite = x.iter().all(|v| v.is_finite());
-    let m_ref = if finite {
-        measure::wavelength(&reference)
-    } else {
-        None
-    };
-    let m_cur = if finite {
-        measure::wavelength(&current)
-    } else {
-        None
-    };
-    Ok(DenseResult {
-        case: *case,
-        predicted: lambda,
-        measured: m_ref.as_ref().map(|m| m.wavelength),
-        measured_current: m_cur.as_ref().map(|m| m.wavelength),
-        error: m_ref
-            .as_ref()
-            .map(|m| (m.wavelength - lambda).abs() / lambda),
-        amplitude: m_ref.as_ref().map(|m| m.amplitude),
-        measurement: m_ref,
-        nearest_admissible: 2.0 * length / (2.0 * length / lambda).round().max(1.0),
-        critical_strain: eps_c,
-        onset_strain: onset.map(|o| o.0),
-        onset_slope: onset.map(|o| o.1),
-        strain,
-        length,
-        elements: mesh.elements.len(),
-        dofs: 2 * mesh.nodes.len(),
-        iterations,
-        seconds: t0.elapsed().as_secs_f64(),
-        status,
-        residual,
-        steps,
-    })
+    (reference, current)
 }
 
 /// One row of [`sweep`].

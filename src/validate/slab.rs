@@ -327,35 +327,123 @@ fn noise(state: &mut u64) -> f64 {
 pub fn run_slab(s: &SlabSettings) -> anyhow::Result<SlabResult> {
     s.validate()?;
     let t0 = Instant::now();
-    let b = s.bilayer;
-    let lambda = b.critical_wavelength();
-    let edge = lambda / s.vertices_per_wavelength;
-    let nx = (s.length * s.vertices_per_wavelength).round().max(2.0) as usize;
-    let length = nx as f64 * edge;
-    let ny = ((s.width * lambda) / (edge * 3f64.sqrt() / 2.0))
-        .round()
-        .max(2.0) as usize;
-    let cell = length / s.cells_along as f64;
-    let depth = s.depth_cells as f64 * cell;
-    let sheet = equilateral_sheet(nx, ny, edge);
-    let width = ny as f64 * edge * 3f64.sqrt() / 2.0;
-    let cells_y = ((width / cell).ceil() as usize).max(1);
+    let g = SlabGeometry::new(s);
+    let sheet = equilateral_sheet(g.nx, g.ny, g.edge);
     let lattice = block_lattice(
         Vector3::zeros(),
-        cell,
-        [s.cells_along, cells_y, s.depth_cells],
+        g.cell,
+        [s.cells_along, g.cells_y, s.depth_cells],
         s.order,
     );
-    // Skin on the top face, centred across the lattice's width.
-    let y0 = 0.5 * (cells_y as f64 * cell - width);
-    let mut mesh = sheet.mesh.clone();
-    for p in &mut mesh.positions {
-        *p = Vector3::new(p.x, p.y + y0, depth);
+    let mesh = on_top_face(&sheet.mesh, &g);
+    let sigma = s.sigma_factor * sigma_for_wavelength(&mesh, g.lambda);
+    let mut skin = slab_skin(s, &g, &lattice, &mesh, sigma)?;
+    let strains = loading_strains(s, g.lambda);
+    let mut be = slab_interior(s, &g, &lattice, strains[0])?;
+    start_with_noise(&mut skin, &be.q, s, g.edge)?;
+    let rounds = load_ramp(&mut be, &mut skin, &strains, 0.5 * g.length)?;
+    // Final shell statics at the final interior state.
+    let last = skin.solve(&be.q)?;
+    let converged = rounds
+        .iter()
+        .all(|r| r.shell.status == SolveStatus::Converged)
+        && last.status == SolveStatus::Converged;
+    let x = skin.x();
+    let mid = &sheet.rows[g.ny / 2];
+    let row = middle_row(mid, &mesh, x, &skin.embedded_positions(&be.q));
+    let profile: Vec<(f64, f64)> = row.iter().map(|r| (r.x, r.z - r.surface_z)).collect();
+    let y_mid = mesh.positions[mid[mid.len() / 2]].y;
+    let faces = face_positions(&lattice, &be.q, s.cells_along, y_mid, g.depth);
+    let skin_pos = (0..mesh.positions.len())
+        .map(|v| Vector3::new(x[3 * v], x[3 * v + 1], x[3 * v + 2]))
+        .collect();
+    Ok(SlabResult {
+        predicted: g.lambda,
+        sigma,
+        profile,
+        length: g.length,
+        skin_vertices: mesh.positions.len(),
+        nodes: lattice.node_count(),
+        clusters: skin.cluster_stats(),
+        strains,
+        rounds,
+        converged,
+        seconds: t0.elapsed().as_secs_f64(),
+        cell: g.cell,
+        faces,
+        row,
+        skin: skin_pos,
+        mesh,
+    })
+}
+
+/// The sizes of a slab scene, derived from its settings and the predicted wavelength.
+struct SlabGeometry {
+    /// Predicted critical wavelength λ (m).
+    lambda: f64,
+    /// Skin edge length (m).
+    edge: f64,
+    /// Sheet triangles along x.
+    nx: usize,
+    /// Sheet rows across (along y).
+    ny: usize,
+    /// Slab length L along x (m), a whole number of edges.
+    length: f64,
+    /// Lattice cell size (m).
+    cell: f64,
+    /// Slab depth D (m): the skin lies at z = D.
+    depth: f64,
+    /// Sheet width W across x (m).
+    width: f64,
+    /// Lattice cells across (along y), enough to hold the sheet.
+    cells_y: usize,
+}
+
+impl SlabGeometry {
+    /// The sizes for settings `s`.
+    fn new(s: &SlabSettings) -> Self {
+        let lambda = s.bilayer.critical_wavelength();
+        let edge = lambda / s.vertices_per_wavelength;
+        let nx = (s.length * s.vertices_per_wavelength).round().max(2.0) as usize;
+        let length = nx as f64 * edge;
+        let ny = ((s.width * lambda) / (edge * 3f64.sqrt() / 2.0))
+            .round()
+            .max(2.0) as usize;
+        let cell = length / s.cells_along as f64;
+        let depth = s.depth_cells as f64 * cell;
+        let width = ny as f64 * edge * 3f64.sqrt() / 2.0;
+        let cells_y = ((width / cell).ceil() as usize).max(1);
+        Self {
+            lambda,
+            edge,
+            nx,
+            ny,
+            length,
+            cell,
+            depth,
+            width,
+            cells_y,
+        }
     }
+}
+
+/// The flat sheet moved onto the top face z = D, centred across the lattice's width.
+fn on_top_face(sheet: &TriMesh, g: &SlabGeometry) -> TriMesh {
+    let y0 = 0.5 * (g.cells_y as f64 * g.cell - g.width);
+    let mut mesh = sheet.clone();
+    for p in &mut mesh.positions {
+        *p = Vector3::new(p.x, p.y + y0, g.depth);
+    }
+    mesh
+}
+
+/// The embedding of each vertex of `mesh` in the block lattice: (vertex, node, weight) for
+/// every non-zero shape function of the element holding it.
+fn block_embedding(lattice: &Lattice, mesh: &TriMesh) -> Vec<(usize, usize, f64)> {
     let points: Vec<MaterialPoint> = mesh
         .positions
         .iter()
-        .map(|p| locate_in_block(&lattice, p))
+        .map(|p| locate_in_block(lattice, p))
         .collect();
     let mut embedding = Vec::new();
     for (v, mp) in points.iter().enumerate() {
@@ -366,14 +454,27 @@ pub fn run_slab(s: &SlabSettings) -> anyhow::Result<SlabResult> {
             }
         }
     }
+    embedding
+}
+
+/// The slab's skin: `mesh` embedded in `lattice` with cluster width `sigma` (m), shell
+/// statics to a tolerance relative to the skin's membrane force, failed load steps redone in
+/// increments.
+fn slab_skin(
+    s: &SlabSettings,
+    g: &SlabGeometry,
+    lattice: &Lattice,
+    mesh: &TriMesh,
+    sigma: f64,
+) -> anyhow::Result<EmbeddedShell> {
+    let b = s.bilayer;
     let material = ShellMaterial {
         young: b.skin_modulus,
         poisson: b.skin_poisson,
         thickness: b.thickness,
     };
-    let sigma = s.sigma_factor * sigma_for_wavelength(&mesh, lambda);
     let settings = StaticSettings {
-        tolerance: 1e-9 * b.skin_modulus * b.thickness * edge,
+        tolerance: 1e-9 * b.skin_modulus * b.thickness * g.edge,
         max_iterations: 200,
         hessian: HessianMode::Auto,
         energy_merit: true,
@@ -382,7 +483,7 @@ pub fn run_slab(s: &SlabSettings) -> anyhow::Result<SlabResult> {
     let mut skin = EmbeddedShell::new(
         mesh.clone(),
         material,
-        embedding,
+        block_embedding(lattice, mesh),
         lattice.node_count(),
         sigma,
         settings,
@@ -391,88 +492,120 @@ pub fn run_slab(s: &SlabSettings) -> anyhow::Result<SlabResult> {
     // A failed load step is redone in up to 4 increments (held, bent quadratic interiors
     // otherwise stall from the first step; see `EmbeddedShell::set_continuation_levels`).
     skin.set_continuation_levels(2);
-    // Interior, affinely compressed; ends and bottom pinned.
+    Ok(skin)
+}
+
+/// The compressive strain of each load step: geometric from `onset` × ε_b (the buckling
+/// strain at λ = `lambda`, m) to `compression`, or `compression` alone for one step.
+fn loading_strains(s: &SlabSettings, lambda: f64) -> Vec<f64> {
+    let eps_b = (2.0 * std::f64::consts::PI * s.bilayer.thickness / lambda).powi(2) / 12.0;
+    let start = (s.onset * eps_b).min(s.compression);
+    if s.steps == 1 {
+        vec![s.compression]
+    } else {
+        (0..s.steps)
+            .map(|i| start * (s.compression / start).powf(i as f64 / (s.steps - 1) as f64))
+            .collect()
+    }
+}
+
+/// Scale the x coordinates of the flat positions `q` (m) about `xc` (m) by `factor`.
+fn compress(q: &mut [f64], xc: f64, factor: f64) {
+    for n in 0..q.len() / 3 {
+        q[3 * n] = xc + factor * (q[3 * n] - xc);
+    }
+}
+
+/// The pinned lattice nodes: the node layers shaping the two x-end faces and the bottom
+/// face, or every node when the interior is held on a bend.
+fn slab_pins(lattice: &Lattice, bend: bool) -> Vec<bool> {
+    let k = lattice.order.per_axis();
+    let nn = [
+        lattice.dims[0] + k - 1,
+        lattice.dims[1] + k - 1,
+        lattice.dims[2] + k - 1,
+    ];
+    let layers = k - 1; // nodes that shape the boundary face
+    lattice
+        .grid
+        .iter()
+        .map(|g| g[0] < layers || g[0] >= nn[0] - layers || g[2] < layers || bend)
+        .collect()
+}
+
+/// The quasi-static interior: rest lattice (bent when `s.bend` > 0) compressed by
+/// `first_strain` about the slab's middle, ends and bottom pinned.
+fn slab_interior(
+    s: &SlabSettings,
+    g: &SlabGeometry,
+    lattice: &Lattice,
+    first_strain: f64,
+) -> anyhow::Result<BackwardEuler> {
+    let b = s.bilayer;
     let interior = Interior::new(
-        &lattice,
+        lattice,
         &Material {
             young: b.interior_modulus,
             poisson: b.interior_poisson.min(0.49),
             density: s.density,
         },
     )?;
-    let k = lattice.order.per_axis();
-    let xc = 0.5 * length;
     let mut q = lattice.rest_flat();
-    let mut pinned = vec![false; lattice.node_count()];
-    let nn = [
-        lattice.dims[0] + k - 1,
-        lattice.dims[1] + k - 1,
-        lattice.dims[2] + k - 1,
-    ];
-    for (n, g) in lattice.grid.iter().enumerate() {
-        let layers = k - 1; // nodes that shape the boundary face
-        if g[0] < layers || g[0] >= nn[0] - layers || g[2] < layers || s.bend > 0.0 {
-            pinned[n] = true;
-        }
-    }
+    let pinned = slab_pins(lattice, s.bend > 0.0);
     if s.bend > 0.0 {
         for n in 0..lattice.node_count() {
-            q[3 * n + 2] += s.bend_height(lambda, lattice.rest[n].x);
+            q[3 * n + 2] += s.bend_height(g.lambda, lattice.rest[n].x);
         }
     }
-    // Loading ramp (geometric), starting just past the buckling strain at λ.
-    let eps_b = (2.0 * std::f64::consts::PI * b.thickness / lambda).powi(2) / 12.0;
-    let start = (s.onset * eps_b).min(s.compression);
-    let strains: Vec<f64> = if s.steps == 1 {
-        vec![s.compression]
-    } else {
-        (0..s.steps)
-            .map(|i| start * (s.compression / start).powf(i as f64 / (s.steps - 1) as f64))
-            .collect()
-    };
     let step = StepSettings {
         gravity: [0.0; 3],
         linear_solver: LinearSolver::Cholesky,
         max_newton: 30,
         ..Default::default()
     };
-    let compress = |q: &mut [f64], factor: f64| {
-        for n in 0..q.len() / 3 {
-            q[3 * n] = xc + factor * (q[3 * n] - xc);
-        }
-    };
-    compress(&mut q, 1.0 - strains[0]);
-    let mut be = BackwardEuler::new(interior, q, pinned, step)?;
-    // Start the skin on the compressed embedded surface plus tiny height noise.
+    compress(&mut q, 0.5 * g.length, 1.0 - first_strain);
+    Ok(BackwardEuler::new(interior, q, pinned, step)?)
+}
+
+/// Start the skin on the embedded surface of interior positions `q` plus the settings'
+/// tiny deterministic height noise (`s.noise` × `edge`, m).
+fn start_with_noise(
+    skin: &mut EmbeddedShell,
+    q: &[f64],
+    s: &SlabSettings,
+    edge: f64,
+) -> anyhow::Result<()> {
     let mut seed = s.seed;
     let x0: Vec<f64> = skin
-        .embedded_positions(&be.q)
+        .embedded_positions(q)
         .iter()
         .flat_map(|p| [p.x, p.y, p.z + s.noise * edge * noise(&mut seed)])
         .collect();
-    skin.set_x(&x0)?;
+    skin.set_x(&x0)
+}
+
+/// One two-step solve per load strain, compressing the interior about `xc` (m) from each
+/// strain to the next (the first is already applied).
+fn load_ramp(
+    be: &mut BackwardEuler,
+    skin: &mut EmbeddedShell,
+    strains: &[f64],
+    xc: f64,
+) -> anyhow::Result<Vec<TwoStepReport>> {
     let f_ext = vec![0.0; be.q.len()];
     let mut rounds = Vec::with_capacity(strains.len());
     for (i, &eps) in strains.iter().enumerate() {
         if i > 0 {
-            compress(&mut be.q, (1.0 - eps) / (1.0 - strains[i - 1]));
+            compress(&mut be.q, xc, (1.0 - eps) / (1.0 - strains[i - 1]));
         }
-        rounds.push(two_step_with(
-            &mut be,
-            &mut skin,
-            &f_ext,
-            InteriorMode::QuasiStatic,
-        )?);
+        rounds.push(two_step_with(be, skin, &f_ext, InteriorMode::QuasiStatic)?);
     }
-    // Final shell statics at the final interior state.
-    let last = skin.solve(&be.q)?;
-    let converged = rounds
-        .iter()
-        .all(|r| r.shell.status == SolveStatus::Converged)
-        && last.status == SolveStatus::Converged;
-    let bq = skin.embedded_positions(&be.q);
-    let x = skin.x();
-    let mid = &sheet.rows[ny / 2];
+    Ok(rounds)
+}
+
+/// The samples of sheet row `mid` from skin positions `x` (flat, m) and embedded surface
+/// `bq` (m), ordered by deformed x.
+fn middle_row(mid: &[usize], mesh: &TriMesh, x: &[f64], bq: &[Vector3<f64>]) -> Vec<RowSample> {
     let mut row: Vec<RowSample> = mid
         .iter()
         .map(|&v| RowSample {
@@ -483,38 +616,27 @@ pub fn run_slab(s: &SlabSettings) -> anyhow::Result<SlabResult> {
         })
         .collect();
     row.sort_by(|a, b| a.x.total_cmp(&b.x));
-    let profile: Vec<(f64, f64)> = row.iter().map(|r| (r.x, r.z - r.surface_z)).collect();
-    // Element boundaries on the top surface, mapped by the interior's final displacement.
-    let y_mid = mesh.positions[mid[mid.len() / 2]].y;
-    let faces: Vec<f64> = (0..=s.cells_along)
+    row
+}
+
+/// Deformed x (m) of the element boundaries x = i · cell on the top surface z = `depth` at
+/// y = `y_mid` (m), mapped by the interior positions `q`.
+fn face_positions(
+    lattice: &Lattice,
+    q: &[f64],
+    cells_along: usize,
+    y_mid: f64,
+    depth: f64,
+) -> Vec<f64> {
+    let cell = lattice.cell_size;
+    (0..=cells_along)
         .map(|i| {
             let p = Vector3::new(i as f64 * cell, y_mid, depth);
-            let mp = locate_in_block(&lattice, &p);
+            let mp = locate_in_block(lattice, &p);
             let sh = shape(lattice.order, mp.xi);
             (0..sh.n)
-                .map(|a| sh.val[a] * be.q[3 * lattice.elements[mp.element].nodes[a]])
+                .map(|a| sh.val[a] * q[3 * lattice.elements[mp.element].nodes[a]])
                 .sum()
         })
-        .collect();
-    let skin_pos = (0..mesh.positions.len())
-        .map(|v| Vector3::new(x[3 * v], x[3 * v + 1], x[3 * v + 2]))
-        .collect();
-    Ok(SlabResult {
-        predicted: lambda,
-        sigma,
-        profile,
-        length,
-        skin_vertices: mesh.positions.len(),
-        nodes: lattice.node_count(),
-        clusters: skin.cluster_stats(),
-        strains,
-        rounds,
-        converged,
-        seconds: t0.elapsed().as_secs_f64(),
-        cell,
-        faces,
-        row,
-        skin: skin_pos,
-        mesh,
-    })
+        .collect()
 }
