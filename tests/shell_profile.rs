@@ -3,7 +3,7 @@
 
 use furrow::math::Energy;
 use furrow::shell::bench::bench_sheet;
-use furrow::solver::kkt::KktSolver;
+use furrow::solver::kkt::{KktBlocks, KktSolver};
 use std::time::Instant;
 
 #[test]
@@ -68,13 +68,22 @@ fn profile_one_iteration() {
     let nc = problem.constraints.rows;
     let mut kkt = KktSolver::new();
     let gamma = 500.0;
+    let blocks = KktBlocks {
+        free_of: &free_of,
+        n_free: nf,
+        n_cons: nc,
+        hessian: &t,
+        hessian_values: None,
+        constraints: &cf,
+        gamma,
+        delta: 1e-4 * gamma,
+        positions: None,
+    };
     time("KKT build: pattern, AMD, symbolic, map", &mut || {
-        kkt.assemble(&free_of, nf, nc, &t, None, &cf, gamma, 1e-4 * gamma, None)
-            .unwrap();
+        kkt.assemble(&blocks).unwrap();
     });
     time("KKT assemble (scatter, pattern reused)", &mut || {
-        kkt.assemble(&free_of, nf, nc, &t, None, &cf, gamma, 1e-4 * gamma, None)
-            .unwrap();
+        kkt.assemble(&blocks).unwrap();
     });
     let mut info = None;
     time("KKT numeric LDLT", &mut || {

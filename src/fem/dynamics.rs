@@ -32,6 +32,8 @@ use super::matfree::ElementOperator;
 use super::FemError;
 use crate::math::sparse::SpdSolver;
 use crate::math::Energy;
+use crate::solver::newton::{self, Check, NewtonLimits, NewtonProblem, Rejection, Verdict};
+use crate::solver::SolveStatus as NewtonStatus;
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
@@ -162,6 +164,18 @@ pub enum SolveStatus {
     Stalled,
 }
 
+impl From<NewtonStatus> for SolveStatus {
+    /// The Newton core's status: a failed line search, a step too short to make progress
+    /// and (never produced here) a non-finite residual are all `Stalled`.
+    fn from(s: NewtonStatus) -> Self {
+        match s {
+            NewtonStatus::Converged => SolveStatus::Converged,
+            NewtonStatus::IterationLimit => SolveStatus::IterationLimit,
+            NewtonStatus::LineSearchFailed | NewtonStatus::NotFinite => SolveStatus::Stalled,
+        }
+    }
+}
+
 /// What a solve did.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct SolveReport {
@@ -183,6 +197,19 @@ pub struct SolveReport {
     pub energy_s: f64,
     /// Potential evaluations (with or without gradient).
     pub evaluations: usize,
+}
+
+/// The terms of a Newton matrix mass_coef·M + stiff_coef·(K + K_x).
+#[derive(Clone, Copy)]
+struct MatrixTerms<'a> {
+    /// Coefficient of the mass matrix (1 for a time step, 0 quasi-static).
+    mass_coef: f64,
+    /// Coefficient of the stiffness (h² for a time step, s²; 1 quasi-static).
+    stiff_coef: f64,
+    /// Lumped node masses (kg) instead of the consistent mass matrix.
+    lumped: Option<&'a [f64]>,
+    /// K_x triplets over DOFs (N/m).
+    extra: Option<&'a [(usize, usize, f64)]>,
 }
 
 /// Compressed lower-triangle pattern over free DOFs with 3 × 3 node blocks.
@@ -386,17 +413,14 @@ impl System {
         }
     }
 
-    /// A = mass_coef·M + stiff_coef·(Σ_e R_e K₀ R_eᵀ + K_x).
-    #[allow(clippy::too_many_arguments)]
-    fn assemble(
-        &mut self,
-        interior: &Interior,
-        rotations: &[M3],
-        mass_coef: f64,
-        lumped: Option<&[f64]>,
-        stiff_coef: f64,
-        extra: Option<&[(usize, usize, f64)]>,
-    ) {
+    /// A = mass_coef·M + stiff_coef·(Σ_e R_e K₀ R_eᵀ + K_x) with the element `rotations`.
+    fn assemble(&mut self, interior: &Interior, rotations: &[M3], terms: &MatrixTerms) {
+        let MatrixTerms {
+            mass_coef,
+            stiff_coef,
+            lumped,
+            extra,
+        } = *terms;
         let k = interior.nodes_per_element();
         let colptr = &self.colptr;
         let free = &self.free;
@@ -754,32 +778,18 @@ impl BackwardEuler {
         Ok(report)
     }
 
-    /// Φ and ∇Φ at y (timed into `self.eval_clock`).
-    fn potential(
-        &self,
-        y: &[f64],
-        x0: &[f64],
-        inertia: Option<(&[f64], f64)>,
-        force: &[f64],
-        extra: Option<&ExtraTerms>,
-        want_grad: bool,
-    ) -> (f64, Vec<f64>) {
+    /// Φ and ∇Φ at y (timed into `self.eval_clock`); the gradient is empty unless
+    /// `want_grad`.
+    fn potential(&self, terms: &Terms, y: &[f64], want_grad: bool) -> (f64, Vec<f64>) {
         let t = Instant::now();
-        let out = self.potential_raw(y, x0, inertia, force, extra, want_grad);
+        let out = self.potential_raw(terms, y, want_grad);
         let (s, n) = self.eval_clock.get();
         self.eval_clock.set((s + t.elapsed().as_secs_f64(), n + 1));
         out
     }
 
-    fn potential_raw(
-        &self,
-        y: &[f64],
-        x0: &[f64],
-        inertia: Option<(&[f64], f64)>,
-        force: &[f64],
-        extra: Option<&ExtraTerms>,
-        want_grad: bool,
-    ) -> (f64, Vec<f64>) {
+    fn potential_raw(&self, terms: &Terms, y: &[f64], want_grad: bool) -> (f64, Vec<f64>) {
+        let (x0, force) = (terms.x0, terms.force);
         let n = y.len();
         let mut g = if want_grad { vec![0.0; n] } else { Vec::new() };
         let mut phi = if want_grad {
@@ -792,7 +802,7 @@ impl BackwardEuler {
         } else {
             self.interior.eval(y, None, None, false)
         };
-        if let Some((target, h)) = inertia {
+        if let Some((target, h)) = terms.inertia {
             let d: Vec<f64> = y.iter().zip(target).map(|(a, b)| a - b).collect();
             let md = self.mass_times(&d);
             let inv = 1.0 / (h * h);
@@ -809,7 +819,7 @@ impl BackwardEuler {
                 g[i] -= force[i];
             }
         }
-        if let Some(x) = extra {
+        if let Some(x) = terms.extra {
             let dy: Vec<f64> = y.iter().zip(x0).map(|(a, b)| a - b).collect();
             let mut kd = vec![0.0; n];
             for &(r, c, v) in x.stiffness {
@@ -837,6 +847,137 @@ impl BackwardEuler {
         s.sqrt()
     }
 
+    /// Force scale (N) the tolerance applies to, given the first residual `res`: the larger
+    /// of it, the applied forces, and (floor) the force that strains one cell face by 1e-3 —
+    /// so a state already at rest counts as converged instead of chasing round-off.
+    fn reference_force(&self, res: f64, terms: &Terms) -> f64 {
+        let mut applied = self.free_norm(terms.force);
+        if let Some(x) = terms.extra {
+            applied += self.free_norm(x.force);
+        }
+        let cell_force = 1e-3 * self.interior.mu * self.interior.cell_size.powi(2);
+        res.max(applied).max(cell_force)
+    }
+
+    /// Element rotations at `y`: those of the last gradient evaluation when it was at `y`
+    /// (it usually is), else computed.
+    fn rotations_at(&self, y: &[f64]) -> Vec<M3> {
+        let cache = self.rot_cache.borrow();
+        if cache.0.as_slice() == y && cache.1.len() == self.interior.elements.len() {
+            cache.1.clone()
+        } else {
+            drop(cache);
+            let interior = &self.interior;
+            (0..interior.elements.len())
+                .into_par_iter()
+                .map(|e| interior.element_rotation(y, e))
+                .collect()
+        }
+    }
+
+    /// The linear solver of the settings with [`LinearSolver::Auto`] resolved for a system
+    /// of `free_dofs` (a `time_step` or a quasi-static solve).
+    fn resolved_solver(&self, free_dofs: usize, time_step: bool) -> LinearSolver {
+        match self.settings.linear_solver {
+            LinearSolver::Auto if time_step && free_dofs > AUTO_CG_DOFS => {
+                LinearSolver::ConjugateGradient {
+                    rel_tol: AUTO_CG_REL_TOL,
+                    max_iter: 1000,
+                }
+            }
+            LinearSolver::Auto => LinearSolver::Cholesky,
+            other => other,
+        }
+    }
+
+    /// Bring the Newton matrix M_coef·M + K_coef·(K(rotations) + K_x) up to date: the
+    /// element operator when `matrix_free`, else the assembled matrix.
+    fn prepare_matrix(&mut self, terms: &Terms, rotations: Vec<M3>, matrix_free: bool) {
+        let (mass_coef, stiff_coef) = terms.coefficients();
+        let lumped = if self.settings.lumped_mass {
+            Some(self.lumped.as_slice())
+        } else {
+            None
+        };
+        let sys = self.system.as_mut().expect("system built");
+        if matrix_free {
+            let op = self
+                .operator
+                .get_or_insert_with(|| ElementOperator::new(&self.interior, &sys.free));
+            let lumped_free = lumped.map(|m| sys.free_nodes.iter().map(|&nd| m[nd]).collect());
+            op.update(
+                &self.interior,
+                rotations,
+                mass_coef,
+                stiff_coef,
+                lumped_free,
+            );
+        } else {
+            let coefs = MatrixTerms {
+                mass_coef,
+                stiff_coef,
+                lumped,
+                extra: terms.extra.map(|x| x.stiffness),
+            };
+            sys.assemble(&self.interior, &rotations, &coefs);
+        }
+    }
+
+    /// Solve the prepared Newton system for `rhs` (free DOFs) with `solver` (resolved);
+    /// returns the solution and the CG iterations. `warm`: the first Newton iteration of a
+    /// time step, whose CG starts from and records the last step's first direction.
+    fn solve_newton_system(
+        &mut self,
+        solver: LinearSolver,
+        matrix_free: bool,
+        mut rhs: Vec<f64>,
+        warm: bool,
+        time_step: bool,
+    ) -> Result<(Vec<f64>, usize), FemError> {
+        let sys = self.system.as_mut().expect("system built");
+        match solver {
+            LinearSolver::Auto => unreachable!("resolved by the caller"),
+            LinearSolver::Cholesky => {
+                if let Err(e) = self.solver.factorize(&sys.mat) {
+                    return Err(if time_step {
+                        FemError::Sparse(e)
+                    } else {
+                        FemError::Input(format!(
+                            "quasi-static solve: the stiffness is singular ({e}); pin nodes to remove rigid motions"
+                        ))
+                    });
+                }
+                self.solver.solve_in_place(&mut rhs);
+                Ok((rhs, 0))
+            }
+            LinearSolver::ConjugateGradient { rel_tol, max_iter } => {
+                // Warm start: the first Newton direction of the last time step (the
+                // velocity change varies slowly between steps).
+                let guess = if warm {
+                    self.last_direction.as_deref()
+                } else {
+                    None
+                };
+                let (x, it) = if matrix_free {
+                    let op = self.operator.as_ref().expect("updated before");
+                    let inv = op.diag_inverses();
+                    pcg(op, &inv, &rhs, guess, rel_tol, max_iter)
+                } else {
+                    sys.fill_bsr();
+                    let inv = sys.bsr.diag_inverses();
+                    pcg(&sys.bsr, &inv, &rhs, guess, rel_tol, max_iter)
+                };
+                if warm {
+                    self.last_direction = Some(x.clone());
+                }
+                Ok((x, it))
+            }
+        }
+    }
+
+    /// Minimise Φ over the free nodes from `y` (updated in place) by the Newton core
+    /// ([`crate::solver::newton`]); `inertia` is the target y₀ + h v and the time step h
+    /// (s) of a backward Euler step, `None` for a quasi-static solve.
     fn minimise(
         &mut self,
         y: &mut [f64],
@@ -849,218 +990,241 @@ impl BackwardEuler {
         let gvec = Vector3::from(self.settings.gravity);
         let fg = self.interior.gravity_force(gvec);
         let force: Vec<f64> = fg.iter().zip(f_ext).map(|(a, b)| a + b).collect();
-        let (mass_coef, stiff_coef) = match inertia {
-            Some((_, h)) => (1.0, h * h),
-            None => (0.0, 1.0),
+        let terms = Terms {
+            x0,
+            inertia,
+            force: &force,
+            extra,
         };
-        let mut applied = self.free_norm(&force);
-        if let Some(x) = extra {
-            applied += self.free_norm(x.force);
-        }
-        let (mut phi, mut g) = self.potential(y, x0, inertia, &force, extra, true);
-        let mut res = self.free_norm(&g);
-        // Force scale the tolerance applies to: the first residual, the applied forces, or
-        // (floor) the force that strains one cell face by 1e-3 — so a state already at rest
-        // counts as converged instead of chasing round-off.
-        let cell_force = 1e-3 * self.interior.mu * self.interior.cell_size.powi(2);
-        let reference = res.max(applied).max(cell_force);
-        let mut report = SolveReport {
-            status: SolveStatus::IterationLimit,
-            iterations: 0,
-            residual: res,
-            relative_residual: res / reference,
-            assembly_s: 0.0,
-            solve_s: 0.0,
-            cg_iterations: 0,
-            energy_s: 0.0,
-            evaluations: 0,
+        let (phi, g) = self.potential(&terms, y, true);
+        let res = self.free_norm(&g);
+        let reference = self.reference_force(res, &terms);
+        let limits = NewtonLimits {
+            max_iterations: self.settings.max_newton,
+            max_trials: 30,
         };
-        let cell = self.interior.cell_size;
-        for _ in 0..self.settings.max_newton {
-            if res <= self.settings.tolerance * reference {
-                report.status = SolveStatus::Converged;
-                break;
-            }
-            let t0 = Instant::now();
-            // The rotations of the last gradient evaluation when it was at y (it usually is).
-            let rotations: Vec<M3> = {
-                let cache = self.rot_cache.borrow();
-                if cache.0.as_slice() == &*y && cache.1.len() == self.interior.elements.len() {
-                    cache.1.clone()
-                } else {
-                    drop(cache);
-                    (0..self.interior.elements.len())
-                        .into_par_iter()
-                        .map(|e| self.interior.element_rotation(y, e))
-                        .collect()
-                }
-            };
-            let ex_trip = extra.map(|x| x.stiffness);
-            let lumped = if self.settings.lumped_mass {
-                Some(self.lumped.as_slice())
-            } else {
-                None
-            };
-            let sys = self.system.as_mut().expect("system built");
-            let solver = match self.settings.linear_solver {
-                LinearSolver::Auto if inertia.is_some() && 3 * sys.nfree > AUTO_CG_DOFS => {
-                    LinearSolver::ConjugateGradient {
-                        rel_tol: AUTO_CG_REL_TOL,
-                        max_iter: 1000,
-                    }
-                }
-                LinearSolver::Auto => LinearSolver::Cholesky,
-                other => other,
-            };
-            // CG without coupling terms multiplies element by element (no assembly); with
-            // K_x it multiplies the assembled matrix.
-            let matrix_free =
-                matches!(solver, LinearSolver::ConjugateGradient { .. }) && extra.is_none();
-            if matrix_free {
-                let op = self
-                    .operator
-                    .get_or_insert_with(|| ElementOperator::new(&self.interior, &sys.free));
-                let lumped_free = lumped.map(|m| sys.free_nodes.iter().map(|&nd| m[nd]).collect());
-                op.update(
-                    &self.interior,
-                    rotations,
-                    mass_coef,
-                    stiff_coef,
-                    lumped_free,
-                );
-            } else {
-                sys.assemble(
-                    &self.interior,
-                    &rotations,
-                    mass_coef,
-                    lumped,
-                    stiff_coef,
-                    ex_trip,
-                );
-            }
-            report.assembly_s += t0.elapsed().as_secs_f64();
-            let t1 = Instant::now();
-            let mut rhs = vec![0.0; 3 * sys.nfree];
-            for (n, &f) in sys.free.iter().enumerate() {
-                if f != NONE {
-                    for i in 0..3 {
-                        rhs[3 * f + i] = -stiff_coef * g[3 * n + i];
-                    }
-                }
-            }
-            match solver {
-                LinearSolver::Auto => unreachable!("resolved above"),
-                LinearSolver::Cholesky => {
-                    if let Err(e) = self.solver.factorize(&sys.mat) {
-                        return Err(match inertia {
-                            None => FemError::Input(format!(
-                                "quasi-static solve: the stiffness is singular ({e}); pin nodes to remove rigid motions"
-                            )),
-                            Some(_) => FemError::Sparse(e),
-                        });
-                    }
-                    self.solver.solve_in_place(&mut rhs);
-                }
-                LinearSolver::ConjugateGradient { rel_tol, max_iter } => {
-                    // Warm start: the first Newton direction of the last time step (the
-                    // velocity change varies slowly between steps).
-                    let guess = if inertia.is_some() && report.iterations == 0 {
-                        self.last_direction.as_deref()
-                    } else {
-                        None
-                    };
-                    let (x, it) = if matrix_free {
-                        let op = self.operator.as_ref().expect("updated above");
-                        let inv = op.diag_inverses();
-                        pcg(op, &inv, &rhs, guess, rel_tol, max_iter)
-                    } else {
-                        sys.fill_bsr();
-                        let inv = sys.bsr.diag_inverses();
-                        pcg(&sys.bsr, &inv, &rhs, guess, rel_tol, max_iter)
-                    };
-                    report.cg_iterations += it;
-                    if inertia.is_some() && report.iterations == 0 {
-                        self.last_direction = Some(x.clone());
-                    }
-                    rhs = x;
-                }
-            }
-            report.solve_s += t1.elapsed().as_secs_f64();
-            report.iterations += 1;
-            let sys = self.system.as_ref().expect("system built");
-            let mut dir = vec![0.0; y.len()];
-            for (n, &f) in sys.free.iter().enumerate() {
-                if f != NONE {
-                    for i in 0..3 {
-                        dir[3 * n + i] = rhs[3 * f + i];
-                    }
-                }
-            }
-            let slope: f64 = dir.iter().zip(&g).map(|(d, gi)| d * gi).sum();
-            let step_max = dir.iter().fold(0.0f64, |m, d| m.max(d.abs()));
-            // Backtracking line search on Φ (Armijo).
-            // The full step is evaluated with its gradient (it is usually accepted); shorter
-            // steps first by value only.
-            let mut alpha = 1.0;
-            let mut accepted: Option<(f64, Vec<f64>)> = None;
-            let mut trial = y.to_vec();
-            for _ in 0..30 {
-                for i in 0..y.len() {
-                    trial[i] = y[i] + alpha * dir[i];
-                }
-                let (p, gt) = self.potential(&trial, x0, inertia, &force, extra, alpha == 1.0);
-                if p.is_finite() && p <= phi + 1e-4 * alpha * slope.min(0.0) {
-                    let gt = if gt.is_empty() {
-                        self.potential(&trial, x0, inertia, &force, extra, true).1
-                    } else {
-                        gt
-                    };
-                    accepted = Some((p, gt));
-                    break;
-                }
-                // Near the solution Φ changes by less than its round-off: accept the step when
-                // it does not raise Φ beyond round-off and it lowers the residual.
-                if p.is_finite() && p - phi <= 1e-12 * phi.abs().max(1e-300) {
-                    let gt = if gt.is_empty() {
-                        self.potential(&trial, x0, inertia, &force, extra, true).1
-                    } else {
-                        gt
-                    };
-                    if self.free_norm(&gt) < res {
-                        accepted = Some((p, gt));
-                        break;
-                    }
-                }
-                alpha *= 0.5;
-            }
-            let Some((p2, g2)) = accepted else {
-                report.status = SolveStatus::Stalled;
-                break;
-            };
-            y.copy_from_slice(&trial);
-            phi = p2;
-            g = g2;
-            res = self.free_norm(&g);
-            report.residual = res;
-            report.relative_residual = res / reference;
-            if alpha * step_max < 1e-14 * cell {
-                report.status = if res <= self.settings.tolerance * reference {
-                    SolveStatus::Converged
-                } else {
-                    SolveStatus::Stalled
-                };
-                break;
-            }
-        }
-        if report.status == SolveStatus::IterationLimit
-            && res <= self.settings.tolerance * reference
-        {
-            report.status = SolveStatus::Converged;
-        }
+        let mut problem = EulerNewton {
+            report: SolveReport {
+                status: SolveStatus::IterationLimit,
+                iterations: 0,
+                residual: res,
+                relative_residual: res / reference,
+                assembly_s: 0.0,
+                solve_s: 0.0,
+                cg_iterations: 0,
+                energy_s: 0.0,
+                evaluations: 0,
+            },
+            be: self,
+            terms,
+            y,
+            phi,
+            g,
+            res,
+            reference,
+            line: EulerLine::default(),
+        };
+        let record = newton::solve(&mut problem, &limits)?;
+        let mut report = problem.report;
+        report.status = record.status.into();
+        report.iterations = record.iterations;
         let (es, en) = self.eval_clock.get();
         report.energy_s = es;
         report.evaluations = en;
         Ok(report)
+    }
+}
+
+/// The fixed terms of one minimisation of Φ: the positions at the start of the step x0 (m),
+/// the inertia target y₀ + h v (m) and time step h (s) (`None`: quasi-static), the applied
+/// force f_ext + f_g (N, flat) and the coupling terms.
+#[derive(Clone, Copy)]
+struct Terms<'a> {
+    x0: &'a [f64],
+    inertia: Option<(&'a [f64], f64)>,
+    force: &'a [f64],
+    extra: Option<&'a ExtraTerms<'a>>,
+}
+
+impl Terms<'_> {
+    /// Coefficients (of M, of K) of the Newton matrix: (1, h²) for a time step, (0, 1)
+    /// quasi-static.
+    fn coefficients(&self) -> (f64, f64) {
+        match self.inertia {
+            Some((_, h)) => (1.0, h * h),
+            None => (0.0, 1.0),
+        }
+    }
+}
+
+/// The search line of the last Newton direction of Φ.
+#[derive(Default)]
+struct EulerLine {
+    /// Direction over all DOFs (m; zero at pinned nodes).
+    dir: Vec<f64>,
+    /// ∇Φ · dir (J per unit step).
+    slope: f64,
+    /// Largest |dir| component (m).
+    step_max: f64,
+    /// Positions of the last trial (m).
+    trial: Vec<f64>,
+    /// Φ (J) and ∇Φ (N) of the last trial when it was accepted.
+    accepted: Option<(f64, Vec<f64>)>,
+}
+
+/// One minimisation of Φ as a [`NewtonProblem`]: the interior's own linear solvers
+/// (Cholesky or CG, matrix-free or assembled) and the iterate y with Φ(y), ∇Φ(y).
+struct EulerNewton<'a, 't> {
+    be: &'a mut BackwardEuler,
+    terms: Terms<'t>,
+    y: &'a mut [f64],
+    /// Φ(y) (J).
+    phi: f64,
+    /// ∇Φ(y) (N, all DOFs).
+    g: Vec<f64>,
+    /// ‖∇Φ‖ over free DOFs (N).
+    res: f64,
+    /// Force scale of the tolerance (N).
+    reference: f64,
+    report: SolveReport,
+    line: EulerLine,
+}
+
+impl EulerNewton<'_, '_> {
+    fn converged(&self) -> bool {
+        self.res <= self.be.settings.tolerance * self.reference
+    }
+
+    /// Right-hand side −K_coef ∇Φ over free DOFs.
+    fn newton_rhs(&self) -> Vec<f64> {
+        let sys = self.be.system.as_ref().expect("system built");
+        let stiff_coef = self.terms.coefficients().1;
+        let mut rhs = vec![0.0; 3 * sys.nfree];
+        for (n, &f) in sys.free.iter().enumerate() {
+            if f != NONE {
+                for i in 0..3 {
+                    rhs[3 * f + i] = -stiff_coef * self.g[3 * n + i];
+                }
+            }
+        }
+        rhs
+    }
+
+    /// The free-DOF solution `dy` scattered over all DOFs.
+    fn scatter(&self, dy: &[f64]) -> Vec<f64> {
+        let sys = self.be.system.as_ref().expect("system built");
+        let mut dir = vec![0.0; self.y.len()];
+        for (n, &f) in sys.free.iter().enumerate() {
+            if f != NONE {
+                for i in 0..3 {
+                    dir[3 * n + i] = dy[3 * f + i];
+                }
+            }
+        }
+        dir
+    }
+
+    /// ∇Φ at the trial point, evaluated now unless `gt` already holds it.
+    fn trial_gradient(&self, gt: Vec<f64>) -> Vec<f64> {
+        if gt.is_empty() {
+            self.be.potential(&self.terms, &self.line.trial, true).1
+        } else {
+            gt
+        }
+    }
+}
+
+impl NewtonProblem for EulerNewton<'_, '_> {
+    type Error = FemError;
+
+    fn check(&mut self) -> Check {
+        if self.converged() {
+            Check::Converged
+        } else {
+            Check::Continue
+        }
+    }
+
+    /// Solve [M_coef M + K_coef (K + K_x)] Δy = −K_coef ∇Φ.
+    fn direction(&mut self, iteration: usize) -> Result<Option<NewtonStatus>, FemError> {
+        let time_step = self.terms.inertia.is_some();
+        let t0 = Instant::now();
+        let rotations = self.be.rotations_at(self.y);
+        let nfree = self.be.system.as_ref().expect("system built").nfree;
+        let solver = self.be.resolved_solver(3 * nfree, time_step);
+        // CG without coupling terms multiplies element by element (no assembly); with
+        // K_x it multiplies the assembled matrix.
+        let matrix_free =
+            matches!(solver, LinearSolver::ConjugateGradient { .. }) && self.terms.extra.is_none();
+        self.be.prepare_matrix(&self.terms, rotations, matrix_free);
+        self.report.assembly_s += t0.elapsed().as_secs_f64();
+        let t1 = Instant::now();
+        let rhs = self.newton_rhs();
+        let warm = time_step && iteration == 0;
+        let (dy, cg_iterations) =
+            self.be
+                .solve_newton_system(solver, matrix_free, rhs, warm, time_step)?;
+        self.report.cg_iterations += cg_iterations;
+        self.report.solve_s += t1.elapsed().as_secs_f64();
+        let dir = self.scatter(&dy);
+        self.line = EulerLine {
+            slope: dir.iter().zip(&self.g).map(|(d, gi)| d * gi).sum(),
+            step_max: dir.iter().fold(0.0f64, |m, d| m.max(d.abs())),
+            dir,
+            trial: self.y.to_vec(),
+            accepted: None,
+        };
+        Ok(None)
+    }
+
+    /// Armijo on Φ (c = 1e-4), or, near the solution where Φ changes by less than its
+    /// round-off, a step that does not raise Φ beyond round-off and lowers the residual.
+    /// The full step is evaluated with its gradient (it is usually accepted); shorter steps
+    /// first by value only. Steps are halved.
+    fn trial(&mut self, t: f64) -> Verdict {
+        for i in 0..self.y.len() {
+            self.line.trial[i] = self.y[i] + t * self.line.dir[i];
+        }
+        let (p, gt) = self.be.potential(&self.terms, &self.line.trial, t == 1.0);
+        let phi = self.phi;
+        let mut accepted = None;
+        if p.is_finite() && p <= phi + 1e-4 * t * self.line.slope.min(0.0) {
+            accepted = Some((p, self.trial_gradient(gt)));
+        } else if p.is_finite() && p - phi <= 1e-12 * phi.abs().max(1e-300) {
+            let gt = self.trial_gradient(gt);
+            if self.be.free_norm(&gt) < self.res {
+                accepted = Some((p, gt));
+            }
+        }
+        self.line.accepted = accepted;
+        Verdict {
+            accepted: self.line.accepted.is_some(),
+            fit: None,
+        }
+    }
+
+    /// Move to the trial; a step shorter than 1e-14 cells ends the solve (converged when
+    /// the residual meets the tolerance, else stalled).
+    fn accept(&mut self, t: f64) -> Option<NewtonStatus> {
+        let (p, g) = self.line.accepted.take().expect("accepted trial");
+        self.y.copy_from_slice(&self.line.trial);
+        self.phi = p;
+        self.res = self.be.free_norm(&g);
+        self.g = g;
+        self.report.residual = self.res;
+        self.report.relative_residual = self.res / self.reference;
+        if t * self.line.step_max < 1e-14 * self.be.interior.cell_size {
+            return Some(if self.converged() {
+                NewtonStatus::Converged
+            } else {
+                NewtonStatus::LineSearchFailed
+            });
+        }
+        None
+    }
+
+    fn rejected(&mut self) -> Rejection {
+        Rejection::Stop(NewtonStatus::LineSearchFailed)
     }
 }
 
@@ -1095,14 +1259,13 @@ mod tests {
             .collect();
         for lumped in [false, true] {
             let coefs = (1.0, h * h);
-            sys.assemble(
-                &int,
-                &rot,
-                coefs.0,
-                lumped.then_some(lumped_all.as_slice()),
-                coefs.1,
-                None,
-            );
+            let terms = MatrixTerms {
+                mass_coef: coefs.0,
+                stiff_coef: coefs.1,
+                lumped: lumped.then_some(lumped_all.as_slice()),
+                extra: None,
+            };
+            sys.assemble(&int, &rot, &terms);
             sys.fill_bsr();
             let mut op = ElementOperator::new(&int, &sys.free);
             op.update(

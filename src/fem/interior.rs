@@ -359,113 +359,143 @@ impl Interior {
         hess: Option<&mut Vec<(usize, usize, f64)>>,
         rot_out: Option<&mut Vec<M3>>,
     ) -> f64 {
+        match hess {
+            None => self.eval_chunked(x, frozen, grad, rot_out),
+            Some(h) => self.eval_with_hessian(x, frozen, grad, h),
+        }
+    }
+
+    /// Energy (J) and optionally gradient (N, added into `grad`) and element rotations
+    /// (into `rot_out`), element chunk by chunk: per-thread accumulation, no per-element
+    /// buffers. Chunks are grouped into at most GROUPS fixed groups whose partial sums are
+    /// added in group order: the result does not depend on the thread count.
+    fn eval_chunked(
+        &self,
+        x: &[f64],
+        frozen: Option<&[M3]>,
+        grad: Option<&mut [f64]>,
+        rot_out: Option<&mut Vec<M3>>,
+    ) -> f64 {
         let want_g = grad.is_some();
-        let want_h = hess.is_some();
-        let k = self.nodes_per_element();
-        if !want_h {
-            // Energy (and gradient) only: per-thread accumulation, no per-element buffers.
-            let len = if want_g { 3 * self.nodes } else { 0 };
-            // Elements in chunks: the displacements of a chunk form the columns of U and
-            // F = K₀ U is one matrix product (K₀ is shared by all elements), much faster
-            // than one K₀ u product per element.
-            let n3 = 3 * k;
-            let ne = self.elements.len();
-            let k0 = nalgebra::DMatrixView::from_slice(&self.k0, n3, n3);
-            // Chunks are grouped into at most GROUPS fixed groups whose partial sums are
-            // added in group order: the result does not depend on the thread count.
-            let chunks = ne.div_ceil(CHUNK);
-            let rot_out_wanted = rot_out.is_some();
-            let per_group = chunks.div_ceil(GROUPS).max(1);
-            let partial: Vec<(f64, Vec<f64>, Vec<M3>)> = (0..chunks.div_ceil(per_group))
-                .into_par_iter()
-                .map(|grp| {
-                    let (mut en, mut g) = (0.0, vec![0.0; len]);
-                    let mut rots = Vec::new();
-                    for c in grp * per_group..((grp + 1) * per_group).min(chunks) {
-                        let e0 = c * CHUNK;
-                        let m = CHUNK.min(ne - e0);
-                        let mut ys = vec![0.0; n3 * m];
-                        let mut us = vec![0.0; n3 * m];
-                        let mut rot = Vec::with_capacity(m);
-                        for j in 0..m {
-                            let fr = frozen.map(|f| &f[e0 + j]);
-                            rot.push(self.element_prepare(
-                                x,
-                                e0 + j,
-                                fr,
-                                &mut ys[j * n3..(j + 1) * n3],
-                                &mut us[j * n3..(j + 1) * n3],
-                            ));
-                        }
-                        if rot_out_wanted {
-                            rots.extend(rot.iter().map(|(r, _)| *r));
-                        }
-                        // (nalgebra's product measured faster than faer's for this shape.)
-                        let um = nalgebra::DMatrixView::from_slice(&us, n3, m);
-                        let fm = k0 * um;
-                        let fs = fm.as_slice();
-                        let mut loc = [0.0; 81];
-                        for (j, (r, fc)) in rot.iter().enumerate() {
-                            let sl = j * n3..(j + 1) * n3;
-                            loc[..n3].fill(0.0);
-                            en += self.element_finish(
-                                r,
-                                fc.as_ref(),
-                                &ys[sl.clone()],
-                                &us[sl.clone()],
-                                &fs[sl],
-                                if want_g { Some(&mut loc[..n3]) } else { None },
-                            );
-                            if want_g {
-                                for (a, &n) in self.elements[e0 + j].iter().enumerate() {
-                                    for i in 0..3 {
-                                        g[3 * n + i] += loc[3 * a + i];
-                                    }
-                                }
-                            }
+        let len = if want_g { 3 * self.nodes } else { 0 };
+        let chunks = self.elements.len().div_ceil(CHUNK);
+        let want_rot = rot_out.is_some();
+        let per_group = chunks.div_ceil(GROUPS).max(1);
+        let partial: Vec<(f64, Vec<f64>, Vec<M3>)> = (0..chunks.div_ceil(per_group))
+            .into_par_iter()
+            .map(|grp| {
+                let range = grp * per_group..((grp + 1) * per_group).min(chunks);
+                self.eval_group(x, frozen, range, want_g, want_rot)
+            })
+            .collect();
+        let mut energy = 0.0;
+        let mut g = vec![0.0; len];
+        if let Some(ro) = rot_out {
+            ro.clear();
+            for (_, _, r) in &partial {
+                ro.extend_from_slice(r);
+            }
+        }
+        for (e, gp, _) in partial {
+            energy += e;
+            g.iter_mut().zip(&gp).for_each(|(p, q)| *p += q);
+        }
+        if let Some(gr) = grad {
+            gr.iter_mut().zip(&g).for_each(|(p, q)| *p += q);
+        }
+        energy
+    }
+
+    /// Energy, gradient over all node DOFs (empty unless `want_g`) and element rotations
+    /// (empty unless `want_rot`) of the element chunks `chunks`. The displacements of a chunk
+    /// form the columns of U and F = K₀ U is one matrix product (K₀ is shared by all
+    /// elements), much faster than one K₀ u product per element.
+    fn eval_group(
+        &self,
+        x: &[f64],
+        frozen: Option<&[M3]>,
+        chunks: std::ops::Range<usize>,
+        want_g: bool,
+        want_rot: bool,
+    ) -> (f64, Vec<f64>, Vec<M3>) {
+        let n3 = 3 * self.nodes_per_element();
+        let ne = self.elements.len();
+        let k0 = nalgebra::DMatrixView::from_slice(&self.k0, n3, n3);
+        let (mut en, mut g) = (0.0, vec![0.0; if want_g { 3 * self.nodes } else { 0 }]);
+        let mut rots = Vec::new();
+        for c in chunks {
+            let e0 = c * CHUNK;
+            let m = CHUNK.min(ne - e0);
+            let mut ys = vec![0.0; n3 * m];
+            let mut us = vec![0.0; n3 * m];
+            let mut rot = Vec::with_capacity(m);
+            for j in 0..m {
+                let fr = frozen.map(|f| &f[e0 + j]);
+                rot.push(self.element_prepare(
+                    x,
+                    e0 + j,
+                    fr,
+                    &mut ys[j * n3..(j + 1) * n3],
+                    &mut us[j * n3..(j + 1) * n3],
+                ));
+            }
+            if want_rot {
+                rots.extend(rot.iter().map(|(r, _)| *r));
+            }
+            // (nalgebra's product measured faster than faer's for this shape.)
+            let um = nalgebra::DMatrixView::from_slice(&us, n3, m);
+            let fm = k0 * um;
+            let fs = fm.as_slice();
+            let mut loc = [0.0; 81];
+            for (j, (r, fc)) in rot.iter().enumerate() {
+                let sl = j * n3..(j + 1) * n3;
+                loc[..n3].fill(0.0);
+                en += self.element_finish(
+                    r,
+                    fc.as_ref(),
+                    &ys[sl.clone()],
+                    &us[sl.clone()],
+                    &fs[sl],
+                    if want_g { Some(&mut loc[..n3]) } else { None },
+                );
+                if want_g {
+                    for (a, &n) in self.elements[e0 + j].iter().enumerate() {
+                        for i in 0..3 {
+                            g[3 * n + i] += loc[3 * a + i];
                         }
                     }
-                    (en, g, rots)
-                })
-                .collect();
-            let mut energy = 0.0;
-            let mut g = vec![0.0; len];
-            if let Some(ro) = rot_out {
-                ro.clear();
-                for (_, _, r) in &partial {
-                    ro.extend_from_slice(r);
                 }
             }
-            for (e, gp, _) in partial {
-                energy += e;
-                g.iter_mut().zip(&gp).for_each(|(p, q)| *p += q);
-            }
-            if let Some(gr) = grad {
-                gr.iter_mut().zip(&g).for_each(|(p, q)| *p += q);
-            }
-            return energy;
         }
+        (en, g, rots)
+    }
+
+    /// Energy (J), optionally gradient (N, added into `grad`), and the Hessian triplets
+    /// R_e K₀ R_eᵀ of every element (pushed onto `hess`), element by element.
+    fn eval_with_hessian(
+        &self,
+        x: &[f64],
+        frozen: Option<&[M3]>,
+        mut grad: Option<&mut [f64]>,
+        hess: &mut Vec<(usize, usize, f64)>,
+    ) -> f64 {
+        let want_g = grad.is_some();
+        let k = self.nodes_per_element();
         let per: Vec<(f64, Vec<f64>, Vec<f64>)> = (0..self.elements.len())
             .into_par_iter()
             .map(|e| {
                 let mut g = if want_g { vec![0.0; 3 * k] } else { Vec::new() };
                 let fr = frozen.map(|f| &f[e]);
                 let en = self.element_energy(x, e, fr, if want_g { Some(&mut g) } else { None });
-                let hm = if want_h {
-                    let r = match fr {
-                        Some(r) => *r,
-                        None => self.element_rotation(x, e),
-                    };
-                    self.rotated_stiffness(&r)
-                } else {
-                    Vec::new()
+                let r = match fr {
+                    Some(r) => *r,
+                    None => self.element_rotation(x, e),
                 };
-                (en, g, hm)
+                (en, g, self.rotated_stiffness(&r))
             })
             .collect();
         let mut energy = 0.0;
-        let mut grad = grad;
-        let mut hess = hess;
+        let n3 = 3 * k;
         for (e, (en, g, hm)) in per.into_iter().enumerate() {
             energy += en;
             let nodes = &self.elements[e];
@@ -476,14 +506,11 @@ impl Interior {
                     }
                 }
             }
-            if let Some(hs) = hess.as_deref_mut() {
-                let n3 = 3 * k;
-                for (a, &na) in nodes.iter().enumerate() {
-                    for (b, &nb) in nodes.iter().enumerate() {
-                        for i in 0..3 {
-                            for j in 0..3 {
-                                hs.push((3 * na + i, 3 * nb + j, hm[(3 * a + i) * n3 + 3 * b + j]));
-                            }
+            for (a, &na) in nodes.iter().enumerate() {
+                for (b, &nb) in nodes.iter().enumerate() {
+                    for i in 0..3 {
+                        for j in 0..3 {
+                            hess.push((3 * na + i, 3 * nb + j, hm[(3 * a + i) * n3 + 3 * b + j]));
                         }
                     }
                 }

@@ -90,6 +90,64 @@ pub struct KktSolver {
     pub symbolic_count: usize,
 }
 
+/// The blocks of a KKT system (free dofs only) for [`KktSolver::assemble`].
+#[derive(Debug, Clone, Copy)]
+pub struct KktBlocks<'a> {
+    /// Free index of each dof, or `usize::MAX` when it is pinned.
+    pub free_of: &'a [usize],
+    /// Free dofs (rows of K).
+    pub n_free: usize,
+    /// Constraint rows (rows of C).
+    pub n_cons: usize,
+    /// Hessian triplets over all dofs, both triangles, as an
+    /// [`Energy`](crate::math::Energy) emits them (N/m).
+    pub hessian: &'a [(usize, usize, f64)],
+    /// Values replacing those of `hessian` (same order and length: the values of
+    /// [`Energy::hessian_values`](crate::math::Energy::hessian_values) for its layout).
+    pub hessian_values: Option<&'a [f64]>,
+    /// Constraint triplets `(row, free dof, value)`, unscaled.
+    pub constraints: &'a [(usize, usize, f64)],
+    /// Row scale γ of the constraint rows (N/m).
+    pub gamma: f64,
+    /// Regularisation δ subtracted on the constraint diagonal (N/m).
+    pub delta: f64,
+    /// The dofs' coordinates (m, 3 per vertex: dof `d` belongs to vertex `d / 3`), read
+    /// only by a new analysis to try the nested-dissection ordering.
+    pub positions: Option<&'a [f64]>,
+}
+
+/// The KKT pattern of `blocks` (both triangles, zero diagonal slots included) with the
+/// Hessian and constraint values of the triplets.
+fn kkt_pattern(blocks: &KktBlocks) -> Result<SparseColMat<usize, f64>, SparseError> {
+    let (free_of, n_free) = (blocks.free_of, blocks.n_free);
+    let n = n_free + blocks.n_cons;
+    let c = blocks.constraints;
+    let mut t = Vec::with_capacity(blocks.hessian.len() + 2 * c.len() + n);
+    for &(r, cc, v) in blocks.hessian {
+        let (fr, fc) = (free_of[r], free_of[cc]);
+        if fr != usize::MAX && fc != usize::MAX {
+            t.push((fr, fc, v));
+        }
+    }
+    for i in 0..n {
+        t.push((i, i, 0.0));
+    }
+    for &(r, j, v) in c {
+        t.push((n_free + r, j, v));
+        t.push((j, n_free + r, v));
+    }
+    Pattern::new(n, &t)?.assemble(&t)
+}
+
+/// Value index of entry (r, col) of the compressed matrix `a`.
+fn slot_of(a: &SparseColMat<usize, f64>, r: usize, col: usize) -> Result<usize, SparseError> {
+    let cp = a.col_ptr();
+    let rows = &a.row_idx()[cp[col]..cp[col + 1]];
+    rows.binary_search(&r)
+        .map(|q| cp[col] + q)
+        .map_err(|_| SparseError::Build(format!("entry ({r}, {col}) missing from pattern")))
+}
+
 fn layout_fingerprint(
     n: usize,
     free_of: &[usize],
@@ -121,33 +179,20 @@ impl KktSolver {
     }
 
     /// Assemble and factorise the KKT matrix ([`KktSolver::assemble`] then
-    /// [`KktSolver::factor`]) when `k` is already indexed by free dofs.
-    #[allow(clippy::too_many_arguments)]
+    /// [`KktSolver::factor`] with `shift`, N/m).
     pub fn factorize(
         &mut self,
-        n_free: usize,
-        n_cons: usize,
-        k: &[(usize, usize, f64)],
-        c: &[(usize, usize, f64)],
-        gamma: f64,
+        blocks: &KktBlocks,
         shift: f64,
-        delta: f64,
     ) -> Result<KktFactorInfo, SparseError> {
-        let identity: Vec<usize> = (0..n_free).collect();
-        let symbolic_s =
-            self.assemble(&identity, n_free, n_cons, k, None, c, gamma, delta, None)?;
+        let symbolic_s = self.assemble(blocks)?;
         let mut info = self.factor(shift);
         info.symbolic_s = symbolic_s;
         Ok(info)
     }
 
-    /// Assemble the unshifted KKT matrix (shift slots on the diagonal kept at zero).
-    ///
-    /// `k` holds the Hessian triplets over all dofs (both triangles, as an [`Energy`]
-    /// emits them); `free_of[dof]` is the free index of a dof or `usize::MAX` when it is
-    /// pinned. `c` holds the constraint triplets `(row, free dof, value)`, unscaled.
-    /// `k_values`, when given, replaces the values of `k` (same order and length: the
-    /// values of [`Energy::hessian_values`](crate::math::Energy::hessian_values) for the layout of `k`).
+    /// Assemble the unshifted KKT matrix of `blocks` (shift slots on the diagonal kept at
+    /// zero).
     ///
     /// The first call (or a call whose layout differs) builds the pattern, the AMD
     /// ordering and symbolic factorisation, and gather lists: for each lower-triangle slot
@@ -155,26 +200,12 @@ impl KktSolver {
     /// upper triangle is copied from the lower one). Later calls only sum the values into
     /// the slots, in parallel (no sorting or copying of triplets). The layout check compares
     /// the sizes, the pinned set, the constraints and every 31st Hessian triplet index.
-    /// `positions` (the dofs' coordinates, 3 per vertex: dof `d` belongs to vertex `d / 3`),
-    /// when given, are read only by a new analysis: it then also tries the geometric
-    /// nested-dissection ordering ([`super::ordering`]) and keeps it if it is cheaper.
-    /// Returns the seconds spent building (0 when reused).
-    ///
-    /// [`Energy`]: crate::math::Energy
-    #[allow(clippy::too_many_arguments)]
-    pub fn assemble(
-        &mut self,
-        free_of: &[usize],
-        n_free: usize,
-        n_cons: usize,
-        k: &[(usize, usize, f64)],
-        k_values: Option<&[f64]>,
-        c: &[(usize, usize, f64)],
-        gamma: f64,
-        delta: f64,
-        positions: Option<&[f64]>,
-    ) -> Result<f64, SparseError> {
-        if let Some(v) = k_values {
+    /// [`KktBlocks::positions`], when given, are read only by a new analysis: it then also
+    /// tries the geometric nested-dissection ordering ([`super::ordering`]) and keeps it if
+    /// it is cheaper. Returns the seconds spent building (0 when reused).
+    pub fn assemble(&mut self, blocks: &KktBlocks) -> Result<f64, SparseError> {
+        let k = blocks.hessian;
+        if let Some(v) = blocks.hessian_values {
             if v.len() != k.len() {
                 return Err(SparseError::PatternMismatch {
                     expected: k.len(),
@@ -182,127 +213,146 @@ impl KktSolver {
                 });
             }
         }
-        let n = n_free + n_cons;
-        let fp = layout_fingerprint(n, free_of, k, c);
+        let n = blocks.n_free + blocks.n_cons;
+        let fp = layout_fingerprint(n, blocks.free_of, k, blocks.constraints);
         let mut symbolic_s = 0.0;
-        self.n_free = n_free;
-        self.n_cons = n_cons;
+        self.n_free = blocks.n_free;
+        self.n_cons = blocks.n_cons;
         if self.fingerprint != Some(fp) || self.base.is_none() {
             let t0 = std::time::Instant::now();
-            let mut t = Vec::with_capacity(k.len() + 2 * c.len() + n);
-            for &(r, cc, v) in k {
-                let (fr, fc) = (free_of[r], free_of[cc]);
-                if fr != usize::MAX && fc != usize::MAX {
-                    t.push((fr, fc, v));
-                }
-            }
-            for i in 0..n {
-                t.push((i, i, 0.0));
-            }
-            for &(r, j, v) in c {
-                t.push((n_free + r, j, v));
-                t.push((j, n_free + r, v));
-            }
-            let pattern = Pattern::new(n, &t)?;
-            let a = pattern.assemble(&t)?;
-            drop(t);
-            let analyse = |ordering: SymmetricOrdering<'_, usize>| {
-                factorize_symbolic_cholesky(
-                    a.symbolic(),
-                    Side::Lower,
-                    ordering,
-                    CholeskySymbolicParams::default(),
-                )
-                .map_err(|e| SparseError::Build(format!("{e:?}")))
-            };
-            let mut sym = analyse(SymmetricOrdering::Amd)?;
-            self.flops = factor_flops(&sym);
-            self.nested_dissection = false;
-            // Nested dissection when positions are known and it needs fewer flops: it wins on
-            // a bare sheet (about 10 % at 20k faces, more above), but the wide cluster rows
-            // of the coupling join far-apart vertices and there AMD measured 9× fewer flops
-            // (face rig: 6.0e9 against 5.2e10), so both are analysed and the cheaper kept.
-            if let Some(x) = positions {
-                if x.len() == free_of.len() && x.len() % 3 == 0 {
-                    let (fwd, inv) = nd_permutation(&a, x, free_of, n_free, c);
-                    let nd = analyse(SymmetricOrdering::Custom(faer::perm::PermRef::new_checked(
-                        &fwd, &inv, n,
-                    )))?;
-                    let nd_flops = factor_flops(&nd);
-                    if nd_flops < self.flops {
-                        sym = nd;
-                        self.flops = nd_flops;
-                        self.nested_dissection = true;
-                    }
-                }
-            }
-            let par = self.par();
-            let req = sym
-                .factorize_numeric_ldlt_scratch::<f64>(par, Default::default())
-                .or(sym.solve_in_place_scratch::<f64>(1, par));
-            self.mem = Some(MemBuffer::new(req));
-            self.values = vec![0.0; sym.len_val()];
-            let cp = a.col_ptr().to_vec();
-            let ri = a.row_idx().to_vec();
-            let slot = |r: usize, col: usize| -> Result<usize, SparseError> {
-                let rows = &ri[cp[col]..cp[col + 1]];
-                rows.binary_search(&r).map(|q| cp[col] + q).map_err(|_| {
-                    SparseError::Build(format!("entry ({r}, {col}) missing from pattern"))
-                })
-            };
-            self.diag_pos = (0..n).map(|j| slot(j, j)).collect::<Result<_, _>>()?;
-            // Gather lists: each lower-triangle Hessian triplet goes to its slot; the upper
-            // ones are skipped (an energy emits both triangles of its symmetric Hessian) and
-            // the upper triangle is copied from the lower one, so the matrix is exactly
-            // symmetric.
-            let mut count = vec![0usize; a.val().len() + 1];
-            let mut lower_slot = Vec::with_capacity(k.len());
-            for &(r, cc, _) in k {
-                let (fr, fc) = (free_of[r], free_of[cc]);
-                if fr != usize::MAX && fc != usize::MAX && fr >= fc {
-                    let q = slot(fr, fc)?;
-                    count[q + 1] += 1;
-                    lower_slot.push(q);
-                } else {
-                    lower_slot.push(usize::MAX);
-                }
-            }
-            for q in 0..a.val().len() {
-                count[q + 1] += count[q];
-            }
-            let mut next = count.clone();
-            let mut src = vec![0u32; count[a.val().len()]];
-            for (i, &q) in lower_slot.iter().enumerate() {
-                if q != usize::MAX {
-                    src[next[q]] = u32::try_from(i)
-                        .map_err(|_| SparseError::Build("more than 2³² Hessian triplets".into()))?;
-                    next[q] += 1;
-                }
-            }
-            self.gather_ptr = count;
-            self.gather_src = src;
-            self.mirror = Vec::new();
-            for col in 0..n {
-                for q in cp[col]..cp[col + 1] {
-                    let r = ri[q];
-                    if r < col {
-                        self.mirror.push((q, slot(col, r)?));
-                    }
-                }
-            }
-            self.cmap = c
-                .iter()
-                .map(|&(r, j, _)| slot(n_free + r, j))
-                .collect::<Result<_, SparseError>>()?;
-            self.symbolic = Some(sym);
-            self.base = Some(a);
+            self.analyse(blocks)?;
             self.fingerprint = Some(fp);
-            self.matrix = None;
-            self.symbolic_count += 1;
-            // A new analysis invalidates the factor.
-            self.factored = false;
             symbolic_s = t0.elapsed().as_secs_f64();
         }
+        self.sum_values(blocks);
+        Ok(symbolic_s)
+    }
+
+    /// A new analysis for the layout of `blocks`: pattern, ordering and symbolic
+    /// factorisation, factorisation memory, and the gather lists of the value sums.
+    fn analyse(&mut self, blocks: &KktBlocks) -> Result<(), SparseError> {
+        let a = kkt_pattern(blocks)?;
+        let sym = self.choose_ordering(&a, blocks)?;
+        let par = self.par();
+        let req = sym
+            .factorize_numeric_ldlt_scratch::<f64>(par, Default::default())
+            .or(sym.solve_in_place_scratch::<f64>(1, par));
+        self.mem = Some(MemBuffer::new(req));
+        self.values = vec![0.0; sym.len_val()];
+        let n = blocks.n_free + blocks.n_cons;
+        self.diag_pos = (0..n)
+            .map(|j| slot_of(&a, j, j))
+            .collect::<Result<_, _>>()?;
+        self.build_gather(&a, blocks)?;
+        self.symbolic = Some(sym);
+        self.base = Some(a);
+        self.matrix = None;
+        self.symbolic_count += 1;
+        // A new analysis invalidates the factor.
+        self.factored = false;
+        Ok(())
+    }
+
+    /// Symbolic LDLᵀ of the pattern `a` with the AMD ordering or, when positions are known
+    /// and it needs fewer flops, the nested-dissection one. Nested dissection wins on a bare
+    /// sheet (about 10 % at 20k faces, more above), but the wide cluster rows of the
+    /// coupling join far-apart vertices and there AMD measured 9× fewer flops (face rig:
+    /// 6.0e9 against 5.2e10), so both are analysed and the cheaper kept.
+    fn choose_ordering(
+        &mut self,
+        a: &SparseColMat<usize, f64>,
+        blocks: &KktBlocks,
+    ) -> Result<SymbolicCholesky<usize>, SparseError> {
+        let analyse = |ordering: SymmetricOrdering<'_, usize>| {
+            factorize_symbolic_cholesky(
+                a.symbolic(),
+                Side::Lower,
+                ordering,
+                CholeskySymbolicParams::default(),
+            )
+            .map_err(|e| SparseError::Build(format!("{e:?}")))
+        };
+        let mut sym = analyse(SymmetricOrdering::Amd)?;
+        self.flops = factor_flops(&sym);
+        self.nested_dissection = false;
+        let free_of = blocks.free_of;
+        if let Some(x) = blocks.positions {
+            if x.len() == free_of.len() && x.len() % 3 == 0 {
+                let (n_free, n) = (blocks.n_free, blocks.n_free + blocks.n_cons);
+                let (fwd, inv) = nd_permutation(a, x, free_of, n_free, blocks.constraints);
+                let nd = analyse(SymmetricOrdering::Custom(faer::perm::PermRef::new_checked(
+                    &fwd, &inv, n,
+                )))?;
+                let nd_flops = factor_flops(&nd);
+                if nd_flops < self.flops {
+                    sym = nd;
+                    self.flops = nd_flops;
+                    self.nested_dissection = true;
+                }
+            }
+        }
+        Ok(sym)
+    }
+
+    /// Gather lists of the pattern `a`: each lower-triangle Hessian triplet goes to its
+    /// slot; the upper ones are skipped (an energy emits both triangles of its symmetric
+    /// Hessian) and the upper triangle is copied from the lower one (`mirror`), so the matrix
+    /// is exactly symmetric; `cmap` holds the slot of each constraint triplet.
+    fn build_gather(
+        &mut self,
+        a: &SparseColMat<usize, f64>,
+        blocks: &KktBlocks,
+    ) -> Result<(), SparseError> {
+        let (free_of, k) = (blocks.free_of, blocks.hessian);
+        let nnz = a.val().len();
+        let mut count = vec![0usize; nnz + 1];
+        let mut lower_slot = Vec::with_capacity(k.len());
+        for &(r, cc, _) in k {
+            let (fr, fc) = (free_of[r], free_of[cc]);
+            if fr != usize::MAX && fc != usize::MAX && fr >= fc {
+                let q = slot_of(a, fr, fc)?;
+                count[q + 1] += 1;
+                lower_slot.push(q);
+            } else {
+                lower_slot.push(usize::MAX);
+            }
+        }
+        for q in 0..nnz {
+            count[q + 1] += count[q];
+        }
+        let mut next = count.clone();
+        let mut src = vec![0u32; count[nnz]];
+        for (i, &q) in lower_slot.iter().enumerate() {
+            if q != usize::MAX {
+                src[next[q]] = u32::try_from(i)
+                    .map_err(|_| SparseError::Build("more than 2³² Hessian triplets".into()))?;
+                next[q] += 1;
+            }
+        }
+        self.gather_ptr = count;
+        self.gather_src = src;
+        self.mirror = Vec::new();
+        let (cp, ri) = (a.col_ptr(), a.row_idx());
+        for col in 0..a.ncols() {
+            for q in cp[col]..cp[col + 1] {
+                let r = ri[q];
+                if r < col {
+                    self.mirror.push((q, slot_of(a, col, r)?));
+                }
+            }
+        }
+        self.cmap = blocks
+            .constraints
+            .iter()
+            .map(|&(r, j, _)| slot_of(a, blocks.n_free + r, j))
+            .collect::<Result<_, SparseError>>()?;
+        Ok(())
+    }
+
+    /// Sum the values of `blocks` into the analysed matrix: Hessian triplets gathered per
+    /// slot in parallel, γ C, −δ on the constraint diagonal, and the mirrored upper triangle.
+    fn sum_values(&mut self, blocks: &KktBlocks) {
+        let (k, k_values) = (blocks.hessian, blocks.hessian_values);
         let base = self.base.as_mut().expect("base set");
         let vals = base.val_mut();
         let (ptr, src) = (&self.gather_ptr, &self.gather_src);
@@ -317,19 +367,17 @@ impl KktSolver {
             .with_min_len(4096)
             .enumerate()
             .for_each(|(q, v)| *v = sum(q));
-        for (&lo, t) in self.cmap.iter().zip(c) {
-            vals[lo] += gamma * t.2;
+        for (&lo, t) in self.cmap.iter().zip(blocks.constraints) {
+            vals[lo] += blocks.gamma * t.2;
         }
-        for &q in &self.diag_pos[n_free..] {
-            vals[q] -= delta;
+        for &q in &self.diag_pos[blocks.n_free..] {
+            vals[q] -= blocks.delta;
         }
         for &(up, lo) in &self.mirror {
             vals[up] = vals[lo];
         }
-        self.delta = delta;
-        Ok(symbolic_s)
+        self.delta = blocks.delta;
     }
-
     /// Numeric LDLᵀ of the assembled matrix with `shift` added to the free-dof diagonal.
     /// Call repeatedly with growing shifts for inertia correction (no re-assembly).
     pub fn factor(&mut self, shift: f64) -> KktFactorInfo {
@@ -667,6 +715,34 @@ fn negative_pivots(sym: &SymbolicCholesky<usize>, values: &[f64]) -> usize {
     }
 }
 
+/// Assemble and factorise K (triplets over free dofs 0..n, n the largest index + 1) with
+/// `n_cons` constraint rows `c`, row scale γ, regularisation δ and `shift`.
+#[cfg(test)]
+fn factorize_free(
+    s: &mut KktSolver,
+    k: &[(usize, usize, f64)],
+    n_cons: usize,
+    c: &[(usize, usize, f64)],
+    gamma: f64,
+    delta: f64,
+    shift: f64,
+) -> KktFactorInfo {
+    let n = k.iter().map(|t| t.0.max(t.1) + 1).max().unwrap_or(0);
+    let free_of: Vec<usize> = (0..n).collect();
+    let blocks = KktBlocks {
+        free_of: &free_of,
+        n_free: n,
+        n_cons,
+        hessian: k,
+        hessian_values: None,
+        constraints: c,
+        gamma,
+        delta,
+        positions: None,
+    };
+    s.factorize(&blocks, shift).unwrap()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -679,7 +755,7 @@ mod tests {
         let c = vec![(0, 0, 1.0), (0, 1, 1.0), (0, 2, 1.0)];
         let mut s = KktSolver::new();
         for gamma in [1.0, 10.0] {
-            let info = s.factorize(3, 1, &k, &c, gamma, 0.0, 1e-8 * gamma).unwrap();
+            let info = factorize_free(&mut s, &k, 1, &c, gamma, 1e-8 * gamma, 0.0);
             assert!(info.inertia_ok, "{info:?}");
             let mut rhs = vec![0.0, 0.0, 0.0, gamma * 1.0];
             s.solve(&mut rhs, 3, 1e-15);
@@ -690,12 +766,12 @@ mod tests {
         assert_eq!(s.symbolic_count, 1, "same pattern: the analysis is reused");
         // K = diag(1, 2, −4): indefinite on the null space of C → inertia flagged.
         let kneg = vec![(0, 0, 1.0), (1, 1, 2.0), (2, 2, -4.0)];
-        let info = s.factorize(3, 1, &kneg, &c, 1.0, 0.0, 1e-8).unwrap();
+        let info = factorize_free(&mut s, &kneg, 1, &c, 1.0, 1e-8, 0.0);
         assert!(!info.inertia_ok);
         // ...but K = diag(1, 2, −0.1) with the constraint x2 = 0 is PD on the null space.
         let c2 = vec![(0, 2, 1.0)];
         let kn2 = vec![(0, 0, 1.0), (1, 1, 2.0), (2, 2, -0.1)];
-        let info = s.factorize(3, 1, &kn2, &c2, 1.0, 0.0, 1e-8).unwrap();
+        let info = factorize_free(&mut s, &kn2, 1, &c2, 1.0, 1e-8, 0.0);
         assert!(info.inertia_ok, "{info:?}");
     }
 }
@@ -742,8 +818,18 @@ mod ordering_tests {
         let solve = |positions: bool| {
             let mut s = KktSolver::new();
             let geometry = positions.then_some(x.as_slice());
-            s.assemble(&free_of, n, 1, &t, None, &c, 1.0, 1e-8, geometry)
-                .unwrap();
+            s.assemble(&KktBlocks {
+                free_of: &free_of,
+                n_free: n,
+                n_cons: 1,
+                hessian: &t,
+                hessian_values: None,
+                constraints: &c,
+                gamma: 1.0,
+                delta: 1e-8,
+                positions: geometry,
+            })
+            .unwrap();
             assert!(s.factor(0.0).inertia_ok);
             let mut r = rhs.clone();
             s.solve(&mut r, 3, 1e-15);
@@ -769,7 +855,6 @@ mod inertia_tests {
     #[test]
     fn negative_pivots_count_eigenvalues_below_shift_on_a_large_supernodal_matrix() {
         let nn = 16usize;
-        let n = nn * nn * nn;
         let id = |i: usize, j: usize, k: usize| (i * nn + j) * nn + k;
         let mut t = Vec::new();
         for i in 0..nn {
@@ -810,7 +895,7 @@ mod inertia_tests {
                     }
                 }
             }
-            let info = s.factorize(n, 0, &t, &[], 1.0, -sigma, 0.0).unwrap();
+            let info = factorize_free(&mut s, &t, 0, &[], 1.0, 0.0, -sigma);
             assert_eq!(info.negative_pivots, expected, "sigma {sigma}");
         }
         assert!(matches!(

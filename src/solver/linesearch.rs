@@ -8,6 +8,8 @@
 //! residual norm rises for any useful step length even though the energy falls, and a
 //! residual-only search crawls (steps of 1e-3, hundreds of iterations in the buckling test).
 
+use super::newton::{backtrack, QuadraticFit, Verdict};
+
 /// Armijo constant.
 pub const ARMIJO: f64 = 1e-4;
 
@@ -44,49 +46,63 @@ pub struct EnergyMerit {
     pub slope: f64,
 }
 
+impl EnergyMerit {
+    /// The merit when it can judge steps: ψ(0) finite and ψ'(0) < 0 (a descent direction).
+    pub fn descending(self) -> Option<Self> {
+        (self.slope < 0.0 && self.value.is_finite()).then_some(self)
+    }
+}
+
+/// Judge the trial `tr` at step `t` (the acceptance rule of the skin statics): accepted when
+/// ‖r‖ satisfies Armijo, ‖r(t)‖ ≤ (1 − α t) r0, or, with a (descending) `energy` merit, when
+/// ψ does, ψ(t) ≤ ψ(0) + α t ψ'(0). The quadratic fit for the next step uses ψ when it is
+/// finite, else ‖r‖² with d‖r‖²/dt(0) = −2‖r‖² (a Newton direction); a non-finite residual
+/// gives no fit (the step is halved).
+pub fn judge(r0: f64, energy: Option<EnergyMerit>, t: f64, tr: Trial) -> Verdict {
+    let res_ok = tr.residual.is_finite() && tr.residual <= (1.0 - ARMIJO * t) * r0;
+    let en_ok = energy.is_some_and(|e| {
+        tr.residual.is_finite()
+            && tr.merit.is_finite()
+            && tr.merit <= e.value + ARMIJO * t * e.slope
+    });
+    let fit = tr.residual.is_finite().then(|| match energy {
+        Some(e) if tr.merit.is_finite() => QuadraticFit {
+            value0: e.value,
+            slope0: e.slope,
+            value: tr.merit,
+        },
+        _ => QuadraticFit {
+            value0: r0 * r0,
+            slope0: -2.0 * r0 * r0,
+            value: tr.residual * tr.residual,
+        },
+    });
+    Verdict {
+        accepted: res_ok || en_ok,
+        fit,
+    }
+}
+
 /// Search along a Newton direction. `eval(t)` measures the trial at step `t` (NaN/∞ are
-/// rejected); `r0` is the residual norm at 0. For a Newton direction d‖r‖²/dt(0) = −2‖r‖²,
-/// which the quadratic fit uses when there is no energy merit (or it is not descending).
+/// rejected); `r0` is the residual norm at 0. Trials are judged by [`judge`] and shortened by
+/// the Newton core's [`backtrack`].
 pub fn line_search(
     r0: f64,
     energy: Option<EnergyMerit>,
     mut eval: impl FnMut(f64) -> Trial,
     max_trials: usize,
 ) -> LineSearch {
-    let energy = energy.filter(|e| e.slope < 0.0 && e.value.is_finite());
-    let mut t = 1.0;
-    for trial in 0..max_trials {
+    let energy = energy.and_then(EnergyMerit::descending);
+    let mut residual = f64::NAN;
+    let search = backtrack(max_trials, |t| {
         let tr = eval(t);
-        let res_ok = tr.residual.is_finite() && tr.residual <= (1.0 - ARMIJO * t) * r0;
-        let en_ok = energy.is_some_and(|e| {
-            tr.residual.is_finite()
-                && tr.merit.is_finite()
-                && tr.merit <= e.value + ARMIJO * t * e.slope
-        });
-        if res_ok || en_ok {
-            return LineSearch::Accepted {
-                step: t,
-                residual: tr.residual,
-            };
-        }
-        let next = if trial == 0 || !tr.residual.is_finite() {
-            0.5 * t
-        } else {
-            // Quadratic model m(s) = f0 + f0' s + c s² fitted through m(t) = f(t).
-            let (f0, d0, ft) = match energy {
-                Some(e) if tr.merit.is_finite() => (e.value, e.slope, tr.merit),
-                _ => (r0 * r0, -2.0 * r0 * r0, tr.residual * tr.residual),
-            };
-            let c = (ft - f0 - d0 * t) / (t * t);
-            let s = if c > 0.0 { -d0 / (2.0 * c) } else { 0.5 * t };
-            s.clamp(0.1 * t, 0.5 * t)
-        };
-        t = next;
-        if t < 1e-12 {
-            break;
-        }
+        residual = tr.residual;
+        judge(r0, energy, t, tr)
+    });
+    match search.step {
+        Some(step) => LineSearch::Accepted { step, residual },
+        None => LineSearch::Failed,
     }
-    LineSearch::Failed
 }
 
 /// Residual-only search (the DESIGN.md rule); `phi(t)` returns ‖r‖ at step `t`.

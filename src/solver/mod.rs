@@ -3,6 +3,7 @@
 pub mod gmres;
 pub mod kkt;
 pub mod linesearch;
+pub mod newton;
 pub mod ordering;
 pub mod statics;
 pub mod status;

@@ -19,8 +19,9 @@
 //! compressed boundary elements (the shell bench at 20k faces: 9 → 4 iterations,
 //! 22 → 4 factorisations).
 
-use super::kkt::{KktFactorInfo, KktSolver};
-use super::linesearch::{line_search, EnergyMerit, LineSearch, Trial};
+use super::kkt::{KktBlocks, KktFactorInfo, KktSolver};
+use super::linesearch::{judge, EnergyMerit, Trial};
+use super::newton::{self, Check, NewtonLimits, NewtonProblem, Rejection, Verdict};
 use super::status::{SolveReport, SolveStatus};
 use crate::math::sparse::SparseError;
 use crate::math::Energy;
@@ -257,6 +258,105 @@ fn forcing(floor: f64, tolerance: f64, rn: f64, rn_prev: Option<f64>) -> f64 {
 /// solution.
 const KKT_DELTA: f64 = 1e-4;
 
+/// The fixed data of one solve: the energy, the problem, its free-dof set-up and the row
+/// scale γ (N/m) of the KKT system.
+#[derive(Clone, Copy)]
+struct Model<'a> {
+    e: &'a dyn Energy,
+    p: &'a StaticProblem,
+    s: &'a Setup,
+    gamma: f64,
+}
+
+/// A Newton iterate: positions x (all dofs, m), scaled multipliers μ (λ = γ μ), the residual
+/// r over [free dofs; constraint rows] (N), the energy including the work of external forces
+/// (J) and ‖r‖₂ (N).
+struct Point {
+    x: Vec<f64>,
+    mu: Vec<f64>,
+    r: Vec<f64>,
+    energy: f64,
+    rn: f64,
+}
+
+/// Euclidean norm.
+fn norm(v: &[f64]) -> f64 {
+    v.iter().map(|a| a * a).sum::<f64>().sqrt()
+}
+
+impl Model<'_> {
+    /// Free dofs.
+    fn free(&self) -> usize {
+        self.s.free.len()
+    }
+
+    /// Constraint rows.
+    fn rows(&self) -> usize {
+        self.p.constraints.rows
+    }
+
+    /// Residual vector over [free dofs; constraint rows] (N) and the energy (J), at (x, μ).
+    fn residual(&self, x: &[f64], mu: &[f64]) -> (Vec<f64>, f64) {
+        let (p, gamma) = (self.p, self.gamma);
+        let n = x.len();
+        let mut g = vec![0.0; n];
+        let mut energy = self.e.eval(x, Some(&mut g), None, false);
+        if !p.forces.is_empty() {
+            for i in 0..n {
+                g[i] -= p.forces[i];
+                energy -= p.forces[i] * x[i];
+            }
+        }
+        for &(r, d, v) in &p.constraints.entries {
+            g[d] += gamma * v * mu[r];
+        }
+        let cx = p.constraints.apply(x);
+        let mut r: Vec<f64> = self.s.free.iter().map(|&d| g[d]).collect();
+        r.extend(
+            cx.iter()
+                .zip(&p.constraints.rhs)
+                .map(|(a, b)| gamma * (a - b)),
+        );
+        (r, energy)
+    }
+
+    /// The iterate (x, μ) with its residual, energy and residual norm.
+    fn point(&self, x: Vec<f64>, mu: Vec<f64>) -> Point {
+        let (r, energy) = self.residual(&x, &mu);
+        let rn = norm(&r);
+        Point {
+            x,
+            mu,
+            r,
+            energy,
+            rn,
+        }
+    }
+}
+
+/// A report before any work (status `IterationLimit` until the solve says otherwise).
+fn empty_report() -> SolveReport {
+    SolveReport {
+        status: SolveStatus::IterationLimit,
+        iterations: 0,
+        residual: f64::NAN,
+        initial_residual: f64::NAN,
+        constraint_violation: 0.0,
+        energy: f64::NAN,
+        modified_hessian_steps: 0,
+        factorizations: 0,
+        lagged_directions: 0,
+        linear_solves: 0,
+        assembly_s: 0.0,
+        symbolic_s: 0.0,
+        factor_s: 0.0,
+        solve_s: 0.0,
+        line_search_s: 0.0,
+        total_s: 0.0,
+        increments: 1,
+    }
+}
+
 impl StaticSolver {
     /// A solver with `settings` (validated).
     pub fn new(settings: StaticSettings) -> Result<Self, SolverError> {
@@ -278,29 +378,22 @@ impl StaticSolver {
         self.multipliers.iter().map(|m| g * m).collect()
     }
 
-    /// Assemble the regularised KKT matrix from the current Hessian triplets (free dofs of
-    /// `s`, `nc` constraint rows, row scale γ); returns the symbolic-analysis time (s), zero
+    /// Assemble the regularised KKT matrix of the model from the current Hessian triplets
+    /// (positions `x` guide a new ordering); returns the symbolic-analysis time (s), zero
     /// when the cached analysis was reused.
-    fn assemble_kkt(
-        &mut self,
-        s: &Setup,
-        nc: usize,
-        gamma: f64,
-        x: &[f64],
-    ) -> Result<f64, SolverError> {
-        Ok(self.kkt.assemble(
-            &s.free_of,
-            s.free.len(),
-            nc,
-            &self.trip,
-            Some(&self.hvals),
-            &s.cfree,
-            gamma,
-            KKT_DELTA * gamma,
-            Some(x),
-        )?)
+    fn assemble_kkt(&mut self, m: &Model, x: &[f64]) -> Result<f64, SolverError> {
+        Ok(self.kkt.assemble(&KktBlocks {
+            free_of: &m.s.free_of,
+            n_free: m.free(),
+            n_cons: m.rows(),
+            hessian: &self.trip,
+            hessian_values: Some(&self.hvals),
+            constraints: &m.s.cfree,
+            gamma: m.gamma,
+            delta: KKT_DELTA * m.gamma,
+            positions: Some(x),
+        })?)
     }
-
     fn setup(&self, e: &dyn Energy, p: &StaticProblem, x: &[f64]) -> Result<Setup, SolverError> {
         let n = e.dofs();
         if x.len() != n {
@@ -363,38 +456,6 @@ impl StaticSolver {
         })
     }
 
-    /// Residual vector over [free dofs; constraint rows] and the energy, at (x, μ).
-    fn residual(
-        &self,
-        e: &dyn Energy,
-        p: &StaticProblem,
-        s: &Setup,
-        x: &[f64],
-        mu: &[f64],
-        gamma: f64,
-    ) -> (Vec<f64>, f64) {
-        let n = x.len();
-        let mut g = vec![0.0; n];
-        let mut energy = e.eval(x, Some(&mut g), None, false);
-        if !p.forces.is_empty() {
-            for i in 0..n {
-                g[i] -= p.forces[i];
-                energy -= p.forces[i] * x[i];
-            }
-        }
-        for &(r, d, v) in &p.constraints.entries {
-            g[d] += gamma * v * mu[r];
-        }
-        let cx = p.constraints.apply(x);
-        let mut r: Vec<f64> = s.free.iter().map(|&d| g[d]).collect();
-        r.extend(
-            cx.iter()
-                .zip(&p.constraints.rhs)
-                .map(|(a, b)| gamma * (a - b)),
-        );
-        (r, energy)
-    }
-
     /// Evaluate the Hessian (all dofs): values into `self.hvals`, and the triplets with
     /// their indices into `self.trip` the first time in a solve.
     fn hessian(&mut self, e: &dyn Energy, x: &[f64], project: bool) {
@@ -437,9 +498,9 @@ impl StaticSolver {
         self.trip_current = false;
         self.hessian(e, x, false);
         let gamma = self.gamma_for(&s);
-        let nc = p.constraints.rows;
-        let sym_s = self.assemble_kkt(&s, nc, gamma, x)?;
-        let mut info = self.factor_fresh(0.0, false, &s, p, gamma);
+        let m = Model { e, p, s: &s, gamma };
+        let sym_s = self.assemble_kkt(&m, x)?;
+        let mut info = self.factor_fresh(0.0, false, &m);
         info.symbolic_s = sym_s;
         Ok(info)
     }
@@ -447,21 +508,14 @@ impl StaticSolver {
     /// Numeric factorisation of the assembled KKT matrix shifted by `shift` (N/m), recording
     /// whether the factor may serve as a lagged preconditioner (exact, unshifted Hessian,
     /// inertia test passed).
-    fn factor_fresh(
-        &mut self,
-        shift: f64,
-        projected: bool,
-        s: &Setup,
-        p: &StaticProblem,
-        gamma: f64,
-    ) -> KktFactorInfo {
+    fn factor_fresh(&mut self, shift: f64, projected: bool, m: &Model) -> KktFactorInfo {
         let info = self.kkt.factor(shift);
         self.lag_last_iterations = 0;
         self.lag_layout = (info.inertia_ok && !projected && shift == 0.0).then(|| FactorLayout {
-            cfree: s.cfree.clone(),
-            pinned: p.pinned.clone(),
-            dofs: s.free_of.len(),
-            gamma,
+            cfree: m.s.cfree.clone(),
+            pinned: m.p.pinned.clone(),
+            dofs: m.s.free_of.len(),
+            gamma: m.gamma,
         });
         info
     }
@@ -469,44 +523,40 @@ impl StaticSolver {
     /// Assemble the KKT matrix of the Hessian at `x` (element-projected when `project`),
     /// evaluating that Hessian unless `have` (which Hessian `self.hvals` holds at `x`)
     /// says it is current; the times go to `rep`.
-    #[allow(clippy::too_many_arguments)]
     fn assemble_hessian(
         &mut self,
-        e: &dyn Energy,
+        m: &Model,
         x: &[f64],
-        s: &Setup,
-        nc: usize,
-        gamma: f64,
         project: bool,
         have: &mut Option<bool>,
         rep: &mut SolveReport,
     ) -> Result<(), SolverError> {
         let t = Instant::now();
         if *have != Some(project) {
-            self.hessian(e, x, project);
+            self.hessian(m.e, x, project);
             *have = Some(project);
         }
-        let sym_s = self.assemble_kkt(s, nc, gamma, x)?;
+        let sym_s = self.assemble_kkt(m, x)?;
         rep.symbolic_s += sym_s;
         rep.factor_s += sym_s;
         rep.assembly_s += t.elapsed().as_secs_f64() - sym_s;
         Ok(())
     }
 
-    /// Whether the current factor may precondition a direction of the problem `p` (set-up
-    /// `s`, row scale γ): lagging is on, the factor exists, was of the exact unshifted Hessian
-    /// with the right inertia for the same free dofs, constraint matrix and γ, and the last
-    /// lagged direction used at most half of the allowed solves.
-    fn lag_usable(&self, s: &Setup, p: &StaticProblem, gamma: f64) -> bool {
+    /// Whether the current factor may precondition a direction of the model: lagging is on,
+    /// the factor exists, was of the exact unshifted Hessian with the right inertia for the
+    /// same free dofs, constraint matrix and γ, and the last lagged direction used at most
+    /// half of the allowed solves.
+    fn lag_usable(&self, m: &Model) -> bool {
         let cap = self.settings.lagged_solves;
         cap > 0
             && self.kkt.is_factored()
             && 2 * self.lag_last_iterations <= cap
             && self.lag_layout.as_ref().is_some_and(|l| {
-                l.dofs == s.free_of.len()
-                    && l.gamma == gamma
-                    && l.pinned == p.pinned
-                    && l.cfree == s.cfree
+                l.dofs == m.s.free_of.len()
+                    && l.gamma == m.gamma
+                    && l.pinned == m.p.pinned
+                    && l.cfree == m.s.cfree
             })
     }
 
@@ -517,7 +567,7 @@ impl StaticSolver {
     /// dᵀK d on the free dofs; else `rhs` is left alone.
     fn lagged_direction(
         &mut self,
-        s: &Setup,
+        m: &Model,
         lin_tol: f64,
         rhs: &mut [f64],
         rep: &mut SolveReport,
@@ -529,7 +579,7 @@ impl StaticSolver {
         rep.linear_solves += g.iterations;
         rep.solve_s += t.elapsed().as_secs_f64();
         self.lag_last_iterations = g.iterations;
-        let nf = s.free.len();
+        let nf = m.free();
         let ok =
             g.converged && d.iter().all(|v| v.is_finite()) && self.kkt.curvature(&d[..nf]) > 0.0;
         if ok {
@@ -540,6 +590,14 @@ impl StaticSolver {
             self.lag_last_iterations = cap;
         }
         ok
+    }
+
+    /// Solve the factored KKT system for `rhs` in place by GMRES preconditioned with the
+    /// fresh factor, to relative tolerance `lin_tol`.
+    fn solve_fresh(&mut self, rhs: &mut [f64], lin_tol: f64, rep: &mut SolveReport) {
+        let t = Instant::now();
+        rep.linear_solves += self.kkt.solve(rhs, self.settings.refinement_steps, lin_tol);
+        rep.solve_s += t.elapsed().as_secs_f64();
     }
 
     fn gamma_for(&mut self, s: &Setup) -> f64 {
@@ -556,25 +614,51 @@ impl StaticSolver {
         }
     }
 
+    /// Right-hand side of the pinned-motion predictor about `x_prev` (the previous solution
+    /// with the new free values of `x`): `[−(r_x(x_prev) + K_fp Δp); −γ(Cx − d)]` with the
+    /// Hessian at `x_prev` evaluated into `self.hvals`.
+    fn predictor_rhs(
+        &mut self,
+        m: &Model,
+        x: &[f64],
+        x_prev: &[f64],
+        mu: &[f64],
+        dp: &[f64],
+    ) -> Vec<f64> {
+        let (r_prev, _) = m.residual(x_prev, mu);
+        self.hessian(m.e, x_prev, false);
+        let s = m.s;
+        let mut rhs: Vec<f64> = r_prev[..m.free()].iter().map(|v| -v).collect();
+        for (&(row, col, _), &v) in self.trip.iter().zip(&self.hvals) {
+            let fr = s.free_of[row];
+            if fr != PINNED && s.free_of[col] == PINNED {
+                rhs[fr] -= v * dp[col];
+            }
+        }
+        let cx = m.p.constraints.apply(x);
+        rhs.extend(
+            cx.iter()
+                .zip(&m.p.constraints.rhs)
+                .map(|(a, b)| -m.gamma * (a - b)),
+        );
+        rhs
+    }
+
     /// Pinned-motion predictor: when the pinned dofs moved since the previous solve (same
     /// pinned set), take the linearised response of the free dofs to that motion about the
     /// previous state, `[K γCᵀ; γC 0] [Δx; μ⁺] = [−(r_x(x_prev) + K_fp Δp); −γ(Cx − d)]`,
     /// so Newton starts near the new equilibrium instead of from a state whose elements
-    /// at the boundary are suddenly compressed. Returns the predicted (x, μ, r, energy,
-    /// ‖r‖), or `None` when nothing moved or the Hessian there is not positive definite on
-    /// the constraint null space.
-    #[allow(clippy::too_many_arguments, clippy::type_complexity)]
+    /// at the boundary are suddenly compressed. Returns the predicted point, or `None` when
+    /// nothing moved or the Hessian there is not positive definite on the constraint null
+    /// space.
     fn pinned_predictor(
         &mut self,
-        e: &dyn Energy,
-        p: &StaticProblem,
-        s: &Setup,
-        x: &[f64],
-        mu: &[f64],
-        gamma: f64,
+        m: &Model,
+        at: &Point,
         lin_tol: f64,
         rep: &mut SolveReport,
-    ) -> Result<Option<(Vec<f64>, Vec<f64>, Vec<f64>, f64, f64)>, SolverError> {
+    ) -> Result<Option<Point>, SolverError> {
+        let (x, p) = (&at.x[..], m.p);
         if self.last_x.len() != x.len() || self.last_pinned != p.pinned {
             return Ok(None);
         }
@@ -589,58 +673,135 @@ impl StaticSolver {
         if !moved {
             return Ok(None);
         }
-        let (nf, nc) = (s.free.len(), p.constraints.rows);
         let t = Instant::now();
-        let (r_prev, _) = self.residual(e, p, s, &x_prev, mu, gamma);
-        self.hessian(e, &x_prev, false);
-        let mut rhs: Vec<f64> = r_prev[..nf].iter().map(|v| -v).collect();
-        for (&(row, col, _), &v) in self.trip.iter().zip(&self.hvals) {
-            let fr = s.free_of[row];
-            if fr != PINNED && s.free_of[col] == PINNED {
-                rhs[fr] -= v * dp[col];
-            }
-        }
-        let cx = p.constraints.apply(x);
-        rhs.extend(
-            cx.iter()
-                .zip(&p.constraints.rhs)
-                .map(|(a, b)| -gamma * (a - b)),
-        );
-        let sym_s = self.assemble_kkt(s, nc, gamma, x)?;
+        let mut rhs = self.predictor_rhs(m, x, &x_prev, &at.mu, &dp);
+        let sym_s = self.assemble_kkt(m, x)?;
         rep.symbolic_s += sym_s;
         rep.factor_s += sym_s;
         rep.assembly_s += t.elapsed().as_secs_f64() - sym_s;
-        if !(self.lag_usable(s, p, gamma) && self.lagged_direction(s, lin_tol, &mut rhs, rep)) {
-            let info = self.factor_fresh(0.0, false, s, p, gamma);
+        if !(self.lag_usable(m) && self.lagged_direction(m, lin_tol, &mut rhs, rep)) {
+            let info = self.factor_fresh(0.0, false, m);
             rep.factor_s += info.numeric_s;
             rep.factorizations += 1;
             if !info.inertia_ok {
                 return Ok(None);
             }
-            let t = Instant::now();
-            rep.linear_solves += self
-                .kkt
-                .solve(&mut rhs, self.settings.refinement_steps, lin_tol);
-            rep.solve_s += t.elapsed().as_secs_f64();
+            self.solve_fresh(&mut rhs, lin_tol, rep);
         }
         if rhs.iter().any(|v| !v.is_finite()) {
             return Ok(None);
         }
         rep.iterations += 1;
         let t = Instant::now();
+        let nf = m.free();
         let mut xn = x.to_vec();
-        for (k, &d) in s.free.iter().enumerate() {
+        for (k, &d) in m.s.free.iter().enumerate() {
             xn[d] = x_prev[d] + rhs[k];
         }
-        let mn: Vec<f64> = mu.iter().zip(&rhs[nf..]).map(|(m, d)| m + d).collect();
-        let (rn_vec, en) = self.residual(e, p, s, &xn, &mn, gamma);
-        let rnorm = rn_vec.iter().map(|a| a * a).sum::<f64>().sqrt();
+        let mn: Vec<f64> = at.mu.iter().zip(&rhs[nf..]).map(|(m, d)| m + d).collect();
+        let predicted = m.point(xn, mn);
         rep.line_search_s += t.elapsed().as_secs_f64();
-        Ok(Some((xn, mn, rn_vec, en, rnorm)))
+        Ok(Some(predicted))
+    }
+
+    /// Hessians Newton tries for a direction, in order, as (element-projected, shift / γ):
+    /// the exact Hessian; if it is not positive definite on the constraint null space, the
+    /// exact Hessian shifted by τ I (τ grown ×10 from a quarter of the last successful
+    /// shift, or 1e-10 γ, up to γ; keeps the negative-curvature information so Newton
+    /// escapes saddles quickly, as in IPOPT's inertia correction); as a last resort (in
+    /// [`HessianMode::Auto`]) the element-projected Hessian.
+    fn hessian_attempts(&self) -> Vec<(bool, f64)> {
+        let start_shift = (self.last_shift / 4.0).max(1e-10);
+        let shifts: Vec<f64> = (0..12)
+            .map(|k| start_shift * 10f64.powi(k))
+            .filter(|&t| t <= 1.0)
+            .collect();
+        let mut modes: Vec<(bool, f64)> = Vec::new();
+        match self.settings.hessian {
+            HessianMode::Exact => {
+                modes.push((false, 0.0));
+                modes.extend(shifts.iter().map(|&t| (false, t)));
+            }
+            HessianMode::Projected => {
+                modes.push((true, 0.0));
+                modes.extend(shifts.iter().map(|&t| (true, t)));
+            }
+            HessianMode::Auto => {
+                modes.push((false, 0.0));
+                modes.extend(shifts.iter().map(|&t| (false, t)));
+                modes.push((true, 0.0));
+                modes.push((true, 1e-6));
+                modes.push((true, 1.0));
+            }
+        }
+        modes
+    }
+
+    /// Evaluate the Hessian at `x` for γ when neither the settings nor an earlier solve
+    /// gave γ; returns which Hessian `self.hvals` then holds at `x` (see
+    /// [`Self::assemble_hessian`]).
+    fn hessian_for_gamma(
+        &mut self,
+        e: &dyn Energy,
+        x: &[f64],
+        rep: &mut SolveReport,
+    ) -> Option<bool> {
+        if self.gamma.is_some() || self.settings.gamma.is_some() {
+            return None;
+        }
+        let t = Instant::now();
+        self.hessian(e, x, false);
+        rep.assembly_s += t.elapsed().as_secs_f64();
+        Some(false)
+    }
+
+    /// The first Newton iterate: the warm start (x, μ), or the pinned-motion prediction when
+    /// it has the smaller residual. `have_hessian` is cleared when the predictor evaluated
+    /// a Hessian elsewhere.
+    fn start_point(
+        &mut self,
+        m: &Model,
+        x: &[f64],
+        mu: Vec<f64>,
+        have_hessian: &mut Option<bool>,
+        rep: &mut SolveReport,
+    ) -> Result<Point, SolverError> {
+        let st = self.settings;
+        let t = Instant::now();
+        let mut at = m.point(x.to_vec(), mu);
+        rep.line_search_s += t.elapsed().as_secs_f64();
+        rep.initial_residual = at.rn;
+        let lin_tol = forcing(st.linear_tolerance, st.tolerance, at.rn, None);
+        if let Some(predicted) = self.pinned_predictor(m, &at, lin_tol, rep)? {
+            if predicted.rn.is_finite() && predicted.rn < at.rn {
+                at = predicted;
+            }
+            *have_hessian = None;
+        }
+        Ok(at)
+    }
+
+    /// Record the end point: residual, energy and constraint violation into `rep`, the
+    /// positions into `x`, and the multipliers and state for the next solve.
+    fn finish(&mut self, m: &Model, end: Point, x: &mut [f64], rep: &mut SolveReport) {
+        let p = m.p;
+        rep.residual = end.rn;
+        rep.energy = end.energy;
+        let cx = p.constraints.apply(&end.x);
+        rep.constraint_violation = cx
+            .iter()
+            .zip(&p.constraints.rhs)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        x.copy_from_slice(&end.x);
+        self.multipliers = end.mu;
+        self.last_x = end.x;
+        self.last_pinned = p.pinned.clone();
     }
 
     /// Solve for equilibrium from the warm start `x` (updated in place; pinned dofs keep
-    /// their values). Returns the report; check its status.
+    /// their values) by the Newton core ([`super::newton`]) on the KKT system. Returns the
+    /// report; check its status.
     pub fn solve(
         &mut self,
         e: &dyn Energy,
@@ -648,277 +809,39 @@ impl StaticSolver {
         x: &mut [f64],
     ) -> Result<SolveReport, SolverError> {
         let t_start = Instant::now();
-        let st = self.settings;
-        st.validate()?;
+        self.settings.validate()?;
         let s = self.setup(e, p, x)?;
         self.trip_current = false;
-        let (nf, nc) = (s.free.len(), p.constraints.rows);
-        let mut rep = SolveReport {
-            status: SolveStatus::IterationLimit,
-            iterations: 0,
-            residual: f64::NAN,
-            initial_residual: f64::NAN,
-            constraint_violation: 0.0,
-            energy: f64::NAN,
-            modified_hessian_steps: 0,
-            factorizations: 0,
-            lagged_directions: 0,
-            linear_solves: 0,
-            assembly_s: 0.0,
-            symbolic_s: 0.0,
-            factor_s: 0.0,
-            solve_s: 0.0,
-            line_search_s: 0.0,
-            total_s: 0.0,
-            increments: 1,
-        };
-        if self.multipliers.len() != nc {
-            self.multipliers = vec![0.0; nc];
+        let mut rep = empty_report();
+        if self.multipliers.len() != p.constraints.rows {
+            self.multipliers = vec![0.0; p.constraints.rows];
         }
-        let mut have_hessian = None;
-        if self.gamma.is_none() && st.gamma.is_none() {
-            let t = Instant::now();
-            self.hessian(e, x, false);
-            rep.assembly_s += t.elapsed().as_secs_f64();
-            have_hessian = Some(false);
-        }
+        let mut have_hessian = self.hessian_for_gamma(e, x, &mut rep);
         let gamma = self.gamma_for(&s);
-        let mut mu = std::mem::take(&mut self.multipliers);
-        let t = Instant::now();
-        let (mut r, mut energy) = self.residual(e, p, &s, x, &mu, gamma);
-        rep.line_search_s += t.elapsed().as_secs_f64();
-        let norm = |v: &[f64]| v.iter().map(|a| a * a).sum::<f64>().sqrt();
-        let mut rn = norm(&r);
-        let mut rn_prev: Option<f64> = None;
-        rep.initial_residual = rn;
-        if let Some((xp, mp, rp, ep, rnp)) = self.pinned_predictor(
-            e,
-            p,
-            &s,
-            x,
-            &mu,
-            gamma,
-            forcing(st.linear_tolerance, st.tolerance, rn, None),
-            &mut rep,
-        )? {
-            if rnp.is_finite() && rnp < rn {
-                x.copy_from_slice(&xp);
-                mu = mp;
-                r = rp;
-                energy = ep;
-                rn = rnp;
-            }
-            have_hessian = None;
-        }
-        loop {
-            if !rn.is_finite() {
-                rep.status = SolveStatus::NotFinite;
-                break;
-            }
-            if rn <= st.tolerance {
-                rep.status = SolveStatus::Converged;
-                break;
-            }
-            if rep.iterations >= st.max_iterations {
-                rep.status = SolveStatus::IterationLimit;
-                break;
-            }
-            // Newton direction with the inertia-controlled Hessian choice.
-            // Attempts (project, shift/γ): exact Hessian; if it is not positive definite on
-            // the constraint null space, the exact Hessian shifted by τ I (τ grown ×30 from a
-            // quarter of the last successful shift, or 1e-8 γ; keeps the negative-curvature information
-            // so Newton escapes saddles quickly, as in IPOPT's inertia correction); as a last
-            // resort the element-projected Hessian.
-            let start_shift = (self.last_shift / 4.0).max(1e-10);
-            let shifts: Vec<f64> = (0..12)
-                .map(|k| start_shift * 10f64.powi(k))
-                .filter(|&t| t <= 1.0)
-                .collect();
-            let mut modes: Vec<(bool, f64)> = Vec::new();
-            match st.hessian {
-                HessianMode::Exact => {
-                    modes.push((false, 0.0));
-                    modes.extend(shifts.iter().map(|&t| (false, t)));
-                }
-                HessianMode::Projected => {
-                    modes.push((true, 0.0));
-                    modes.extend(shifts.iter().map(|&t| (true, t)));
-                }
-                HessianMode::Auto => {
-                    modes.push((false, 0.0));
-                    modes.extend(shifts.iter().map(|&t| (false, t)));
-                    modes.push((true, 0.0));
-                    modes.push((true, 1e-6));
-                    modes.push((true, 1.0));
-                }
-            }
-            let lin_tol = forcing(st.linear_tolerance, st.tolerance, rn, rn_prev);
-            let mut used = false;
-            let mut assembled: Option<bool> = None;
-            let mut step: Vec<f64> = r.iter().map(|v| -v).collect();
-            // The multiplier block solves for μ⁺ directly: rhs is −γ(Cx − d) there.
-            // First the lagged factor (exact Hessian), when it may be used.
-            let mut lagged = false;
-            if st.hessian != HessianMode::Projected && self.lag_usable(&s, p, gamma) {
-                self.assemble_hessian(e, x, &s, nc, gamma, false, &mut have_hessian, &mut rep)?;
-                assembled = Some(false);
-                lagged = self.lagged_direction(&s, lin_tol, &mut step, &mut rep);
-                if lagged {
-                    modes.clear();
-                    used = true;
-                }
-            }
-            for (k, &(project, shift)) in modes.iter().enumerate() {
-                let shift: f64 = shift;
-                if have_hessian != Some(project) || assembled != Some(project) {
-                    self.assemble_hessian(
-                        e,
-                        x,
-                        &s,
-                        nc,
-                        gamma,
-                        project,
-                        &mut have_hessian,
-                        &mut rep,
-                    )?;
-                    assembled = Some(project);
-                }
-                let info = self.factor_fresh(shift * gamma, project, &s, p, gamma);
-                rep.factor_s += info.numeric_s;
-                rep.factorizations += 1;
-                let last = k + 1 == modes.len();
-                if info.inertia_ok || (last && self.kkt.is_factored()) {
-                    if k > 0 {
-                        rep.modified_hessian_steps += 1;
-                    }
-                    if !project {
-                        self.last_shift = shift;
-                    }
-                    used = true;
-                    break;
-                }
-            }
-            have_hessian = None;
-            if !used {
-                rep.status = SolveStatus::NotFinite;
-                break;
-            }
-            if !lagged {
-                let t = Instant::now();
-                rep.linear_solves += self.kkt.solve(&mut step, st.refinement_steps, lin_tol);
-                rep.solve_s += t.elapsed().as_secs_f64();
-            }
-            // rhs of the x block was −(∇E − f + γCᵀμ); the solution's multiplier part is
-            // then μ⁺ − μ directly (the γCᵀμ term moved to the rhs).
-            if step.iter().any(|v| !v.is_finite()) {
-                rep.status = SolveStatus::NotFinite;
-                break;
-            }
-            rep.iterations += 1;
-            let t = Instant::now();
-            let x0: Vec<f64> = x.to_vec();
-            let mu0 = mu.clone();
-            let trial = |a: f64, x: &mut [f64], mu: &mut [f64]| {
-                for (k, &d) in s.free.iter().enumerate() {
-                    x[d] = x0[d] + a * step[k];
-                }
-                for (i, m) in mu.iter_mut().enumerate() {
-                    *m = mu0[i] + a * step[nf + i];
-                }
-            };
-            let mut best: Option<(Vec<f64>, f64)> = None;
-            // Energy merit ψ(t) = E − fᵀx + γ μ⁺ᵀ (Cx − d) with μ⁺ = μ + Δμ fixed;
-            // ψ'(0) = r_xᵀ Δx + γ Δμᵀ C Δx.
-            let merit0 = if st.energy_merit {
-                let mut cdx = vec![0.0; nc];
-                for &(row, j, v) in &s.cfree {
-                    cdx[row] += v * step[j];
-                }
-                let slope = r[..nf]
-                    .iter()
-                    .zip(&step[..nf])
-                    .map(|(a, b)| a * b)
-                    .sum::<f64>()
-                    + gamma * step[nf..].iter().zip(&cdx).map(|(a, b)| a * b).sum::<f64>();
-                let viol = p.constraints.apply(x);
-                let value = energy
-                    + gamma
-                        * viol
-                            .iter()
-                            .zip(&p.constraints.rhs)
-                            .zip(&mu0)
-                            .zip(&step[nf..])
-                            .map(|(((cx, d), m), dm)| (m + dm) * (cx - d))
-                            .sum::<f64>();
-                Some(EnergyMerit { value, slope })
-            } else {
-                None
-            };
-            let mu_plus: Vec<f64> = mu0.iter().zip(&step[nf..]).map(|(m, d)| m + d).collect();
-            let ls = {
-                let mut xt = x0.clone();
-                let mut mt = mu0.clone();
-                let selfr = &*self;
-                line_search(
-                    rn,
-                    merit0,
-                    |a| {
-                        trial(a, &mut xt, &mut mt);
-                        let (rt, et) = selfr.residual(e, p, &s, &xt, &mt, gamma);
-                        let n = norm(&rt);
-                        let merit = if merit0.is_some() {
-                            let cx = p.constraints.apply(&xt);
-                            et + gamma
-                                * cx.iter()
-                                    .zip(&p.constraints.rhs)
-                                    .zip(&mu_plus)
-                                    .map(|((c, d), m)| m * (c - d))
-                                    .sum::<f64>()
-                        } else {
-                            f64::NAN
-                        };
-                        best = Some((rt, et));
-                        Trial { residual: n, merit }
-                    },
-                    st.max_line_search,
-                )
-            };
-            rep.line_search_s += t.elapsed().as_secs_f64();
-            match ls {
-                LineSearch::Accepted { step: a, residual } => {
-                    trial(a, x, &mut mu);
-                    let (rt, et) = best.expect("evaluated");
-                    r = rt;
-                    energy = et;
-                    rn_prev = Some(rn);
-                    rn = residual;
-                }
-                // A lagged direction that the line search rejects is retried from the same
-                // point with a fresh factorisation.
-                LineSearch::Failed if lagged => {
-                    self.lag_layout = None;
-                }
-                LineSearch::Failed => {
-                    rep.status = SolveStatus::LineSearchFailed;
-                    break;
-                }
-            }
-        }
-        rep.residual = rn;
-        rep.energy = energy;
-        let cx = p.constraints.apply(x);
-        rep.constraint_violation = cx
-            .iter()
-            .zip(&p.constraints.rhs)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0, f64::max);
-        self.multipliers = mu;
-        self.last_x = x.to_vec();
-        self.last_pinned = p.pinned.clone();
+        let m = Model { e, p, s: &s, gamma };
+        let mu = std::mem::take(&mut self.multipliers);
+        let at = self.start_point(&m, x, mu, &mut have_hessian, &mut rep)?;
+        let limits = NewtonLimits {
+            max_iterations: self.settings.max_iterations.saturating_sub(rep.iterations),
+            max_trials: self.settings.max_line_search,
+        };
+        let mut problem = StaticNewton {
+            solver: self,
+            model: m,
+            at,
+            rn_prev: None,
+            have_hessian,
+            rep: &mut rep,
+            line: SearchLine::default(),
+        };
+        let record = newton::solve(&mut problem, &limits)?;
+        let end = problem.at;
+        rep.status = record.status;
+        rep.iterations += record.iterations;
+        self.finish(&m, end, x, &mut rep);
         rep.total_s = t_start.elapsed().as_secs_f64();
         Ok(rep)
     }
-
     /// [`StaticSolver::solve`] with load continuation: when the direct solve stops at the
     /// iteration limit or in a failed line search, start again from the same state (`x` and
     /// multipliers as given) and apply the change of load, from `rhs_from` (the constraint
@@ -1008,6 +931,236 @@ impl StaticSolver {
             }
         }
         Ok(total)
+    }
+}
+
+/// The search line of the last Newton direction.
+#[derive(Default)]
+struct SearchLine {
+    /// The direction [Δx over free dofs (m); μ⁺ − μ].
+    step: Vec<f64>,
+    /// It came from a lagged factor (a rejected search retries with a fresh one).
+    lagged: bool,
+    /// Whether trials evaluate the energy merit ψ (the settings ask for it).
+    with_merit: bool,
+    /// ψ(0) and ψ'(0) when they can judge steps (ψ'(0) < 0).
+    merit0: Option<EnergyMerit>,
+    /// μ⁺ = μ + Δμ, held fixed in ψ.
+    mu_plus: Vec<f64>,
+    /// The last trial point evaluated.
+    trial: Option<Point>,
+}
+
+impl SearchLine {
+    /// The line from `at` along `step`. The energy merit (when `with_merit`) is
+    /// ψ(t) = E − fᵀx + γ μ⁺ᵀ (Cx − d) with μ⁺ = μ + Δμ fixed, so
+    /// ψ'(0) = r_xᵀ Δx + γ Δμᵀ C Δx.
+    fn new(m: &Model, at: &Point, step: Vec<f64>, lagged: bool, with_merit: bool) -> Self {
+        let (nf, nc, gamma) = (m.free(), m.rows(), m.gamma);
+        let merit0 = if with_merit {
+            let mut cdx = vec![0.0; nc];
+            for &(row, j, v) in &m.s.cfree {
+                cdx[row] += v * step[j];
+            }
+            let slope = at.r[..nf]
+                .iter()
+                .zip(&step[..nf])
+                .map(|(a, b)| a * b)
+                .sum::<f64>()
+                + gamma * step[nf..].iter().zip(&cdx).map(|(a, b)| a * b).sum::<f64>();
+            let viol = m.p.constraints.apply(&at.x);
+            let value = at.energy
+                + gamma
+                    * viol
+                        .iter()
+                        .zip(&m.p.constraints.rhs)
+                        .zip(&at.mu)
+                        .zip(&step[nf..])
+                        .map(|(((cx, d), m), dm)| (m + dm) * (cx - d))
+                        .sum::<f64>();
+            Some(EnergyMerit { value, slope })
+        } else {
+            None
+        };
+        let mu_plus: Vec<f64> = at.mu.iter().zip(&step[nf..]).map(|(m, d)| m + d).collect();
+        Self {
+            step,
+            lagged,
+            with_merit,
+            merit0: merit0.and_then(EnergyMerit::descending),
+            mu_plus,
+            trial: None,
+        }
+    }
+
+    /// The point at step length `t` from `at` (free dofs and multipliers move).
+    fn point_at(&self, m: &Model, at: &Point, t: f64) -> Point {
+        let nf = m.free();
+        let mut x = at.x.clone();
+        for (k, &d) in m.s.free.iter().enumerate() {
+            x[d] = at.x[d] + t * self.step[k];
+        }
+        let mu: Vec<f64> = (0..at.mu.len())
+            .map(|i| at.mu[i] + t * self.step[nf + i])
+            .collect();
+        m.point(x, mu)
+    }
+
+    /// The energy merit ψ at `pt` (J), NaN when the line has none.
+    fn merit(&self, m: &Model, pt: &Point) -> f64 {
+        if !self.with_merit {
+            return f64::NAN;
+        }
+        let cx = m.p.constraints.apply(&pt.x);
+        pt.energy
+            + m.gamma
+                * cx.iter()
+                    .zip(&m.p.constraints.rhs)
+                    .zip(&self.mu_plus)
+                    .map(|((c, d), m)| m * (c - d))
+                    .sum::<f64>()
+    }
+}
+
+/// One quasi-static solve as a [`NewtonProblem`]: the solver's linear algebra (KKT LDLᵀ
+/// with inertia control, lagged factors, GMRES) and the current iterate.
+struct StaticNewton<'a, 'm> {
+    solver: &'a mut StaticSolver,
+    model: Model<'m>,
+    at: Point,
+    /// ‖r‖ before the last accepted step (N), for the inexact-Newton forcing term.
+    rn_prev: Option<f64>,
+    /// Which Hessian the solver holds at `at.x` (`Some(projected)`), if any.
+    have_hessian: Option<bool>,
+    rep: &'a mut SolveReport,
+    line: SearchLine,
+}
+
+impl StaticNewton<'_, '_> {
+    /// The direction by GMRES with the lagged factor of the exact Hessian, when that factor
+    /// may be used: returns whether `step` now holds it, and which Hessian (`Some(false)`:
+    /// exact) was assembled for the attempt.
+    fn try_lagged(
+        &mut self,
+        lin_tol: f64,
+        step: &mut [f64],
+    ) -> Result<(bool, Option<bool>), SolverError> {
+        let m = &self.model;
+        if self.solver.settings.hessian == HessianMode::Projected || !self.solver.lag_usable(m) {
+            return Ok((false, None));
+        }
+        let rep = &mut *self.rep;
+        self.solver
+            .assemble_hessian(m, &self.at.x, false, &mut self.have_hessian, rep)?;
+        Ok((
+            self.solver.lagged_direction(m, lin_tol, step, rep),
+            Some(false),
+        ))
+    }
+
+    /// Factorise the KKT matrix with the first Hessian of
+    /// [`StaticSolver::hessian_attempts`] that has the right inertia (or the last one, when
+    /// none does but it factorised); `assembled` says which Hessian the assembled matrix
+    /// holds. Returns whether a factor was made.
+    fn factor_with_inertia_control(
+        &mut self,
+        mut assembled: Option<bool>,
+    ) -> Result<bool, SolverError> {
+        let (m, solver, rep) = (&self.model, &mut *self.solver, &mut *self.rep);
+        let modes = solver.hessian_attempts();
+        for (k, &(project, shift)) in modes.iter().enumerate() {
+            if self.have_hessian != Some(project) || assembled != Some(project) {
+                solver.assemble_hessian(m, &self.at.x, project, &mut self.have_hessian, rep)?;
+                assembled = Some(project);
+            }
+            let info = solver.factor_fresh(shift * m.gamma, project, m);
+            rep.factor_s += info.numeric_s;
+            rep.factorizations += 1;
+            let last = k + 1 == modes.len();
+            if info.inertia_ok || (last && solver.kkt.is_factored()) {
+                if k > 0 {
+                    rep.modified_hessian_steps += 1;
+                }
+                if !project {
+                    solver.last_shift = shift;
+                }
+                return Ok(true);
+            }
+        }
+        Ok(false)
+    }
+}
+
+impl NewtonProblem for StaticNewton<'_, '_> {
+    type Error = SolverError;
+
+    fn check(&mut self) -> Check {
+        if !self.at.rn.is_finite() {
+            Check::NotFinite
+        } else if self.at.rn <= self.solver.settings.tolerance {
+            Check::Converged
+        } else {
+            Check::Continue
+        }
+    }
+
+    /// Solve `[K γCᵀ; γC 0] [Δx; μ⁺] = [−(∇E − f + γCᵀμ); −γ(Cx − d)]`: with the γCᵀμ term
+    /// on the right-hand side the multiplier part of the solution is μ⁺ − μ directly.
+    fn direction(&mut self, _iteration: usize) -> Result<Option<SolveStatus>, SolverError> {
+        let st = self.solver.settings;
+        let lin_tol = forcing(st.linear_tolerance, st.tolerance, self.at.rn, self.rn_prev);
+        let mut step: Vec<f64> = self.at.r.iter().map(|v| -v).collect();
+        let (lagged, assembled) = self.try_lagged(lin_tol, &mut step)?;
+        let factored = lagged || self.factor_with_inertia_control(assembled)?;
+        self.have_hessian = None;
+        if !factored {
+            return Ok(Some(SolveStatus::NotFinite));
+        }
+        if !lagged {
+            self.solver.solve_fresh(&mut step, lin_tol, self.rep);
+        }
+        if step.iter().any(|v| !v.is_finite()) {
+            return Ok(Some(SolveStatus::NotFinite));
+        }
+        let t = Instant::now();
+        self.line = SearchLine::new(&self.model, &self.at, step, lagged, st.energy_merit);
+        self.rep.line_search_s += t.elapsed().as_secs_f64();
+        Ok(None)
+    }
+
+    fn trial(&mut self, t: f64) -> Verdict {
+        let clock = Instant::now();
+        let pt = self.line.point_at(&self.model, &self.at, t);
+        let merit = self.line.merit(&self.model, &pt);
+        let tr = Trial {
+            residual: pt.rn,
+            merit,
+        };
+        self.line.trial = Some(pt);
+        self.rep.line_search_s += clock.elapsed().as_secs_f64();
+        judge(self.at.rn, self.line.merit0, t, tr)
+    }
+
+    fn accept(&mut self, _t: f64) -> Option<SolveStatus> {
+        let pt = self
+            .line
+            .trial
+            .take()
+            .expect("the accepted trial was evaluated");
+        self.rn_prev = Some(self.at.rn);
+        self.at = pt;
+        None
+    }
+
+    /// A lagged direction that the line search rejects is retried from the same point
+    /// with a fresh factorisation; a fresh one ends the solve.
+    fn rejected(&mut self) -> Rejection {
+        if self.line.lagged {
+            self.solver.lag_layout = None;
+            Rejection::Retry
+        } else {
+            Rejection::Stop(SolveStatus::LineSearchFailed)
+        }
     }
 }
 
@@ -1332,7 +1485,13 @@ mod tests {
             let mut x = start.clone();
             assert!(warm.solve(&QUARTIC, &base, &mut x).unwrap().status == SolveStatus::Converged);
             let set_up = warm.setup(energy.as_ref(), &problem, &x).unwrap();
-            assert_eq!(warm.lag_usable(&set_up, &problem, 1.0), lag, "case {k}");
+            let model = Model {
+                e: energy.as_ref(),
+                p: &problem,
+                s: &set_up,
+                gamma: 1.0,
+            };
+            assert_eq!(warm.lag_usable(&model), lag, "case {k}");
             let rep = warm.solve(energy.as_ref(), &problem, &mut x).unwrap();
             assert_eq!(rep.status, SolveStatus::Converged, "case {k}: {rep:?}");
             if lag {
