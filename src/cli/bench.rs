@@ -53,6 +53,23 @@ pub enum BenchCommand {
         #[arg(long)]
         force: bool,
     },
+    /// Skin selection: the rig run with only the skin some frame compresses simulated
+    /// (`skin.simulate = "compressed"`, the default) against the whole skin, in one process:
+    /// skin time, share simulated and the phase-free wrinkle amplitude difference per 2λ.
+    #[command(
+        after_help = "Example:\n  furrow bench select --rig rigs/face.glb --frames 0:40\n  furrow bench select --rig rigs/head.glb --frames 0:10 --json"
+    )]
+    Select {
+        /// The rig.
+        #[arg(long, default_value = "rigs/face.glb")]
+        rig: std::path::PathBuf,
+        /// Frames to run, `A:B` (end exclusive).
+        #[arg(long, default_value = "0:40")]
+        frames: String,
+        /// Frames per second at which the clip is sampled.
+        #[arg(long, default_value_t = 30.0)]
+        fps: f64,
+    },
     /// Activation fit: 52 muscles on a face lattice of about N cells, a 335-frame clip.
     #[command(after_help = "Example:\n  furrow bench fit\n  furrow bench fit --cells 2000 --json")]
     Fit {
@@ -116,6 +133,7 @@ pub fn run(c: BenchCommand, out: &Output) -> anyhow::Result<()> {
             no_demo,
             force,
         } => suite(&dir, faces, elements, cells, !no_demo, force, out)?,
+        BenchCommand::Select { rig, frames, fps } => select(&rig, &frames, fps, out)?,
         BenchCommand::Fit { cells, gn_frames } => {
             anyhow::ensure!(
                 (1..=1_000_000).contains(&cells),
@@ -132,6 +150,21 @@ pub fn run(c: BenchCommand, out: &Output) -> anyhow::Result<()> {
             );
         }
     }
+    Ok(())
+}
+
+/// `furrow bench select`: the selected skin against the whole skin on a rig.
+fn select(rig: &std::path::Path, frames: &str, fps: f64, out: &Output) -> anyhow::Result<()> {
+    let loaded = crate::io::load::load(rig, &Default::default())?;
+    let count = loaded.frame_weights(fps).len();
+    let opts = crate::pipeline::RunOptions {
+        scene: crate::scene::Scene::default(),
+        scene_path: None,
+        fps,
+        frames: Some(crate::pipeline::frames::FrameRange::parse(frames, count)?),
+    };
+    let c = crate::studies::locality::compare_selection(&loaded, &opts)?;
+    print(out, "bench select", &serde_json::to_value(&c)?);
     Ok(())
 }
 

@@ -201,6 +201,42 @@ impl Clusters {
         })
     }
 
+    /// The clusters on a part of the mesh: `local[v]` is vertex v's index in the part (`None`
+    /// outside it). A cluster is kept when its centre lies in the part and at least
+    /// `min_share` of its weight does; its weights are restricted to the part and renormalised.
+    /// Inside the part, away from its border, the clusters are exactly the whole mesh's, so the
+    /// constraint layout does not depend on where the part was cut.
+    pub fn restrict(&self, local: &[Option<usize>], min_share: f64) -> Self {
+        let count = local.iter().filter(|l| l.is_some()).count();
+        let mut kept_weight = vec![0.0; self.len()];
+        for &(c, v, w) in &self.entries {
+            if local[v].is_some() {
+                kept_weight[c] += w;
+            }
+        }
+        let mut renumber = vec![None; self.len()];
+        let mut centres = Vec::new();
+        for (c, &centre) in self.centres.iter().enumerate() {
+            if let Some(lc) = local[centre] {
+                if kept_weight[c] >= min_share {
+                    renumber[c] = Some(centres.len());
+                    centres.push(lc);
+                }
+            }
+        }
+        let entries = self
+            .entries
+            .iter()
+            .filter_map(|&(c, v, w)| Some((renumber[c]?, local[v]?, w / kept_weight[c])))
+            .collect();
+        Self {
+            sigma: self.sigma,
+            centres,
+            entries,
+            vertices: count,
+        }
+    }
+
     /// Number of clusters.
     pub fn len(&self) -> usize {
         self.centres.len()

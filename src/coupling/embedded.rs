@@ -254,6 +254,22 @@ impl EmbeddedShell {
         Ok(())
     }
 
+    /// Replace the constraint clusters (e.g. the whole skin's clusters restricted to this
+    /// part, [`Clusters::restrict`]); they must be over this skin's vertices. Call before the
+    /// first solve.
+    pub fn set_clusters(&mut self, clusters: Clusters) -> anyhow::Result<()> {
+        if clusters.vertices != self.rows.len() {
+            bail!(
+                "clusters over {} vertices for a skin of {}",
+                clusters.vertices,
+                self.rows.len()
+            );
+        }
+        self.problem.constraints = cluster_constraints(&clusters);
+        self.clusters = clusters;
+        Ok(())
+    }
+
     /// Number of skin vertices.
     pub fn vertex_count(&self) -> usize {
         self.rows.len()

@@ -4,46 +4,10 @@
 use super::dynamics::AUTO_CG_REL_TOL;
 use super::{BackwardEuler, Interior, LinearSolver, Material, StepSettings};
 use crate::lattice::{ElementOrder, Lattice, LatticeSettings};
-use crate::mesh::TriMesh;
-use nalgebra::Vector3;
 use std::time::Instant;
 
-/// Closed box mesh [0, a]³ (a in m) with each face split into m × m quads (outward normals).
-pub fn cube_mesh(a: f64, m: usize) -> TriMesh {
-    let mut pos = Vec::new();
-    let mut tris = Vec::new();
-    let frames: [(usize, f64, Vector3<f64>, Vector3<f64>); 6] = [
-        (0, 1.0, Vector3::y(), Vector3::z()),
-        (0, 0.0, Vector3::z(), Vector3::y()),
-        (1, 1.0, Vector3::z(), Vector3::x()),
-        (1, 0.0, Vector3::x(), Vector3::z()),
-        (2, 1.0, Vector3::x(), Vector3::y()),
-        (2, 0.0, Vector3::y(), Vector3::x()),
-    ];
-    let mut key = std::collections::HashMap::new();
-    for (axis, side, t1, t2) in frames {
-        let mut idx = vec![vec![0usize; m + 1]; m + 1];
-        for (i, row) in idx.iter_mut().enumerate() {
-            for (j, id) in row.iter_mut().enumerate() {
-                let mut u = t1 * (i as f64 / m as f64) + t2 * (j as f64 / m as f64);
-                u[axis] = side;
-                let k = [0, 1, 2].map(|d| (u[d] * m as f64).round() as i64);
-                *id = *key.entry(k).or_insert_with(|| {
-                    pos.push(u * a);
-                    pos.len() - 1
-                });
-            }
-        }
-        for i in 0..m {
-            for j in 0..m {
-                let (p, q, r, s) = (idx[i][j], idx[i + 1][j], idx[i + 1][j + 1], idx[i][j + 1]);
-                tris.push([p, q, r]);
-                tris.push([p, r, s]);
-            }
-        }
-    }
-    TriMesh::new(pos, tris)
-}
+/// The benchmark cube's surface (see [`crate::mesh::cube_mesh`]).
+pub use crate::mesh::cube_mesh;
 
 /// Lattice of n³ quadratic cells of side `h` (m) over the box [0, n h]³ ([`cube_mesh`]): the
 /// benchmark cube.

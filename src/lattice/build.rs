@@ -884,10 +884,10 @@ mod fingerprint {
     #[ignore = "prints a hash for refactoring checks; slow-ish"]
     fn print_lattice_fingerprints() {
         let face = crate::rig::face::generate().mesh;
-        let cube = crate::fem::bench::cube_mesh(0.4, 4);
+        let cube = crate::mesh::cube_mesh(0.4, 4);
         let two = {
-            let a = crate::fem::bench::cube_mesh(0.25, 5);
-            let mut b = crate::fem::bench::cube_mesh(0.24, 5);
+            let a = crate::mesh::cube_mesh(0.25, 5);
+            let mut b = crate::mesh::cube_mesh(0.24, 5);
             b.positions.iter_mut().for_each(|p| p.x += 0.26);
             let n = a.positions.len();
             let mut m = a.clone();

@@ -72,6 +72,13 @@ pub struct SkinSection {
     /// The part of the skin to simulate: boxes in world space (m); outside them the skin
     /// follows the interior (the embedding). Empty: all of it.
     pub mask: Vec<Aabb>,
+    /// Which skin the shell simulates: `compressed` (default: the triangles some frame of the
+    /// clip compresses past `compression_threshold`, plus a margin of one λ; the rest follows
+    /// the blend shapes exactly) or `all`.
+    pub simulate: Option<String>,
+    /// Compression (1 − smaller principal stretch, dimensionless) beyond which a triangle can
+    /// wrinkle; default half the bilayer's onset strain ε_c = ¼ (3 Ē_q / Ē_x)^(2/3).
+    pub compression_threshold: Option<f64>,
 }
 
 /// An axis-aligned box in world space (m).
@@ -331,6 +338,16 @@ impl Scene {
         if let Some(v) = s.vertices_per_wavelength {
             if !(v.is_finite() && (2.0..=64.0).contains(&v)) {
                 bail!("`skin.vertices_per_wavelength` must lie in [2, 64], got {v}");
+            }
+        }
+        if let Some(m) = s.simulate.as_deref() {
+            if !matches!(m, "compressed" | "all") {
+                bail!("`skin.simulate` = \"{m}\": use \"compressed\" (the skin some frame compresses) or \"all\"");
+            }
+        }
+        if let Some(t) = s.compression_threshold {
+            if !(t.is_finite() && (0.0..0.5).contains(&t)) {
+                bail!("`skin.compression_threshold` must lie in [0, 0.5) (a strain: 0.01 = 1 %), got {t}");
             }
         }
         Ok(())

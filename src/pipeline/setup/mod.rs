@@ -12,6 +12,7 @@ pub mod interior;
 pub mod lattice;
 pub mod muscles;
 pub mod refine;
+pub mod select;
 pub mod skin;
 pub mod weld;
 
@@ -52,6 +53,9 @@ pub struct Model {
     pub sigma: f64,
     /// The tracking energy towards the blend-shape target.
     pub tracking: Tracking,
+    /// The skin the `select` stage left out, riding on the interior (x = B q), and its
+    /// stiffness Bᵀ K_x B at rest (N/m): the interior keeps that skin's elasticity.
+    pub left_out: Option<(skin::SimulatedSkin, skin::Stiffness)>,
 }
 
 /// What the frame step advances.
@@ -98,17 +102,17 @@ pub fn set_up(
     let (refined, record) = refine::refine_skin(&input, &scene.skin, &path)?;
     log.stages.push(record);
     progress("setup", 2, 4);
-    let triangles = skin::select_triangles(&refined.mesh, scene, &path, &mut log.warnings);
-    let simulated = if triangles.is_empty() {
-        log.stages.push(skin::skipped_shell(scene));
-        None
-    } else {
-        let nodes = lattice.node_count();
-        let lambda = plan.skin.lambda;
-        let (s, record) = skin::build_shell(&refined, &triangles, nodes, scene, lambda, &path)?;
-        log.stages.push(record);
-        Some(s)
+    let (selection, record) = select::select_skin(rig, scene, plan, &welded);
+    log.stages.push(record);
+    let nodes = lattice.node_count();
+    let input = skin::ShellInput {
+        refined: &refined,
+        nodes,
+        scene,
+        lambda: plan.skin.lambda,
+        path: &path,
     };
+    let (simulated, left_out) = simulated_skin(&input, selection.as_ref(), log)?;
     progress("setup", 3, 4);
     let stepper = interior::stepper(&lattice, scene, plan)?;
     let young = scene.interior.material()?.young;
@@ -149,6 +153,7 @@ pub fn set_up(
         sim_vertices,
         sigma,
         tracking,
+        left_out,
     };
     let state = State {
         interior: stepper,
@@ -156,6 +161,36 @@ pub fn set_up(
         muscles,
     };
     Ok((model, state))
+}
+
+/// The left-out skin and its rest stiffness, when the selection leaves some out.
+type LeftOut = Option<(skin::SimulatedSkin, skin::Stiffness)>;
+
+/// The simulated skin (the selected, non-degenerate triangles inside the mask, with its shell
+/// and clusters) and the rest stiffness of the skin the selection left out; records the
+/// `clusters` stage, or the `shell` stage as skipped.
+fn simulated_skin(
+    s: &skin::ShellInput,
+    selection: Option<&select::Selection>,
+    log: &mut Log,
+) -> anyhow::Result<(Option<skin::SimulatedSkin>, LeftOut)> {
+    let mesh = &s.refined.mesh;
+    let candidates = skin::select_triangles(mesh, s.scene, s.path, &mut log.warnings);
+    let per = 4usize.pow(s.refined.levels as u32);
+    let (triangles, left_out): (Vec<usize>, Vec<usize>) = candidates
+        .iter()
+        .partition(|&&t| selection.is_none_or(|sel| sel.simulated[t / per]));
+    let shell = if triangles.is_empty() {
+        let compressed = selection.is_none_or(|sel| sel.simulated.contains(&true));
+        log.stages.push(skin::skipped_shell(s.scene, compressed));
+        None
+    } else {
+        let (sim, record) = skin::build_selected_shell(s, &candidates, &triangles)?;
+        log.stages.push(record);
+        Some(sim)
+    };
+    let rest = skin::left_out_skin(s, &left_out)?;
+    Ok((shell, rest))
 }
 
 /// Small inputs for the stages' unit tests.
@@ -266,7 +301,14 @@ pub(crate) mod test_support {
         let (refined, _) = refine::refine_skin(&input, &scene.skin, path).unwrap();
         let triangles = skin::select_triangles(&refined.mesh, &scene, path, &mut Vec::new());
         let nodes = lattice.node_count();
-        let (sim, _) = skin::build_shell(&refined, &triangles, nodes, &scene, 0.01, path).unwrap();
+        let input = skin::ShellInput {
+            refined: &refined,
+            nodes,
+            scene: &scene,
+            lambda: 0.01,
+            path,
+        };
+        let (sim, _) = skin::build_shell(&input, &triangles).unwrap();
         let stepper = interior::stepper(&lattice, &scene, &plan).unwrap();
         let young = scene.interior.material().unwrap().young;
         let cell = lattice.cell_size;
@@ -291,6 +333,7 @@ pub(crate) mod test_support {
             sim_vertices: sim.vertices,
             sigma: sim.sigma,
             tracking,
+            left_out: None,
         };
         let state = State {
             interior: stepper,

@@ -27,6 +27,8 @@ pub struct RefinedSkin {
     pub rows: Vec<Vec<(usize, f64)>>,
     /// Skin thickness per refined triangle (m), when the scene varies it.
     pub thickness: Option<Vec<f64>>,
+    /// Subdivision levels: refined triangle t lies in welded triangle t / 4^levels.
+    pub levels: usize,
 }
 
 /// What the refinement works from: the loaded face, its weld, the lattice and the skin's scale.
@@ -96,7 +98,9 @@ pub fn refine_skin(
         rows[v].push((n, w));
     }
     let origin = export_origins(&refined.origin, &input.welded.loaded_of);
+    let levels = refined.report.levels;
     let skin = RefinedSkin {
+        levels,
         mesh: refined.mesh,
         target_of: refined.origin,
         origin,

@@ -3,19 +3,35 @@
 //! them with its constraint clusters of width σ (the `clusters` stage).
 
 use super::refine::RefinedSkin;
+use crate::coupling::clusters::Clusters;
 use crate::coupling::embedded::{sigma_for_wavelength, EmbeddedShell};
 use crate::coupling::refine;
 use crate::mesh::TriMesh;
 use crate::pipeline::record::StagePlan;
 use crate::scene::Scene;
 use crate::solver::statics::{HessianMode, StaticSettings};
-use anyhow::Context;
+use anyhow::{anyhow, Context};
 use std::collections::HashSet;
 use std::time::Instant;
 
 /// Quality (2 r_in / r_circ) below which a skin triangle is left out of the shell (it still
 /// follows the interior): such triangles have no usable rest shape.
 pub const DEGENERATE_QUALITY: f64 = 1e-3;
+
+/// What the shell stages work from.
+#[derive(Clone, Copy)]
+pub struct ShellInput<'a> {
+    /// The refined skin.
+    pub refined: &'a RefinedSkin,
+    /// Lattice nodes the skin is embedded in.
+    pub nodes: usize,
+    /// The scene (skin material, statics settings).
+    pub scene: &'a Scene,
+    /// Critical wavelength the clusters place wrinkles at (m).
+    pub lambda: f64,
+    /// The rig, in errors.
+    pub path: &'a str,
+}
 
 /// The simulated skin: the embedded shell and which refined vertices it moves.
 pub struct SimulatedSkin {
@@ -27,8 +43,8 @@ pub struct SimulatedSkin {
     pub sigma: f64,
 }
 
-/// Refined triangles the shell simulates: inside every box of `scene.skin.mask` (all when it
-/// is empty) and not degenerate; degenerate ones are reported in `warnings`.
+/// Refined triangles the shell may simulate: inside every box of `scene.skin.mask` (all when
+/// it is empty) and not degenerate; degenerate ones are reported in `warnings`.
 pub fn select_triangles(
     mesh: &TriMesh,
     scene: &Scene,
@@ -56,16 +72,68 @@ pub fn select_triangles(
         .collect()
 }
 
-/// The record of a run whose shell simulates nothing.
-pub fn skipped_shell(scene: &Scene) -> StagePlan {
+/// The record of a run whose shell simulates nothing; `compressed` says whether any triangle
+/// was compressed enough to wrinkle (the `select` stage).
+pub fn skipped_shell(scene: &Scene, compressed: bool) -> StagePlan {
     StagePlan::skipped(
         "shell",
-        if scene.skin.mask.is_empty() {
+        if !compressed {
+            "no frame compresses the skin past the wrinkling threshold: the whole skin follows the blend shapes".to_string()
+        } else if scene.skin.mask.is_empty() {
             "every skin triangle is degenerate".to_string()
         } else {
             "the skin mask selects no triangle: the whole skin follows the interior".to_string()
         },
     )
+}
+
+/// Triplets (row, column, value) of a stiffness over node dofs (N/m).
+pub type Stiffness = Vec<(usize, usize, f64)>;
+
+/// The skin left out of the simulation, riding on the interior (x = B q): a shell over
+/// `triangles` and its stiffness Bᵀ K_x B at rest (N/m, triplets over node dofs), so the
+/// interior keeps that skin's elasticity; `None` when nothing is left out.
+pub fn left_out_skin(
+    input: &ShellInput,
+    triangles: &[usize],
+) -> anyhow::Result<Option<(SimulatedSkin, Stiffness)>> {
+    if triangles.is_empty() {
+        return Ok(None);
+    }
+    let (rest, _) = build_shell(input, triangles)?;
+    let stiffness = rest.shell.coupling_terms().0;
+    Ok(Some((rest, stiffness)))
+}
+
+/// The `clusters` stage for a selected part (`triangles`) of the skin the shell could
+/// simulate (`candidates`): the whole candidate skin's clusters and σ, restricted to the part
+/// (a cluster stays when its centre and half its weight lie in it), so that inside the part
+/// the constraints are the whole skin's whatever the selection. With a varying thickness the
+/// clusters are built on the part itself.
+pub fn build_selected_shell(
+    input: &ShellInput,
+    candidates: &[usize],
+    triangles: &[usize],
+) -> anyhow::Result<(SimulatedSkin, StagePlan)> {
+    if input.refined.thickness.is_some() || candidates.len() == triangles.len() {
+        return build_shell(input, triangles);
+    }
+    let mesh = &input.refined.mesh;
+    let (whole, whole_vertices) = sub_mesh(mesh, candidates);
+    let sigma = sigma_for_wavelength(&whole, input.lambda);
+    let clusters = Clusters::build(&whole, sigma).map_err(|e| anyhow!("clusters: {e}"))?;
+    let (mut sim, _) = build_shell_with_sigma(input, triangles, sigma)?;
+    let mut local_of_refined = vec![None; mesh.positions.len()];
+    for (i, &v) in sim.vertices.iter().enumerate() {
+        local_of_refined[v] = Some(i);
+    }
+    let local: Vec<Option<usize>> = whole_vertices
+        .iter()
+        .map(|&v| local_of_refined[v])
+        .collect();
+    sim.shell.set_clusters(clusters.restrict(&local, 0.5))?;
+    let record = clusters_record(&sim, Instant::now());
+    Ok((sim, record))
 }
 
 /// The sub-mesh of `triangles` with its own vertex numbering, and the refined vertex of each
@@ -89,25 +157,34 @@ fn sub_mesh(mesh: &TriMesh, triangles: &[usize]) -> (TriMesh, Vec<usize>) {
 }
 
 /// The `clusters` stage: the embedded shell over `triangles` of the refined skin, its clusters
-/// of the σ that puts wrinkles at `lambda` (m), and the skin statics settings of the scene.
+/// of the σ that puts wrinkles at λ (m), and the skin statics settings of the scene.
 pub fn build_shell(
-    skin: &RefinedSkin,
+    input: &ShellInput,
     triangles: &[usize],
-    nodes: usize,
-    scene: &Scene,
-    lambda: f64,
-    path: &str,
 ) -> anyhow::Result<(SimulatedSkin, StagePlan)> {
     let t = Instant::now();
+    let (sub, _) = sub_mesh(&input.refined.mesh, triangles);
+    // σ that puts the wrinkles at λ on this mesh (the truncated kernel's first zero,
+    // corrected for edge-path distances; see `coupling::embedded`).
+    let sigma = sigma_for_wavelength(&sub, input.lambda);
+    let sim = build_shell_with_sigma(input, triangles, sigma)?.0;
+    let record = clusters_record(&sim, t);
+    Ok((sim, record))
+}
+
+/// The embedded shell over `triangles` with clusters of width `sigma` (m), and its mesh.
+fn build_shell_with_sigma(
+    input: &ShellInput,
+    triangles: &[usize],
+    sigma: f64,
+) -> anyhow::Result<(SimulatedSkin, TriMesh)> {
+    let (skin, scene, path) = (input.refined, input.scene, input.path);
     let (sub, vertices) = sub_mesh(&skin.mesh, triangles);
     let emb: Vec<(usize, usize, f64)> = vertices
         .iter()
         .enumerate()
         .flat_map(|(i, &v)| skin.rows[v].iter().map(move |&(n, w)| (i, n, w)))
         .collect();
-    // σ that puts the wrinkles at λ on this mesh (the truncated kernel's first zero,
-    // corrected for edge-path distances; see `coupling::embedded`).
-    let sigma = sigma_for_wavelength(&sub, lambda);
     let edge = refine::mean_edge(&sub);
     let stretch = scene.skin.material()?.stretch_stiffness();
     let settings = StaticSettings {
@@ -117,7 +194,8 @@ pub fn build_shell(
         energy_merit: true,
         ..StaticSettings::default()
     };
-    let mut shell = EmbeddedShell::new(sub, scene.skin.material()?, emb, nodes, sigma, settings)
+    let material = scene.skin.material()?;
+    let mut shell = EmbeddedShell::new(sub.clone(), material, emb, input.nodes, sigma, settings)
         .with_context(|| format!("{path}: setting up the skin"))?;
     if let Some(h) = &skin.thickness {
         // The skin's own thickness per simulated triangle; the clusters widen with it
@@ -127,24 +205,28 @@ pub fn build_shell(
             .set_thickness(sub_h)
             .with_context(|| format!("{path}: setting up the skin thickness"))?;
     }
-    let st = shell.cluster_stats();
-    let record = StagePlan::ran(
-        "clusters",
-        format!(
-            "{} clusters of σ = {:.2} mm, {:.0} vertices each on average, {:.1} per vertex",
-            st.clusters,
-            sigma * 1e3,
-            st.vertices_per_cluster[1],
-            st.clusters_per_vertex[1]
-        ),
-        t.elapsed().as_secs_f64() * 1e3,
-    );
     let simulated = SimulatedSkin {
         shell,
         vertices,
         sigma,
     };
-    Ok((simulated, record))
+    Ok((simulated, sub))
+}
+
+/// The `clusters` stage's record of a built shell, timed from `t`.
+fn clusters_record(sim: &SimulatedSkin, t: Instant) -> StagePlan {
+    let st = sim.shell.cluster_stats();
+    StagePlan::ran(
+        "clusters",
+        format!(
+            "{} clusters of σ = {:.2} mm, {:.0} vertices each on average, {:.1} per vertex",
+            st.clusters,
+            sim.sigma * 1e3,
+            st.vertices_per_cluster[1],
+            st.clusters_per_vertex[1]
+        ),
+        t.elapsed().as_secs_f64() * 1e3,
+    )
 }
 
 #[cfg(test)]
@@ -183,9 +265,12 @@ mod tests {
             max: [0.5, 1.1, 0.1],
         }];
         assert!(select_triangles(&mesh, &scene, "f.glb", &mut warnings).is_empty());
-        assert!(skipped_shell(&scene)
+        assert!(skipped_shell(&scene, true)
             .why
             .contains("mask selects no triangle"));
+        assert!(skipped_shell(&scene, false)
+            .why
+            .starts_with("no frame compresses"));
     }
 
     #[test]

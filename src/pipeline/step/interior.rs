@@ -39,7 +39,8 @@ pub fn advance(
         residual: 0.0,
         ms: 0.0,
     };
-    let skin_force = coupling_terms(model, state.skin.as_ref(), scratch, schedule);
+    let q = &state.interior.q;
+    let skin_force = coupling_terms(model, state.skin.as_ref(), q, scratch, schedule);
     let mut stiffness = scratch.combined.clone().unwrap_or_default();
     let base_len = stiffness.len();
     let dynamics = schedule.substeps > 0;
@@ -82,12 +83,13 @@ pub fn advance(
     Ok(record)
 }
 
-/// The skin's pull on the interior: its force Bᵀ F_x now (returned), and the combined
-/// stiffness of tracking and skin in `scratch`. The skin's stiffness Bᵀ K_x B (element
+/// The skin's pull on the interior: its force Bᵀ F_x now (returned; the left-out skin's at
+/// x = B q), and the combined stiffness of tracking and skin in `scratch`. The skin's stiffness Bᵀ K_x B (element
 /// projected, the expensive part) is taken at the rest state once, or every frame when asked.
 fn coupling_terms(
     model: &Model,
     skin: Option<&EmbeddedShell>,
+    q: &[f64],
     scratch: &mut Scratch,
     schedule: InteriorSchedule,
 ) -> Option<Vec<f64>> {
@@ -99,13 +101,29 @@ fn coupling_terms(
     }
     if scratch.combined.is_none() || every {
         let mut all = model.tracking.stiffness.clone();
+        if let Some((_, ks)) = &model.left_out {
+            all.extend_from_slice(ks);
+        }
         if let (Some(_), Some(ks)) = (skin, &scratch.skin_stiffness) {
             all.extend_from_slice(ks);
         }
         scratch.combined = Some(aggregate(all));
     }
     let nd = scratch.zero_force.len();
-    skin.map(|s| skin_force(s, &model.sim_vertices, &model.rows, nd))
+    let force = skin.map(|s| skin_force(s, &model.sim_vertices, &model.rows, nd));
+    match (&model.left_out, force) {
+        (Some((left, _)), force) => {
+            let mut f = force.unwrap_or_else(|| vec![0.0; nd]);
+            let riding = left.shell.embedded_positions(q);
+            let x: Vec<f64> = riding.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
+            let g = elastic_force(&left.shell, &x, &left.vertices, &model.rows, nd);
+            for (a, b) in f.iter_mut().zip(&g) {
+                *a += b;
+            }
+            Some(f)
+        }
+        (None, force) => force,
+    }
 }
 
 /// Bᵀ F_x: the skin's elastic force F_x = −∇E_x at its current state, carried to the nodes
@@ -116,8 +134,18 @@ pub fn skin_force(
     rows: &[Vec<(usize, f64)>],
     nd: usize,
 ) -> Vec<f64> {
+    elastic_force(skin, skin.x(), verts, rows, nd)
+}
+
+/// Bᵀ F_x of the skin at positions `x` (flat, m), as [`skin_force`].
+fn elastic_force(
+    skin: &EmbeddedShell,
+    x: &[f64],
+    verts: &[usize],
+    rows: &[Vec<(usize, f64)>],
+    nd: usize,
+) -> Vec<f64> {
     use crate::math::Energy;
-    let x = skin.x();
     let mut grad = vec![0.0; x.len()];
     skin.shell.eval(x, Some(&mut grad), None, false);
     let mut force = vec![0.0; nd];
