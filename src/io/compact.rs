@@ -14,7 +14,7 @@
 //! | target `NORMAL` deltas | normalized i8 |
 //! | targets that move less than half the vertices | sparse accessors (no dense data): the vertices whose quantized position or normal delta is non-zero, indices shared by both |
 //! | animation times | f32 (s) |
-//! | animation weights | normalized u16, one row of target weights per key |
+//! | animation weights | normalized u16, one row of target weights per key (not compressed: see [`Codec::Plain`]) |
 //!
 //! [`CompactDocument`] is the reusable part: a [`Document`] whose buffer views each carry a
 //! meshopt codec, laid out into a GLB with the compressed bytes in the binary chunk and a
@@ -48,6 +48,8 @@ pub enum Codec {
         /// Bytes per index (2 or 4).
         index_size: usize,
     },
+    /// Stored as is (no compression).
+    Plain,
 }
 
 /// A glTF document whose buffer views are compressed with meshopt when written.
@@ -165,12 +167,12 @@ fn align4(b: &mut Vec<u8>) {
     }
 }
 
-/// The compressed bytes, stride, count and mode name of a view, or `None` when compression
-/// does not shrink it (or its length does not fit the codec).
-fn encode(
-    bytes: &[u8],
-    codec: Codec,
-) -> anyhow::Result<Option<(Vec<u8>, usize, usize, &'static str)>> {
+/// A compressed view: bytes, element stride, element count and meshopt mode name.
+type Packed = (Vec<u8>, usize, usize, &'static str);
+
+/// The compressed view, or `None` when compression does not shrink it (or its length does not
+/// fit the codec, or the codec is [`Codec::Plain`]).
+fn encode(bytes: &[u8], codec: Codec) -> anyhow::Result<Option<Packed>> {
     let out = match codec {
         Codec::Attributes { stride } => {
             if stride == 0 || stride % 4 != 0 || stride > 256 {
@@ -219,6 +221,7 @@ fn encode(
             let data = meshopt::encode_index_buffer(&indices, vertices)?;
             (data, index_size, indices.len(), "TRIANGLES")
         }
+        Codec::Plain => return Ok(None),
     };
     Ok((out.0.len() < bytes.len()).then_some(out))
 }
@@ -519,16 +522,17 @@ impl CompactDocument {
         );
         let input = self.push_accessor(json!({ "bufferView": tview, "componentType": 5126,
             "count": keys.times.len(), "type": "SCALAR", "min": [t0], "max": [t1] }));
-        let mut w: Vec<u8> = keys
+        let w: Vec<u8> = keys
             .weights
             .iter()
             .flatten()
             .map(|&x| (x.clamp(0.0, 1.0) * U16_MAX).round() as u16)
             .flat_map(u16::to_le_bytes)
             .collect();
-        let stride = row_stride(2 * targets);
-        w.resize(w.len().next_multiple_of(stride), 0);
-        let wview = self.push_view(w, Codec::Attributes { stride }, None, None);
+        // Stored plainly: furrow's loader reads a view without `byteStride` at the meshopt
+        // element size (`io::accessor`), so a compressed view must use the accessor's own
+        // element size, and 2-byte weights are not a multiple of 4.
+        let wview = self.push_view(w, Codec::Plain, None, None);
         let output = self.push_accessor(json!({ "bufferView": wview, "componentType": 5123,
             "normalized": true, "count": keys.times.len() * targets, "type": "SCALAR" }));
         self.doc.json["animations"] = json!([{
@@ -537,17 +541,6 @@ impl CompactDocument {
             "channels": [{ "sampler": 0, "target": { "node": 0, "path": "weights" } }],
         }]);
     }
-}
-
-/// The meshopt element size for rows of `row` bytes: the row itself when it is a multiple of
-/// 4 up to 256 bytes (each key's weights delta-coded against the last key's), else the largest
-/// such divisor of it, else 4.
-fn row_stride(row: usize) -> usize {
-    (1..=64)
-        .rev()
-        .map(|k| 4 * k)
-        .find(|&s| s <= row && row % s == 0)
-        .unwrap_or(4)
 }
 
 /// Check the rig's arrays agree (deltas per vertex, a weight per target per key).
@@ -824,8 +817,5 @@ mod tests {
             "scale {}",
             q.scale
         );
-        assert_eq!(row_stride(104), 104);
-        assert_eq!(row_stride(6), 4);
-        assert_eq!(row_stride(600), 200);
     }
 }
