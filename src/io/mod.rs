@@ -3,6 +3,7 @@
 pub mod accessor;
 pub mod animation;
 pub mod atomic;
+pub mod compact;
 pub mod container;
 pub mod error;
 pub mod export;

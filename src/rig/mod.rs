@@ -2,6 +2,9 @@
 
 pub mod animation;
 pub mod face;
+pub mod head;
+pub mod head_animation;
+pub mod head_shapes;
 pub mod regions;
 pub mod shapes;
 pub mod surface;
