@@ -278,6 +278,7 @@ fn every_subcommand_has_help_with_an_example() {
         vec!["bench", "shell"],
         vec!["bench", "lattice"],
         vec!["bench", "fit"],
+        vec!["bench", "select"],
         vec!["fit"],
         vec!["animate"],
         vec!["batch"],

@@ -12,7 +12,7 @@ pub enum RigCommand {
     /// ~2.6k vertices, the 52 ARKit shapes, an 11 s performance, written compact: quantized,
     /// sparse targets, meshopt-compressed).
     #[command(
-        after_help = "Examples:\n  furrow rig generate -o rigs/face.glb --force\n  furrow rig generate --kind head -o rigs/head.glb --force"
+        after_help = "Example:\n  furrow rig generate -o rigs/face.glb --force\n  furrow rig generate --kind head -o rigs/head.glb --force"
     )]
     Generate {
         /// Which rig: `face` (rigs/face.glb) or `head` (rigs/head.glb).

@@ -201,13 +201,13 @@ impl Clusters {
         })
     }
 
-    /// The clusters on a part of the mesh: `local[v]` is vertex v's index in the part (`None`
-    /// outside it). A cluster is kept when its centre lies in the part and at least
-    /// `min_share` of its weight does; its weights are restricted to the part and renormalised.
-    /// Inside the part, away from its border, the clusters are exactly the whole mesh's, so the
-    /// constraint layout does not depend on where the part was cut.
-    pub fn restrict(&self, local: &[Option<usize>], min_share: f64) -> Self {
-        let count = local.iter().filter(|l| l.is_some()).count();
+    /// The clusters on a part of the mesh, over a skin of `vertices` vertices: `local[v]` is
+    /// vertex v's index in that skin (`None` outside the part). A cluster is kept when its
+    /// centre lies in the part and at least `min_share` of its weight does; its weights are
+    /// restricted to the part and renormalised. Inside the part, away from its border, the
+    /// clusters are exactly the whole mesh's, so the constraint layout does not depend on
+    /// where the part was cut.
+    pub fn restrict(&self, local: &[Option<usize>], vertices: usize, min_share: f64) -> Self {
         let mut kept_weight = vec![0.0; self.len()];
         for &(c, v, w) in &self.entries {
             if local[v].is_some() {
@@ -233,7 +233,7 @@ impl Clusters {
             sigma: self.sigma,
             centres,
             entries,
-            vertices: count,
+            vertices,
         }
     }
 

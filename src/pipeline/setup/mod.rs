@@ -177,15 +177,19 @@ fn simulated_skin(
     let mesh = &s.refined.mesh;
     let candidates = skin::select_triangles(mesh, s.scene, s.path, &mut log.warnings);
     let per = 4usize.pow(s.refined.levels as u32);
-    let (triangles, left_out): (Vec<usize>, Vec<usize>) = candidates
+    let (triangles, beyond): (Vec<usize>, Vec<usize>) = candidates
         .iter()
         .partition(|&&t| selection.is_none_or(|sel| sel.simulated[t / per]));
+    let ring = skin::border_ring(mesh, &candidates, &triangles);
+    let mut in_ring = vec![false; mesh.triangles.len()];
+    ring.iter().for_each(|&t| in_ring[t] = true);
+    let left_out: Vec<usize> = beyond.into_iter().filter(|&t| !in_ring[t]).collect();
     let shell = if triangles.is_empty() {
         let compressed = selection.is_none_or(|sel| sel.simulated.contains(&true));
         log.stages.push(skin::skipped_shell(s.scene, compressed));
         None
     } else {
-        let (sim, record) = skin::build_selected_shell(s, &candidates, &triangles)?;
+        let (sim, record) = skin::build_selected_shell(s, &candidates, &triangles, &ring)?;
         log.stages.push(record);
         Some(sim)
     };

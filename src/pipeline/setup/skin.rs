@@ -105,34 +105,71 @@ pub fn left_out_skin(
     Ok(Some((rest, stiffness)))
 }
 
-/// The `clusters` stage for a selected part (`triangles`) of the skin the shell could
-/// simulate (`candidates`): the whole candidate skin's clusters and σ, restricted to the part
-/// (a cluster stays when its centre and half its weight lie in it), so that inside the part
-/// the constraints are the whole skin's whatever the selection. With a varying thickness the
+/// The candidate triangles outside `selected` that share a vertex with it: the ring the
+/// selected shell is clamped to (its vertices outside the selection follow B q).
+pub fn border_ring(mesh: &TriMesh, candidates: &[usize], selected: &[usize]) -> Vec<usize> {
+    let mut in_selection = vec![false; mesh.positions.len()];
+    let mut chosen = vec![false; mesh.triangles.len()];
+    for &t in selected {
+        chosen[t] = true;
+        for &v in &mesh.triangles[t] {
+            in_selection[v] = true;
+        }
+    }
+    candidates
+        .iter()
+        .copied()
+        .filter(|&t| !chosen[t] && mesh.triangles[t].iter().any(|&v| in_selection[v]))
+        .collect()
+}
+
+/// The `clusters` stage for a selected part of the skin the shell could simulate
+/// (`candidates`): a shell over the `selected` triangles and their border `ring`, whose
+/// vertices outside the selection are pinned to the interior (x = B q, as the left-out skin
+/// beyond them), with the whole candidate skin's clusters and σ restricted to the selection (a
+/// cluster stays when its centre and half its weight lie in it), so that inside the selection
+/// the constraints are the whole skin's whatever was left out. With a varying thickness the
 /// clusters are built on the part itself.
 pub fn build_selected_shell(
     input: &ShellInput,
     candidates: &[usize],
-    triangles: &[usize],
+    selected: &[usize],
+    ring: &[usize],
 ) -> anyhow::Result<(SimulatedSkin, StagePlan)> {
-    if input.refined.thickness.is_some() || candidates.len() == triangles.len() {
-        return build_shell(input, triangles);
+    if candidates.len() == selected.len() {
+        return build_shell(input, selected);
     }
+    let t = Instant::now();
     let mesh = &input.refined.mesh;
     let (whole, whole_vertices) = sub_mesh(mesh, candidates);
     let sigma = sigma_for_wavelength(&whole, input.lambda);
-    let clusters = Clusters::build(&whole, sigma).map_err(|e| anyhow!("clusters: {e}"))?;
-    let (mut sim, _) = build_shell_with_sigma(input, triangles, sigma)?;
-    let mut local_of_refined = vec![None; mesh.positions.len()];
-    for (i, &v) in sim.vertices.iter().enumerate() {
-        local_of_refined[v] = Some(i);
+    let shell_triangles: Vec<usize> = selected.iter().chain(ring).copied().collect();
+    let (mut sim, _) = build_shell_with_sigma(input, &shell_triangles, sigma)?;
+    let (_, selected_vertices) = sub_mesh(mesh, selected);
+    let mut is_selected = vec![false; mesh.positions.len()];
+    for &v in &selected_vertices {
+        is_selected[v] = true;
     }
-    let local: Vec<Option<usize>> = whole_vertices
-        .iter()
-        .map(|&v| local_of_refined[v])
-        .collect();
-    sim.shell.set_clusters(clusters.restrict(&local, 0.5))?;
-    let record = clusters_record(&sim, Instant::now());
+    let mut local_of_refined = vec![None; mesh.positions.len()];
+    let mut pinned = Vec::new();
+    for (i, &v) in sim.vertices.iter().enumerate() {
+        if is_selected[v] {
+            local_of_refined[v] = Some(i);
+        } else {
+            pinned.push(i);
+        }
+    }
+    sim.shell.set_pinned(&pinned)?;
+    if input.refined.thickness.is_none() {
+        let clusters = Clusters::build(&whole, sigma).map_err(|e| anyhow!("clusters: {e}"))?;
+        let local: Vec<Option<usize>> = whole_vertices
+            .iter()
+            .map(|&v| local_of_refined[v])
+            .collect();
+        let n = sim.vertices.len();
+        sim.shell.set_clusters(clusters.restrict(&local, n, 0.5))?;
+    }
+    let record = clusters_record(&sim, t);
     Ok((sim, record))
 }
 
