@@ -20,41 +20,14 @@ use nalgebra::{Rotation3, Vector3};
 
 type V3 = Vector3<f64>;
 
-/// Closed box mesh [0, a.x] × [0, a.y] × [0, a.z], each face split into m × m quads.
+/// Closed box mesh [0, a.x] × [0, a.y] × [0, a.z], each face split into m × m quads (the unit
+/// cube of `furrow::mesh::cube_mesh` scaled per axis).
 fn box_mesh(a: V3, m: usize) -> TriMesh {
-    let mut pos = Vec::new();
-    let mut tris = Vec::new();
-    let frames: [(usize, f64, V3, V3); 6] = [
-        (0, 1.0, V3::y(), V3::z()),
-        (0, 0.0, V3::z(), V3::y()),
-        (1, 1.0, V3::z(), V3::x()),
-        (1, 0.0, V3::x(), V3::z()),
-        (2, 1.0, V3::x(), V3::y()),
-        (2, 0.0, V3::y(), V3::x()),
-    ];
-    let mut key = std::collections::HashMap::new();
-    for (axis, side, t1, t2) in frames {
-        let mut idx = vec![vec![0usize; m + 1]; m + 1];
-        for (i, row) in idx.iter_mut().enumerate() {
-            for (j, id) in row.iter_mut().enumerate() {
-                let mut u = t1 * (i as f64 / m as f64) + t2 * (j as f64 / m as f64);
-                u[axis] = side;
-                let k = [0, 1, 2].map(|d| (u[d] * m as f64).round() as i64);
-                *id = *key.entry(k).or_insert_with(|| {
-                    pos.push(u.component_mul(&a));
-                    pos.len() - 1
-                });
-            }
-        }
-        for i in 0..m {
-            for j in 0..m {
-                let (p, q, r, s) = (idx[i][j], idx[i + 1][j], idx[i + 1][j + 1], idx[i][j + 1]);
-                tris.push([p, q, r]);
-                tris.push([p, r, s]);
-            }
-        }
+    let mut cube = furrow::mesh::cube_mesh(1.0, m);
+    for p in &mut cube.positions {
+        *p = p.component_mul(&a);
     }
-    TriMesh::new(pos, tris)
+    cube
 }
 
 /// A lattice over a box of `cells` cells of edge `h` (m).
