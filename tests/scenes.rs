@@ -19,6 +19,19 @@ fn example_scenes_parse() {
     assert!(n >= 4);
 }
 
+/// The cubes example runs (its first frame): it was once refused by its own check (λ of its
+/// latex skin held fewer than 3 skin edges). The slab and cushions run in the tests below and in
+/// `validate`.
+#[test]
+fn cubes_example_runs_its_first_frame() {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/cubes.toml");
+    let mut scene = Scene::load(&p).unwrap();
+    scene.load.as_mut().unwrap().frames = 1;
+    let out = run_scene(&scene, &|_, _| {}).unwrap_or_else(|e| panic!("{}: {e:#}", p.display()));
+    assert_eq!(out.frames.len(), 1);
+    assert_eq!(out.copies.len(), 3);
+}
+
 #[test]
 fn cushions_with_different_covers_wrinkle_in_the_order_of_their_wavelengths() {
     // Same foam; covers whose λ differ by 2× each.
