@@ -388,15 +388,38 @@ fn draw_legend(img: &mut RgbImage, x0: u32, w: u32, range: (f64, f64), label: &s
         for x in bar_x + bar_w..bar_x + bar_w + 5 {
             img.put_pixel(x, y.round() as u32, Rgb(ink));
         }
+        let x = bar_x + bar_w + 8;
+        let room = img.width().saturating_sub(x + 2);
         draw_text(
             img,
-            &format_number(v),
-            (bar_x + bar_w + 8) as i32,
+            &tick_label(v, fs, room),
+            x as i32,
             (y - fs * 0.5) as i32,
             fs,
             ink,
         );
     }
+}
+
+/// `v` as [`format_number`] writes it, with fewer decimals when that is wider than `room`
+/// pixels at font size `fs` (a label is rounded rather than clipped at the image's edge).
+fn tick_label(v: f64, fs: f64, room: u32) -> String {
+    let full = format_number(v);
+    if text_size(&full, fs).0 <= room || !(1e-3..1e5).contains(&v.abs()) {
+        return full;
+    }
+    (0..4)
+        .rev()
+        .map(|d| {
+            let s = format!("{v:.d$}");
+            if s.contains('.') {
+                s.trim_end_matches('0').trim_end_matches('.').to_string()
+            } else {
+                s
+            }
+        })
+        .find(|s| text_size(s, fs).0 <= room)
+        .unwrap_or(full)
 }
 
 /// Signed distance (mm) of each wrinkled vertex from the blend-shape-only surface `base`
@@ -468,4 +491,18 @@ pub fn contact_sheet(frames: &[RgbImage], labels: &[&str], columns: usize) -> Rg
         }
     }
     img
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tick_labels_round_to_fit_instead_of_clipping() {
+        assert_eq!(tick_label(1.7819, 14.0, 500), "1.7819");
+        let narrow = text_size("1.78", 14.0).0;
+        assert_eq!(tick_label(1.7819, 14.0, narrow), "1.78");
+        assert_eq!(tick_label(-1.7819, 14.0, text_size("-1.8", 14.0).0), "-1.8");
+        assert_eq!(tick_label(0.0, 14.0, 1), "0");
+    }
 }
