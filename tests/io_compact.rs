@@ -20,12 +20,8 @@ fn sheet() -> Vec<u8> {
     for (k, v) in [20, 21, 33, 34].into_iter().enumerate() {
         few[v] = Vector3::new(0.0, 0.0, 0.002 * (k + 1) as f64);
     }
-    let normals_of = |d: &[Vector3<f64>]| {
-        let moved: Vec<_> = mesh.positions.iter().zip(d).map(|(p, d)| p + d).collect();
-        let n0 = mesh.vertex_normals();
-        let n1 = mesh.vertex_normals_of(&moved);
-        n1.iter().zip(&n0).map(|(a, b)| a - b).collect::<Vec<_>>()
-    };
+    let n0 = mesh.vertex_normals();
+    let normals_of = |d: &[Vector3<f64>]| mesh.normal_deltas(&n0, d);
     let targets = vec![
         MorphTarget {
             name: "dense".into(),

@@ -239,11 +239,7 @@ fn say_runs(out: &Output, rows: &[TradeoffRun]) {
             "{:<6} {:<30} {:>10} {:>9.2} {:>11.3e} {:>11.3e} {:>9} {:>8.1}% {:>8.1}%  {}{}",
             r.case,
             r.knob,
-            if r.value.is_finite() {
-                format!("{}", r.value)
-            } else {
-                String::new()
-            },
+            r.value_text(),
             r.wall_s,
             r.rms_m,
             r.max_m,

@@ -559,14 +559,7 @@ fn check_rig(mesh: &TriMesh, targets: &[MorphTarget], keys: &WeightKeys) -> anyh
             );
         }
     }
-    if keys.weights.len() != keys.times.len()
-        || keys.weights.iter().any(|w| w.len() != targets.len())
-    {
-        bail!(
-            "weight keys do not match the times and the {} targets",
-            targets.len()
-        );
-    }
+    super::export::check_weight_keys(keys, targets.len())?;
     let all_finite = mesh
         .positions
         .iter()
@@ -672,15 +665,8 @@ mod tests {
         few[10] = Vector3::new(0.001, 0.0, 0.0);
         few[31] = Vector3::new(0.0, -0.0023, 0.0004);
         few[32] = Vector3::new(0.0, 0.0, 0.005);
-        let normals_of = |d: &[Vector3<f64>]| {
-            let moved: Vec<_> = mesh.positions.iter().zip(d).map(|(p, d)| p + d).collect();
-            let n0 = mesh.vertex_normals();
-            mesh.vertex_normals_of(&moved)
-                .iter()
-                .zip(&n0)
-                .map(|(a, b)| a - b)
-                .collect::<Vec<_>>()
-        };
+        let n0 = mesh.vertex_normals();
+        let normals_of = |d: &[Vector3<f64>]| mesh.normal_deltas(&n0, d);
         let targets = vec![
             MorphTarget {
                 name: "dense".into(),

@@ -610,6 +610,15 @@ pub fn write_frames_dir(
     Ok(paths)
 }
 
+/// Weight keys fit a rig of `targets` morph targets: one weight vector per key time, each with
+/// one weight per target.
+pub fn check_weight_keys(keys: &WeightKeys, targets: usize) -> anyhow::Result<()> {
+    if keys.weights.len() != keys.times.len() || keys.weights.iter().any(|w| w.len() != targets) {
+        bail!("weight keys do not match the times and the {targets} targets");
+    }
+    Ok(())
+}
+
 /// A fresh blend-shape rig file: one mesh with morph targets (names in `extras.targetNames`)
 /// and a linear weights animation, as GLB bytes. Positions in metres.
 pub fn rig_glb(
@@ -626,14 +635,7 @@ pub fn rig_glb(
             t.positions.len()
         );
     }
-    if keys.weights.len() != keys.times.len()
-        || keys.weights.iter().any(|w| w.len() != targets.len())
-    {
-        bail!(
-            "weight keys do not match the times and the {} targets",
-            targets.len()
-        );
-    }
+    check_weight_keys(keys, targets.len())?;
     let mut doc = Document::new();
     let pos = doc.push_f32(&flat(&mesh.positions), 3, Some(ARRAY_BUFFER));
     let nrm = doc.push_f32(&flat(&mesh.vertex_normals()), 3, Some(ARRAY_BUFFER));

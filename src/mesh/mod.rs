@@ -85,6 +85,27 @@ impl TriMesh {
         self.vertex_normals_of(&self.positions)
     }
 
+    /// A morph target's normal deltas: the unit vertex normals of the mesh moved by `deltas`
+    /// (m) minus `neutral` (this mesh's own [`TriMesh::vertex_normals`], passed in so a rig
+    /// with many targets computes them once).
+    pub fn normal_deltas(
+        &self,
+        neutral: &[Vector3<f64>],
+        deltas: &[Vector3<f64>],
+    ) -> Vec<Vector3<f64>> {
+        let moved: Vec<_> = self
+            .positions
+            .iter()
+            .zip(deltas)
+            .map(|(p, d)| p + d)
+            .collect();
+        self.vertex_normals_of(&moved)
+            .iter()
+            .zip(neutral)
+            .map(|(a, b)| a - b)
+            .collect()
+    }
+
     /// Flat `[x0, y0, z0, x1, …]` copy of the positions (the layout solvers use).
     pub fn flat_positions(&self) -> Vec<f64> {
         self.positions

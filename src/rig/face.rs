@@ -129,18 +129,7 @@ fn build(settings: FaceRigSettings) -> FaceRig {
     let targets = shape_deltas(&mask)
         .into_iter()
         .map(|(name, positions)| {
-            let moved: Vec<_> = mesh
-                .positions
-                .iter()
-                .zip(&positions)
-                .map(|(p, d)| p + d)
-                .collect();
-            let normals = mesh
-                .vertex_normals_of(&moved)
-                .iter()
-                .zip(&neutral_normals)
-                .map(|(n, n0)| n - n0)
-                .collect();
+            let normals = mesh.normal_deltas(&neutral_normals, &positions);
             MorphTarget {
                 name,
                 positions,

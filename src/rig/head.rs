@@ -303,18 +303,7 @@ pub fn generate() -> HeadRig {
     let targets = shape_deltas(&samples, mouth_y, base.corner_x)
         .into_iter()
         .map(|(name, positions)| {
-            let moved: Vec<_> = mesh
-                .positions
-                .iter()
-                .zip(&positions)
-                .map(|(p, d)| p + d)
-                .collect();
-            let dn = mesh
-                .vertex_normals_of(&moved)
-                .iter()
-                .zip(&normals)
-                .map(|(a, b)| a - b)
-                .collect();
+            let dn = mesh.normal_deltas(&normals, &positions);
             MorphTarget {
                 name,
                 positions,

@@ -15,7 +15,7 @@
 use nalgebra::{Rotation3, Vector3};
 
 use super::head::EYE;
-use super::surface::{bump, smoothstep};
+use super::surface::{bump, smoothstep, window};
 
 /// The 52 ARKit blend-shape names, in ARKit's order (the order of [`shape_deltas`]).
 pub const ARKIT_NAMES: [&str; 52] = [
@@ -114,11 +114,6 @@ impl Side<'_> {
     fn local(&self, du: f64, dv: f64, dn: f64) -> Vector3<f64> {
         self.s.e_u * (du * self.m) + self.s.e_v * dv + self.s.n * dn
     }
-}
-
-/// 1 inside `|x| < r0`, smoothly 0 beyond `r0 + w`.
-fn window(ax: f64, r0: f64, w: f64) -> f64 {
-    1.0 - smoothstep(r0, r0 + w, ax)
 }
 
 /// Distance to the eye of the side, scaled by (rx, ry).

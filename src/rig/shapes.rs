@@ -19,7 +19,7 @@
 
 use nalgebra::{Rotation3, Vector3};
 
-use super::surface::{bump, smoothstep, Mask, Sample, Side, EYE_X, EYE_Y};
+use super::surface::{bump, smoothstep, window, Mask, Sample, Side, EYE_X, EYE_Y};
 
 /// Names of the blend shapes, in the order [`shape_deltas`] returns them.
 pub const SHAPE_NAMES: [&str; 9] = [
@@ -42,11 +42,6 @@ pub const JAW_PIVOT_YZ: (f64, f64) = (0.005, -0.005);
 /// Displacement `du e_u + dv e_v + dn n` in the local frame of `s`, m.
 fn local(s: &Sample, du: f64, dv: f64, dn: f64) -> Vector3<f64> {
     s.e_u * du + s.e_v * dv + s.n * dn
-}
-
-/// 1 inside `|x| < r0`, smoothly 0 beyond `r0 + w`.
-fn window(ax: f64, r0: f64, w: f64) -> f64 {
-    1.0 - smoothstep(r0, r0 + w, ax)
 }
 
 /// Frontalis: brows up, forehead compressed vertically toward the fixed hairline.

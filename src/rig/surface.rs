@@ -99,6 +99,11 @@ pub fn smoothstep(e0: f64, e1: f64, x: f64) -> f64 {
     t * t * (3.0 - 2.0 * t)
 }
 
+/// 1 inside `|x| < r0`, smoothly 0 beyond `r0 + w` (a smoothstep fall-off of width `w`, m).
+pub fn window(ax: f64, r0: f64, w: f64) -> f64 {
+    1.0 - smoothstep(r0, r0 + w, ax)
+}
+
 /// Compactly supported C² bump `(1 − r²)³` for `|r| < 1`, else 0.
 pub fn bump(r: f64) -> f64 {
     let s = 1.0 - r * r;

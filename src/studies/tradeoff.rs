@@ -177,6 +177,17 @@ pub struct TradeoffRun {
     pub status: String,
 }
 
+impl TradeoffRun {
+    /// The knob's value as written in tables: empty for the reference run's missing value.
+    pub fn value_text(&self) -> String {
+        if self.value.is_finite() {
+            format!("{}", self.value)
+        } else {
+            String::new()
+        }
+    }
+}
+
 /// The CSV header written by [`to_csv`].
 pub const CSV_HEADER: &str = "case,knob,value,default,reference,wall_s,rms_m,max_m,wrinkle_m,measured_wavelength_m,predicted_wavelength_m,wavelength_error,amplitude_error,phase_free_error,frames_not_converged,pareto,status";
 
@@ -562,11 +573,7 @@ pub fn to_csv(rows: &[TradeoffRun]) -> String {
             "{},{},{},{},{},{:.4},{:.6e},{:.6e},{:.6e},{},{},{},{:.6e},{:.6e},{},{},\"{}\"\n",
             r.case,
             r.knob,
-            if r.value.is_finite() {
-                format!("{}", r.value)
-            } else {
-                String::new()
-            },
+            r.value_text(),
             r.is_default,
             r.is_reference,
             r.wall_s,
