@@ -267,83 +267,42 @@ pub(crate) mod test_support {
         )
     }
 
-    /// A small model and state, built stage by stage as `set_up` does (without a rig file):
-    /// the lifted 7 × 7 bump sheet, 1 cm cells, refined for λ = 1 cm, a default skin, driven by
-    /// `driver`, with `substeps` backward Euler steps per frame at 30 fps (0: quasi-static).
+    /// A small model and state from [`set_up`](super::set_up): the lifted 7 × 7 bump sheet as
+    /// a rig (its lift ramping from 0 to 1 over one frame), 1 cm cells, refined for λ = 1 cm,
+    /// the whole default skin simulated, driven by `driver`, with `substeps` backward Euler
+    /// steps per frame at 30 fps (0: quasi-static). Returns the loaded face too.
     pub fn small_model(
         driver: Driver,
         substeps: usize,
     ) -> (super::Model, super::State, MeshInstance) {
         use super::*;
         let face = face_of(bump_sheet(7));
-        let path = "sheet.glb";
+        let mesh = TriMesh::new(face.positions.clone(), face.triangles.clone());
+        let keys = crate::io::model::WeightKeys {
+            times: vec![0.0, 1.0 / 30.0],
+            weights: vec![vec![0.0], vec![1.0]],
+        };
+        let bytes = crate::io::export::rig_glb("sheet", &mesh, &face.targets, &keys).unwrap();
+        let path = std::path::Path::new("sheet.glb");
+        let rig = crate::io::load::load_bytes(path, &bytes, &Default::default()).unwrap();
         let mut scene = Scene::default();
         scene.interior.cell_size = Some(0.01);
-        let (welded, _) = weld::weld_face(&face, path).unwrap();
-        let (lattice, _) = lattice::build_lattice(&welded.mesh, &scene.interior, path).unwrap();
-        let plan = crate::pipeline::plan::Plan {
-            weights: vec![vec![1.0]],
-            range: crate::pipeline::frames::FrameRange::all(1),
+        scene.skin.simulate = Some("all".into());
+        if let Driver::Muscles { source } = &driver {
+            scene.muscles.source = Some(source.clone());
+        }
+        let opts = crate::pipeline::RunOptions {
+            scene: scene.clone(),
+            scene_path: None,
             fps: 30.0,
-            animated: substeps > 0,
-            materials: scene.materials().unwrap(),
-            skin: crate::pipeline::plan::SkinScale {
-                face_thickness: None,
-                thickness: [1e-3; 2],
-                lambda: 0.01,
-                lambda_max: 0.01,
-            },
-            substeps,
-            driver: driver.clone(),
+            frames: None,
         };
-        let input = refine::RefineInput {
-            face: &face,
-            welded: &welded,
-            lattice: &lattice,
-            scale: &plan.skin,
-        };
-        let (refined, _) = refine::refine_skin(&input, &scene.skin, path).unwrap();
-        let triangles = skin::select_triangles(&refined.mesh, &scene, path, &mut Vec::new());
-        let nodes = lattice.node_count();
-        let input = skin::ShellInput {
-            refined: &refined,
-            nodes,
-            scene: &scene,
-            lambda: 0.01,
-            path,
-        };
-        let (sim, _) = skin::build_shell(&input, &triangles).unwrap();
-        let stepper = interior::stepper(&lattice, &scene, &plan).unwrap();
-        let young = scene.interior.material().unwrap().young;
-        let cell = lattice.cell_size;
-        let tracking = interior::tracking(&welded.mesh, &refined.rows, &driver, young, cell);
-        let muscles = match &driver {
-            Driver::Tracking => None,
-            Driver::Muscles { source } => Some(
-                muscles::build_muscles(&face, path, &scene, &lattice, &welded.loaded_of, source)
-                    .unwrap()
-                    .0,
-            ),
-        };
-        let model = Model {
-            skin_mesh: refined.mesh,
-            target_of: refined.target_of,
-            origin: refined.origin,
-            welded_of_loaded: welded.of_loaded,
-            welded_loaded: welded.loaded_of,
-            welded_count: welded.mesh.positions.len(),
-            lattice,
-            rows: refined.rows,
-            sim_vertices: sim.vertices,
-            sigma: sim.sigma,
-            tracking,
-            left_out: None,
-        };
-        let state = State {
-            interior: stepper,
-            skin: Some(sim.shell),
-            muscles,
-        };
-        (model, state, face)
+        let mut plan = Plan::new(&rig, &opts).unwrap();
+        plan.skin.lambda = 0.01;
+        plan.skin.lambda_max = 0.01;
+        plan.substeps = substeps;
+        let (model, state) =
+            set_up(&rig, &scene, &plan, &mut Log::default(), &|_, _, _| {}).unwrap();
+        (model, state, rig.face().clone())
     }
 }
