@@ -115,6 +115,45 @@ impl EmbeddedShell {
         sigma: f64,
         settings: StaticSettings,
     ) -> anyhow::Result<Self> {
+        let clusters = |rest: &TriMesh| Clusters::build(rest, sigma);
+        Self::build(rest, material, embedding, nodes, clusters, settings)
+    }
+
+    /// As [`EmbeddedShell::new`], with the constraint `clusters` given (over this skin's
+    /// vertices; e.g. a whole skin's clusters restricted to this part,
+    /// [`Clusters::restrict`]). Empty clusters make a shell that is never solved but gives
+    /// the interior its stiffness ([`EmbeddedShell::coupling_terms`]).
+    pub fn with_clusters(
+        rest: TriMesh,
+        material: ShellMaterial,
+        embedding: Vec<(usize, usize, f64)>,
+        nodes: usize,
+        clusters: Clusters,
+        settings: StaticSettings,
+    ) -> anyhow::Result<Self> {
+        let given = |rest: &TriMesh| {
+            if clusters.vertices == rest.positions.len() {
+                Ok(clusters)
+            } else {
+                Err(format!(
+                    "clusters over {} vertices for a skin of {}",
+                    clusters.vertices,
+                    rest.positions.len()
+                ))
+            }
+        };
+        Self::build(rest, material, embedding, nodes, given, settings)
+    }
+
+    /// The shell, its embedding checked, with the clusters `clusters` makes for its rest mesh.
+    fn build(
+        rest: TriMesh,
+        material: ShellMaterial,
+        embedding: Vec<(usize, usize, f64)>,
+        nodes: usize,
+        clusters: impl FnOnce(&TriMesh) -> Result<Clusters, String>,
+        settings: StaticSettings,
+    ) -> anyhow::Result<Self> {
         let n = rest.positions.len();
         if n == 0 {
             bail!("the skin mesh has no vertices");
@@ -186,7 +225,7 @@ impl EmbeddedShell {
         }
         group_offset.push(off);
         let solver = StaticSolver::new(settings).map_err(|e| anyhow!("{e}"))?;
-        let clusters = Clusters::build(&rest, sigma).map_err(|e| anyhow!("clusters: {e}"))?;
+        let clusters = clusters(&rest).map_err(|e| anyhow!("clusters: {e}"))?;
         let x: Vec<f64> = rest
             .positions
             .iter()
@@ -251,22 +290,6 @@ impl EmbeddedShell {
         self.problem.constraints = cluster_constraints(&clusters);
         self.clusters = clusters;
         self.shell = shell;
-        Ok(())
-    }
-
-    /// Replace the constraint clusters (e.g. the whole skin's clusters restricted to this
-    /// part, [`Clusters::restrict`]); they must be over this skin's vertices. Call before the
-    /// first solve.
-    pub fn set_clusters(&mut self, clusters: Clusters) -> anyhow::Result<()> {
-        if clusters.vertices != self.rows.len() {
-            bail!(
-                "clusters over {} vertices for a skin of {}",
-                clusters.vertices,
-                self.rows.len()
-            );
-        }
-        self.problem.constraints = cluster_constraints(&clusters);
-        self.clusters = clusters;
         Ok(())
     }
 

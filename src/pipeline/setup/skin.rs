@@ -100,7 +100,16 @@ pub fn left_out_skin(
     if triangles.is_empty() {
         return Ok(None);
     }
-    let (rest, _) = build_shell(input, triangles)?;
+    // Never solved: it needs no constraints, only its elasticity (σ = λ/π is nominal; a
+    // varying thickness rebuilds clusters from it).
+    let part = sub_mesh(&input.refined.mesh, triangles);
+    let none = Clusters {
+        sigma: input.lambda / std::f64::consts::PI,
+        centres: Vec::new(),
+        entries: Vec::new(),
+        vertices: part.1.len(),
+    };
+    let rest = shell_over(input, triangles, part, ClusterSource::Given(none))?;
     let stiffness = rest.shell.coupling_terms().0;
     Ok(Some((rest, stiffness)))
 }
@@ -144,31 +153,34 @@ pub fn build_selected_shell(
     let (whole, whole_vertices) = sub_mesh(mesh, candidates);
     let sigma = sigma_for_wavelength(&whole, input.lambda);
     let shell_triangles: Vec<usize> = selected.iter().chain(ring).copied().collect();
-    let (mut sim, _) = build_shell_with_sigma(input, &shell_triangles, sigma)?;
-    let (_, selected_vertices) = sub_mesh(mesh, selected);
+    let part = sub_mesh(mesh, &shell_triangles);
     let mut is_selected = vec![false; mesh.positions.len()];
-    for &v in &selected_vertices {
-        is_selected[v] = true;
+    for &t in selected {
+        for &v in &mesh.triangles[t] {
+            is_selected[v] = true;
+        }
     }
     let mut local_of_refined = vec![None; mesh.positions.len()];
     let mut pinned = Vec::new();
-    for (i, &v) in sim.vertices.iter().enumerate() {
+    for (i, &v) in part.1.iter().enumerate() {
         if is_selected[v] {
             local_of_refined[v] = Some(i);
         } else {
             pinned.push(i);
         }
     }
-    sim.shell.set_pinned(&pinned)?;
-    if input.refined.thickness.is_none() {
+    let clusters = if input.refined.thickness.is_none() {
         let clusters = Clusters::build(&whole, sigma).map_err(|e| anyhow!("clusters: {e}"))?;
         let local: Vec<Option<usize>> = whole_vertices
             .iter()
             .map(|&v| local_of_refined[v])
             .collect();
-        let n = sim.vertices.len();
-        sim.shell.set_clusters(clusters.restrict(&local, n, 0.5))?;
-    }
+        ClusterSource::Given(clusters.restrict(&local, part.1.len(), 0.5))
+    } else {
+        ClusterSource::Width(sigma)
+    };
+    let mut sim = shell_over(input, &shell_triangles, part, clusters)?;
+    sim.shell.set_pinned(&pinned)?;
     let record = clusters_record(&sim, t);
     Ok((sim, record))
 }
@@ -200,23 +212,33 @@ pub fn build_shell(
     triangles: &[usize],
 ) -> anyhow::Result<(SimulatedSkin, StagePlan)> {
     let t = Instant::now();
-    let (sub, _) = sub_mesh(&input.refined.mesh, triangles);
+    let part = sub_mesh(&input.refined.mesh, triangles);
     // σ that puts the wrinkles at λ on this mesh (the truncated kernel's first zero,
     // corrected for edge-path distances; see `coupling::embedded`).
-    let sigma = sigma_for_wavelength(&sub, input.lambda);
-    let sim = build_shell_with_sigma(input, triangles, sigma)?.0;
+    let sigma = sigma_for_wavelength(&part.0, input.lambda);
+    let sim = shell_over(input, triangles, part, ClusterSource::Width(sigma))?;
     let record = clusters_record(&sim, t);
     Ok((sim, record))
 }
 
-/// The embedded shell over `triangles` with clusters of width `sigma` (m), and its mesh.
-fn build_shell_with_sigma(
+/// The constraint clusters a shell is built with.
+enum ClusterSource {
+    /// Clusters of this width σ (m), built on the shell's own mesh.
+    Width(f64),
+    /// These clusters, over the shell's vertices.
+    Given(Clusters),
+}
+
+/// The embedded shell over `triangles`, whose sub-mesh and refined vertices are `part`
+/// ([`sub_mesh`]), with the scene's skin, thickness and statics settings.
+fn shell_over(
     input: &ShellInput,
     triangles: &[usize],
-    sigma: f64,
-) -> anyhow::Result<(SimulatedSkin, TriMesh)> {
+    part: (TriMesh, Vec<usize>),
+    clusters: ClusterSource,
+) -> anyhow::Result<SimulatedSkin> {
     let (skin, scene, path) = (input.refined, input.scene, input.path);
-    let (sub, vertices) = sub_mesh(&skin.mesh, triangles);
+    let (sub, vertices) = part;
     let emb: Vec<(usize, usize, f64)> = vertices
         .iter()
         .enumerate()
@@ -232,8 +254,19 @@ fn build_shell_with_sigma(
         ..StaticSettings::default()
     };
     let material = scene.skin.material()?;
-    let mut shell = EmbeddedShell::new(sub.clone(), material, emb, input.nodes, sigma, settings)
-        .with_context(|| format!("{path}: setting up the skin"))?;
+    let nodes = input.nodes;
+    let (shell, sigma) = match clusters {
+        ClusterSource::Width(sigma) => (
+            EmbeddedShell::new(sub, material, emb, nodes, sigma, settings),
+            sigma,
+        ),
+        ClusterSource::Given(c) => {
+            let sigma = c.sigma;
+            let shell = EmbeddedShell::with_clusters(sub, material, emb, nodes, c, settings);
+            (shell, sigma)
+        }
+    };
+    let mut shell = shell.with_context(|| format!("{path}: setting up the skin"))?;
     if let Some(h) = &skin.thickness {
         // The skin's own thickness per simulated triangle; the clusters widen with it
         // (σ ∝ λ ∝ h, from σ of the thinnest skin above).
@@ -242,12 +275,11 @@ fn build_shell_with_sigma(
             .set_thickness(sub_h)
             .with_context(|| format!("{path}: setting up the skin thickness"))?;
     }
-    let simulated = SimulatedSkin {
+    Ok(SimulatedSkin {
         shell,
         vertices,
         sigma,
-    };
-    Ok((simulated, sub))
+    })
 }
 
 /// The `clusters` stage's record of a built shell, timed from `t`.
