@@ -827,7 +827,11 @@ pub fn amplitude_error(run: &AmplitudeMap, reference: &AmplitudeMap) -> f64 {
     for (k, rf) in reference.frames.iter().enumerate() {
         let empty = HashMap::new();
         let rn = run.frames.get(k).unwrap_or(&empty);
-        for (key, &(sq, n)) in rf {
+        // In key order: the sums do not depend on the hash map's iteration order.
+        let mut keys: Vec<&[i64; 3]> = rf.keys().collect();
+        keys.sort_unstable();
+        for key in keys {
+            let (sq, n) = rf[key];
             let a_ref = (sq / n as f64).sqrt();
             let a = rn
                 .get(key)
