@@ -214,6 +214,7 @@ fn stiff_skin_reduces_sag_as_composite_beam_theory_says() {
     let step = StepSettings {
         gravity: [0.0, 0.0, -9.81],
         linear_solver: LinearSolver::Cholesky,
+        tangent: furrow::fem::Tangent::Consistent,
         ..Default::default()
     };
     let k = 3;

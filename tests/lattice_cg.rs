@@ -18,6 +18,7 @@ fn sag(n: usize, dt: f64, t_end: f64, record: usize, solver: LinearSolver) -> Ve
         dt,
         gravity: [0.0, 0.0, -furrow::fem::GRAVITY],
         linear_solver: solver,
+        tangent: furrow::fem::Tangent::Consistent,
         max_newton: 1,
         ..Default::default()
     };
@@ -117,6 +118,7 @@ fn cg_with_coupling_terms_matches_cholesky() {
         let int = Interior::new(&lat, &Material::default()).unwrap();
         let settings = StepSettings {
             linear_solver: solver,
+            tangent: furrow::fem::Tangent::Consistent,
             max_newton: 1,
             ..Default::default()
         };

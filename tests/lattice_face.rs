@@ -123,6 +123,7 @@ fn push(mesh: &furrow::mesh::TriMesh, lat: &Lattice, pushed: usize, watched: usi
             rel_tol: 1e-6,
             max_iter: 2000,
         },
+        tangent: furrow::fem::Tangent::Consistent,
         max_newton: 3,
         ..Default::default()
     };

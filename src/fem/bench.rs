@@ -2,7 +2,7 @@
 //! lattice construction on a face-sized open mesh.
 
 use super::dynamics::AUTO_CG_REL_TOL;
-use super::{BackwardEuler, Interior, LinearSolver, Material, StepSettings};
+use super::{BackwardEuler, Interior, LinearSolver, Material, StepSettings, Tangent};
 use crate::lattice::{ElementOrder, Lattice, LatticeSettings};
 use std::time::Instant;
 
@@ -138,6 +138,7 @@ fn bench_step(
     let settings = StepSettings {
         gravity: [0.0, 0.0, -super::GRAVITY],
         linear_solver: solver,
+        tangent: Tangent::Consistent,
         max_newton,
         ..Default::default()
     };

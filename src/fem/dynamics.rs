@@ -29,6 +29,7 @@
 use super::cg::{pcg, BlockCsr};
 use super::interior::Interior;
 use super::matfree::ElementOperator;
+use super::tangent::RotationCorrection;
 use super::FemError;
 use crate::math::sparse::SpdSolver;
 use crate::math::Energy;
@@ -61,6 +62,23 @@ pub struct StepSettings {
     pub gravity: [f64; 3],
     /// How each Newton system is solved.
     pub linear_solver: LinearSolver,
+    /// Which stiffness the Newton matrix carries.
+    #[serde(default)]
+    pub tangent: Tangent,
+}
+
+/// The stiffness of the interior's Newton matrix.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub enum Tangent {
+    /// The consistent tangent (the default): R K₀ Rᵀ plus the derivative of each element's
+    /// rotation, its stress term projected to positive semi-definite
+    /// ([`super::tangent`]). Newton converges quadratically where the projection is
+    /// inactive. The matrix-free CG product (no coupling terms) uses it too.
+    #[default]
+    Consistent,
+    /// The warped stiffness R K₀ Rᵀ with each rotation frozen: cheaper per iteration,
+    /// linear convergence under large rotation (kept as the reference).
+    Frozen,
 }
 
 /// Relative residual at which [`LinearSolver::Auto`]'s conjugate gradients stop. Measured
@@ -101,6 +119,7 @@ impl Default for StepSettings {
             lumped_mass: false,
             gravity: [0.0, -super::GRAVITY, 0.0],
             linear_solver: LinearSolver::Auto,
+            tangent: Tangent::Consistent,
         }
     }
 }
@@ -210,6 +229,8 @@ struct MatrixTerms<'a> {
     lumped: Option<&'a [f64]>,
     /// K_x triplets over DOFs (N/m).
     extra: Option<&'a [(usize, usize, f64)]>,
+    /// Rotation-derivative part of each element's stiffness (empty: frozen rotations).
+    corrections: &'a [Option<RotationCorrection>],
 }
 
 /// Compressed lower-triangle pattern over free DOFs with 3 × 3 node blocks.
@@ -420,6 +441,7 @@ impl System {
             stiff_coef,
             lumped,
             extra,
+            corrections,
         } = *terms;
         let k = interior.nodes_per_element();
         let colptr = &self.colptr;
@@ -451,7 +473,11 @@ impl System {
                     if slot == SLOT_SKIP {
                         continue;
                     }
-                    let mut rb = (r * interior.k0_blocks[la * k + lb] * rt) * stiff_coef;
+                    let mut rb = r * interior.k0_blocks[la * k + lb] * rt;
+                    if let Some(Some(c)) = corrections.get(e) {
+                        rb += c.block(la, lb);
+                    }
+                    rb *= stiff_coef;
                     if lumped.is_none() {
                         let m = mass_coef * interior.m0[la * k + lb];
                         for i in 0..3 {
@@ -875,6 +901,21 @@ impl BackwardEuler {
         }
     }
 
+    /// The rotation-derivative part of each element's stiffness at `y` (projected), or none
+    /// when the settings ask for the frozen-rotation stiffness.
+    fn corrections_at(&self, y: &[f64]) -> Vec<Option<RotationCorrection>> {
+        match self.settings.tangent {
+            Tangent::Frozen => Vec::new(),
+            Tangent::Consistent => {
+                let interior = &self.interior;
+                (0..interior.elements.len())
+                    .into_par_iter()
+                    .map(|e| interior.rotation_correction(y, e, true))
+                    .collect()
+            }
+        }
+    }
+
     /// The linear solver of the settings with [`LinearSolver::Auto`] resolved for a system
     /// of `free_dofs` (a `time_step` or a quasi-static solve).
     fn resolved_solver(&self, free_dofs: usize, time_step: bool) -> LinearSolver {
@@ -892,7 +933,13 @@ impl BackwardEuler {
 
     /// Bring the Newton matrix M_coef·M + K_coef·(K(rotations) + K_x) up to date: the
     /// element operator when `matrix_free`, else the assembled matrix.
-    fn prepare_matrix(&mut self, terms: &Terms, rotations: Vec<M3>, matrix_free: bool) {
+    fn prepare_matrix(
+        &mut self,
+        terms: &Terms,
+        rotations: Vec<M3>,
+        corrections: Vec<Option<RotationCorrection>>,
+        matrix_free: bool,
+    ) {
         let (mass_coef, stiff_coef) = terms.coefficients();
         let lumped = if self.settings.lumped_mass {
             Some(self.lumped.as_slice())
@@ -908,6 +955,7 @@ impl BackwardEuler {
             op.update(
                 &self.interior,
                 rotations,
+                corrections,
                 mass_coef,
                 stiff_coef,
                 lumped_free,
@@ -918,6 +966,7 @@ impl BackwardEuler {
                 stiff_coef,
                 lumped,
                 extra: terms.extra.map(|x| x.stiffness),
+                corrections: &corrections,
             };
             sys.assemble(&self.interior, &rotations, &coefs);
         }
@@ -1156,7 +1205,9 @@ impl NewtonProblem for EulerNewton<'_, '_> {
         // K_x it multiplies the assembled matrix.
         let matrix_free =
             matches!(solver, LinearSolver::ConjugateGradient { .. }) && self.terms.extra.is_none();
-        self.be.prepare_matrix(&self.terms, rotations, matrix_free);
+        let corrections = self.be.corrections_at(self.y);
+        self.be
+            .prepare_matrix(&self.terms, rotations, corrections, matrix_free);
         self.report.assembly_s += t0.elapsed().as_secs_f64();
         let t1 = Instant::now();
         let rhs = self.newton_rhs();
@@ -1251,6 +1302,20 @@ mod tests {
                 *Rotation3::from_axis_angle(&ax, 0.3 * e as f64).matrix()
             })
             .collect();
+        // The consistent tangent's rotation corrections at a twisted, stretched state.
+        let q: Vec<f64> = lat
+            .rest
+            .iter()
+            .flat_map(|p| {
+                let t = 2.0 * p.z;
+                let (c, s) = (t.cos(), t.sin());
+                [1.2 * (c * p.x - s * p.y), c * p.y + s * p.x, 0.9 * p.z]
+            })
+            .collect();
+        let corrections: Vec<_> = (0..int.elements.len())
+            .map(|e| int.rotation_correction(&q, e, true))
+            .collect();
+        assert!(corrections.iter().all(|c| c.is_some()));
         let lumped_all = int.node_masses();
         let lumped_free: Vec<f64> = sys.free_nodes.iter().map(|&n| lumped_all[n]).collect();
         let n = 3 * sys.nfree;
@@ -1264,6 +1329,7 @@ mod tests {
                 stiff_coef: coefs.1,
                 lumped: lumped.then_some(lumped_all.as_slice()),
                 extra: None,
+                corrections: &corrections,
             };
             sys.assemble(&int, &rot, &terms);
             sys.fill_bsr();
@@ -1271,6 +1337,7 @@ mod tests {
             op.update(
                 &int,
                 rot.clone(),
+                corrections.clone(),
                 coefs.0,
                 coefs.1,
                 lumped.then(|| lumped_free.clone()),

@@ -14,13 +14,15 @@
 //! c = (tr S · I − S)⁻¹ τ (δR = R \[ω\]×, skew(Rᵀ δF) = \[½ (tr S · I − S) ω\]×). τ is second
 //! order in u (K₀ annihilates infinitesimal rotations), so the term is small but kept.
 //!
-//! Hessian (what Newton uses, and what [`Energy::eval`] emits): H_e = R_e K₀ R_eᵀ, the exact
-//! Hessian of the frozen-rotation energy ([`FrozenInterior`]), which is how it is tested. It
-//! is symmetric positive semi-definite by construction (so `project_psd` needs no work). It
-//! omits the derivative of the rotation, so Newton converges linearly rather than
-//! quadratically under large rotation.
+//! Hessian ([`Energy::eval`]): the consistent tangent, R_e K₀ R_eᵀ plus the derivative of
+//! the rotation ([`super::tangent`], a correction of rank ≤ 18 per element), exact when
+//! `project_psd` is false and with its stress term projected to positive semi-definite when
+//! true. [`FrozenInterior`] keeps each rotation fixed; its Hessian is R_e K₀ R_eᵀ alone (the
+//! warped stiffness, symmetric positive semi-definite), which converges only linearly under
+//! large rotation.
 
 use super::corot::rotation;
+use super::tangent::{ElementState, RotationCorrection};
 use super::{FemError, Material};
 use crate::lattice::basis::gauss27;
 use crate::lattice::{shape, ElementOrder, Lattice};
@@ -310,6 +312,37 @@ impl Interior {
         energy
     }
 
+    /// The rotation-derivative part of element `e`'s Hessian at `x` (see
+    /// [`super::tangent`]): exact, or with its stress term projected to positive
+    /// semi-definite when `project`; `None` where the rotation has no derivative.
+    pub(crate) fn rotation_correction(
+        &self,
+        x: &[f64],
+        e: usize,
+        project: bool,
+    ) -> Option<RotationCorrection> {
+        let n3 = 3 * self.elements[e].len();
+        let mut y = [0.0; 81];
+        let mut u = [0.0; 81];
+        let (r, fc) = self.element_prepare(x, e, None, &mut y[..n3], &mut u[..n3]);
+        let mut f = [0.0; 81];
+        for c in 0..n3 {
+            let kc = &self.k0[c * n3..(c + 1) * n3];
+            for (fr, kv) in f[..n3].iter_mut().zip(kc) {
+                *fr += kv * u[c];
+            }
+        }
+        let state = ElementState {
+            r: &r,
+            fc: fc.as_ref().expect("not frozen"),
+            y: &y[..n3],
+            f: &f[..n3],
+            k0: &self.k0,
+            center_g: &self.center_g,
+        };
+        RotationCorrection::new(&state, project)
+    }
+
     /// The rotated element stiffness R K₀ Rᵀ (3K × 3K, row-major, N/m).
     pub(crate) fn rotated_stiffness(&self, r: &M3) -> Vec<f64> {
         let k = self.nodes_per_element();
@@ -338,7 +371,7 @@ impl Interior {
         grad: &mut [f64],
         rotations: &mut Vec<M3>,
     ) -> f64 {
-        self.eval_impl_rot(x, None, Some(grad), None, Some(rotations))
+        self.eval_chunked(x, None, Some(grad), Some(rotations))
     }
 
     fn eval_impl(
@@ -347,21 +380,11 @@ impl Interior {
         frozen: Option<&[M3]>,
         grad: Option<&mut [f64]>,
         hess: Option<&mut Vec<(usize, usize, f64)>>,
-    ) -> f64 {
-        self.eval_impl_rot(x, frozen, grad, hess, None)
-    }
-
-    fn eval_impl_rot(
-        &self,
-        x: &[f64],
-        frozen: Option<&[M3]>,
-        grad: Option<&mut [f64]>,
-        hess: Option<&mut Vec<(usize, usize, f64)>>,
-        rot_out: Option<&mut Vec<M3>>,
+        project: bool,
     ) -> f64 {
         match hess {
-            None => self.eval_chunked(x, frozen, grad, rot_out),
-            Some(h) => self.eval_with_hessian(x, frozen, grad, h),
+            None => self.eval_chunked(x, frozen, grad, None),
+            Some(h) => self.eval_with_hessian(x, frozen, grad, h, project),
         }
     }
 
@@ -470,14 +493,17 @@ impl Interior {
         (en, g, rots)
     }
 
-    /// Energy (J), optionally gradient (N, added into `grad`), and the Hessian triplets
-    /// R_e K₀ R_eᵀ of every element (pushed onto `hess`), element by element.
+    /// Energy (J), optionally gradient (N, added into `grad`), and the Hessian triplets of
+    /// every element (pushed onto `hess`), element by element: R_e K₀ R_eᵀ when the
+    /// rotations are `frozen`, else the consistent tangent (its stress term projected to
+    /// positive semi-definite when `project`).
     fn eval_with_hessian(
         &self,
         x: &[f64],
         frozen: Option<&[M3]>,
         mut grad: Option<&mut [f64]>,
         hess: &mut Vec<(usize, usize, f64)>,
+        project: bool,
     ) -> f64 {
         let want_g = grad.is_some();
         let k = self.nodes_per_element();
@@ -491,7 +517,13 @@ impl Interior {
                     Some(r) => *r,
                     None => self.element_rotation(x, e),
                 };
-                (en, g, self.rotated_stiffness(&r))
+                let mut hm = self.rotated_stiffness(&r);
+                if fr.is_none() {
+                    if let Some(c) = self.rotation_correction(x, e, project) {
+                        c.add_to(&mut hm);
+                    }
+                }
+                (en, g, hm)
             })
             .collect();
         let mut energy = 0.0;
@@ -585,9 +617,9 @@ impl Energy for Interior {
         x: &[f64],
         grad: Option<&mut [f64]>,
         hess: Option<&mut Vec<(usize, usize, f64)>>,
-        _project_psd: bool,
+        project_psd: bool,
     ) -> f64 {
-        self.eval_impl(x, None, grad, hess)
+        self.eval_impl(x, None, grad, hess, project_psd)
     }
 }
 
@@ -613,6 +645,6 @@ impl Energy for FrozenInterior<'_> {
         _project_psd: bool,
     ) -> f64 {
         self.interior
-            .eval_impl(x, Some(&self.rotations), grad, hess)
+            .eval_impl(x, Some(&self.rotations), grad, hess, false)
     }
 }

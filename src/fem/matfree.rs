@@ -9,6 +9,7 @@
 //! over fixed chunks in order: the same bits for any thread count.
 
 use super::interior::Interior;
+use super::tangent::RotationCorrection;
 use faer::linalg::matmul::matmul;
 use faer::{Accum, MatMut, MatRef, Par};
 use nalgebra::Matrix3;
@@ -37,6 +38,9 @@ pub struct ElementOperator {
     node_ptr: Vec<usize>,
     /// Rotation of each element.
     rot: Vec<M3>,
+    /// Rotation-derivative part of each element's stiffness (consistent tangent; empty for
+    /// the frozen-rotation stiffness).
+    corrections: Vec<Option<RotationCorrection>>,
     /// Lumped mass per free node times c_m (kg), when lumped.
     lumped: Option<Vec<f64>>,
     /// Scratch: element results (3K per element).
@@ -77,6 +81,7 @@ impl ElementOperator {
             node_elems,
             node_ptr,
             rot: Vec::new(),
+            corrections: Vec::new(),
             lumped: None,
             buf: std::sync::Mutex::new(vec![0.0; 3 * k * interior.elements.len()]),
         }
@@ -87,12 +92,14 @@ impl ElementOperator {
         self.node_ptr.len() - 1
     }
 
-    /// Set A = c_m M + c_k Σ R_e K₀ R_eᵀ for element rotations `rot`; `lumped` gives the
-    /// lumped node masses of the free nodes (kg) instead of the consistent mass.
+    /// Set A = c_m M + c_k Σ (R_e K₀ R_eᵀ + Z_e C_e Z_eᵀ) for element rotations `rot` and
+    /// rotation corrections `corrections` (empty: none); `lumped` gives the lumped node
+    /// masses of the free nodes (kg) instead of the consistent mass.
     pub fn update(
         &mut self,
         interior: &Interior,
         rot: Vec<M3>,
+        corrections: Vec<Option<RotationCorrection>>,
         mass_coef: f64,
         stiff_coef: f64,
         lumped: Option<Vec<f64>>,
@@ -116,6 +123,7 @@ impl ElementOperator {
             self.coefs = (cons, stiff_coef);
         }
         self.rot = rot;
+        self.corrections = corrections;
         self.lumped = lumped.map(|m| m.into_iter().map(|v| v * mass_coef).collect());
     }
 
@@ -159,6 +167,7 @@ impl ElementOperator {
                             o[i] = r[(i, 0)] * v0 + r[(i, 1)] * v1 + r[(i, 2)] * v2;
                         }
                     }
+                    self.add_correction(e0 + j, x, &mut out[j * n3..(j + 1) * n3]);
                 }
             });
         let buf: &[f64] = buf;
@@ -190,6 +199,23 @@ impl ElementOperator {
         parts.iter().sum()
     }
 
+    /// out += c_k Z_e C_e Z_eᵀ x_e for element `e` (x over free DOFs; pinned nodes zero).
+    fn add_correction(&self, e: usize, x: &[f64], out: &mut [f64]) {
+        let Some(Some(c)) = self.corrections.get(e) else {
+            return;
+        };
+        let k = self.k;
+        let mut xe = [0.0; 81];
+        for a in 0..k {
+            let f = self.elem_free[e * k + a];
+            if f != PINNED {
+                let f = 3 * f as usize;
+                xe[3 * a..3 * a + 3].copy_from_slice(&x[f..f + 3]);
+            }
+        }
+        c.apply(&xe[..3 * k], out, self.coefs.1);
+    }
+
     /// Inverses of the 3 × 3 diagonal blocks (row-major), for block Jacobi.
     pub fn diag_inverses(&self) -> Vec<[f64; 9]> {
         let n3 = 3 * self.k;
@@ -202,6 +228,9 @@ impl ElementOperator {
                     let blk = M3::from_fn(|i, j| self.ke[(3 * la + j) * n3 + 3 * la + i]);
                     let r = &self.rot[e as usize];
                     d += r * blk * r.transpose();
+                    if let Some(Some(c)) = self.corrections.get(e as usize) {
+                        d += c.block(la, la) * self.coefs.1;
+                    }
                 }
                 if let Some(l) = &self.lumped {
                     for i in 0..3 {

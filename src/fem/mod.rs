@@ -9,9 +9,11 @@ pub mod corot;
 pub mod dynamics;
 pub mod interior;
 pub mod matfree;
+pub mod tangent;
 
 pub use dynamics::{
-    BackwardEuler, ExtraTerms, LinearSolver, SolveReport, SolveStatus, StepSettings, AUTO_CG_DOFS,
+    BackwardEuler, ExtraTerms, LinearSolver, SolveReport, SolveStatus, StepSettings, Tangent,
+    AUTO_CG_DOFS,
 };
 pub use interior::{FrozenInterior, Interior};
 

@@ -341,6 +341,7 @@ fn copy_interior(
             max_newton: scene.solver.interior_iterations.unwrap_or(20),
             gravity,
             linear_solver: LinearSolver::Auto,
+            tangent: crate::fem::Tangent::Consistent,
             ..Default::default()
         },
     )?)

@@ -324,6 +324,7 @@ pub fn inverted_interior(steps: usize) -> StabilityRow {
                 lumped_mass: false,
                 gravity: [0.0; 3],
                 linear_solver: LinearSolver::Auto,
+                tangent: crate::fem::Tangent::Consistent,
             },
         )
     });

@@ -560,6 +560,7 @@ fn slab_interior(
     let step = StepSettings {
         gravity: [0.0; 3],
         linear_solver: LinearSolver::Cholesky,
+        tangent: crate::fem::Tangent::Consistent,
         max_newton: 30,
         ..Default::default()
     };

@@ -56,6 +56,7 @@ pub fn stepper(lattice: &Lattice, scene: &Scene, plan: &Plan) -> anyhow::Result<
             lumped_mass: false,
             gravity,
             linear_solver: LinearSolver::Auto,
+            tangent: crate::fem::Tangent::Consistent,
         },
     )?;
     if plan.dynamics() {
