@@ -53,6 +53,18 @@ pub struct StageRecord {
     pub residual: f64,
     /// Wall time (ms).
     pub ms: f64,
+    /// Interior: halvings of a sub-step that did not converge (each retries it as two half
+    /// steps), summed over the frame.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub halvings: usize,
+    /// Skin: the equal load steps a solve that did not converge directly was redone in (0
+    /// when it converged directly).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub load_steps: usize,
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 /// One frame of the report.

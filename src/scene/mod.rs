@@ -153,6 +153,13 @@ pub struct SolverSection {
     pub shell_iterations: Option<usize>,
     /// Interior Newton iterations per step (default 3).
     pub interior_iterations: Option<usize>,
+    /// The interior Newton matrix: `consistent` (default: with the rotation's derivative,
+    /// quadratic convergence) or `frozen` (the warped stiffness R K₀ Rᵀ, the reference).
+    pub interior_tangent: Option<String>,
+    /// Load stepping of the skin: a frame whose skin solve does not converge directly is
+    /// redone with its constraint targets moved in 2, then 4, … up to 2^levels equal steps
+    /// (default 2; 0 turns it off).
+    pub skin_continuation: Option<usize>,
     /// When the skin's stiffness Bᵀ K_x B seen by the interior is recomputed: `once` (at
     /// rest; default, the force Bᵀ F_x is always current) or `every_frame` (the paper).
     pub skin_stiffness: Option<String>,
@@ -403,6 +410,18 @@ impl Scene {
         if let Some(m) = &self.muscles.source {
             if m.is_empty() {
                 bail!("`muscles.source` is empty: use \"auto\", \"none\" or a file path");
+            }
+        }
+        if let Some(t) = &self.solver.interior_tangent {
+            if t != "consistent" && t != "frozen" {
+                bail!(
+                    "`solver.interior_tangent` must be \"consistent\" or \"frozen\", got \"{t}\""
+                );
+            }
+        }
+        if let Some(l) = self.solver.skin_continuation {
+            if l > 6 {
+                bail!("`solver.skin_continuation` is at most 6 (64 load steps), got {l}");
             }
         }
         if self.solver.shell_iterations == Some(0) || self.solver.interior_iterations == Some(0) {

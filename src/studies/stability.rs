@@ -50,12 +50,16 @@ pub struct StabilityRow {
     pub interior_iterations: usize,
     /// Largest final interior residual over frames (N).
     pub interior_residual: f64,
+    /// Sub-step halvings the interior needed, summed over frames.
+    pub interior_halvings: usize,
     /// The shell's worst status over the frames, with the count.
     pub shell_status: String,
     /// Shell Newton iterations summed over frames.
     pub shell_iterations: usize,
     /// Largest final shell residual over frames (N).
     pub shell_residual: f64,
+    /// Load steps of the skin solves that needed load stepping, summed over frames.
+    pub shell_load_steps: usize,
     /// Frames simulated.
     pub frames: usize,
     /// Largest wrinkle depth over frames (m).
@@ -69,7 +73,7 @@ pub struct StabilityRow {
 }
 
 /// The CSV header written by [`to_csv`].
-pub const CSV_HEADER: &str = "case,parameter,outcome,interior_status,interior_iterations,interior_residual,shell_status,shell_iterations,shell_residual,frames,wrinkle_depth_max_m,wall_s,non_finite,message";
+pub const CSV_HEADER: &str = "case,parameter,outcome,interior_status,interior_iterations,interior_residual,interior_halvings,shell_status,shell_iterations,shell_residual,shell_load_steps,frames,wrinkle_depth_max_m,wall_s,non_finite,message";
 
 /// The cases. `quick` keeps each end of every range (a reduced set for tests); the full set
 /// adds intermediate values. The sheet is `n` quads per side over `size` (m, the model size),
@@ -127,7 +131,7 @@ pub fn cases(quick: bool, n: usize, size: f64, seconds: f64) -> Vec<Case> {
             30.0,
         );
     }
-    let strains: &[f64] = if quick { &[0.5] } else { &[0.3, 0.5] };
+    let strains: &[f64] = if quick { &[0.5, 0.7] } else { &[0.3, 0.5, 0.7] };
     for &c in strains {
         push(
             "compression",
@@ -137,7 +141,12 @@ pub fn cases(quick: bool, n: usize, size: f64, seconds: f64) -> Vec<Case> {
             30.0,
         );
     }
-    for w in [-0.5, 2.0] {
+    let weights: &[f64] = if quick {
+        &[-1.0, 3.0]
+    } else {
+        &[-1.0, -0.5, 2.0, 3.0]
+    };
+    for &w in weights {
         push(
             "weight",
             format!("blend weight → {w}"),
@@ -149,17 +158,22 @@ pub fn cases(quick: bool, n: usize, size: f64, seconds: f64) -> Vec<Case> {
     // The pipeline sub-steps a frame by at most dt: steps shorter than a frame (1/30 s) are
     // sub-steps; for longer ones the sampling rate is 1/dt so that the step really is dt.
     let dts: &[f64] = if quick {
-        &[0.005, 0.1]
+        &[0.005, 0.2]
     } else {
-        &[0.005, 0.02, 0.05, 0.1]
+        &[0.005, 0.02, 0.05, 0.1, 0.2]
     };
     for &dt in dts {
         let mut s = scene.clone();
         s.dynamics.dt = Some(dt);
+        // At least two steps of dt after the rest frame, so the strain is really applied.
+        let rig = SheetRig {
+            seconds: base.seconds.max(2.0 * dt),
+            ..base
+        };
         push(
             "time_step",
             format!("dt = {dt} s"),
-            base,
+            rig,
             s,
             if dt < 1.0 / 30.0 { 30.0 } else { 1.0 / dt },
         );
@@ -185,6 +199,15 @@ pub fn cases(quick: bool, n: usize, size: f64, seconds: f64) -> Vec<Case> {
         push(
             "stiff_skin",
             "E_x/E_q = 1e6, h = 0.1 × size".into(),
+            base,
+            s.clone(),
+            30.0,
+        );
+        // The same stiffness ratio on a thin skin: λ ∝ h (E_x/E_q)^⅓ stays near the sheet's.
+        s.skin.thickness = Some(1e-3 * base.size);
+        push(
+            "stiff_skin",
+            "E_x/E_q = 1e6, h = 1e-3 × size".into(),
             base,
             s,
             30.0,
@@ -224,9 +247,11 @@ pub fn run_case(c: &Case) -> StabilityRow {
         interior_status: "-".into(),
         interior_iterations: 0,
         interior_residual: 0.0,
+        interior_halvings: 0,
         shell_status: "-".into(),
         shell_iterations: 0,
         shell_residual: 0.0,
+        shell_load_steps: 0,
         frames: 0,
         wrinkle_depth_max_m: 0.0,
         wall_s: 0.0,
@@ -258,6 +283,16 @@ pub fn run_case(c: &Case) -> StabilityRow {
             row.shell_status = ss;
             row.shell_iterations = si;
             row.shell_residual = sr;
+            row.interior_halvings = pf
+                .iter()
+                .filter_map(|f| f.interior.as_ref())
+                .map(|r| r.halvings)
+                .sum();
+            row.shell_load_steps = pf
+                .iter()
+                .filter_map(|f| f.shell.as_ref())
+                .map(|r| r.load_steps)
+                .sum();
             row.frames = pf.len();
             row.wrinkle_depth_max_m = pf.iter().map(|f| f.wrinkle_depth_max_m).fold(0.0, f64::max);
             row.non_finite = out
@@ -299,9 +334,11 @@ pub fn inverted_interior(steps: usize) -> StabilityRow {
         interior_status: "-".into(),
         interior_iterations: 0,
         interior_residual: 0.0,
+        interior_halvings: 0,
         shell_status: "skipped".into(),
         shell_iterations: 0,
         shell_residual: 0.0,
+        shell_load_steps: 0,
         frames: 0,
         wrinkle_depth_max_m: 0.0,
         wall_s: 0.0,
@@ -485,16 +522,18 @@ pub fn to_csv(rows: &[StabilityRow]) -> String {
     s.push('\n');
     for r in rows {
         s.push_str(&format!(
-            "{},{},{},{},{},{:.3e},{},{},{:.3e},{},{:.3e},{:.3},{},{}\n",
+            "{},{},{},{},{},{:.3e},{},{},{},{:.3e},{},{},{:.3e},{:.3},{},{}\n",
             r.case,
             q(&r.parameter),
             r.outcome,
             q(&r.interior_status),
             r.interior_iterations,
             r.interior_residual,
+            r.interior_halvings,
             q(&r.shell_status),
             r.shell_iterations,
             r.shell_residual,
+            r.shell_load_steps,
             r.frames,
             r.wrinkle_depth_max_m,
             r.wall_s,
@@ -508,7 +547,7 @@ pub fn to_csv(rows: &[StabilityRow]) -> String {
 /// The rows as a markdown table (the message cut to 120 characters).
 pub fn to_markdown(rows: &[StabilityRow]) -> String {
     let mut s = String::from(
-        "| case | parameter | outcome | interior (it, residual N) | shell (it, residual N) | frames | max depth (mm) | time (s) | non-finite | message |\n|---|---|---|---|---|---|---|---|---|---|\n",
+        "| case | parameter | outcome | interior (it, residual N) | halvings | shell (it, residual N) | load steps | frames | max depth (mm) | time (s) | non-finite | message |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         let full = one_line(&r.message);
@@ -517,16 +556,18 @@ pub fn to_markdown(rows: &[StabilityRow]) -> String {
             msg.push('…');
         }
         s.push_str(&format!(
-            "| {} | {} | {} | {} ({}, {:.1e}) | {} ({}, {:.1e}) | {} | {:.3} | {:.2} | {} | {} |\n",
+            "| {} | {} | {} | {} ({}, {:.1e}) | {} | {} ({}, {:.1e}) | {} | {} | {:.3} | {:.2} | {} | {} |\n",
             r.case,
             r.parameter,
             r.outcome,
             r.interior_status,
             r.interior_iterations,
             r.interior_residual,
+            r.interior_halvings,
             r.shell_status,
             r.shell_iterations,
             r.shell_residual,
+            r.shell_load_steps,
             r.frames,
             r.wrinkle_depth_max_m * 1e3,
             r.wall_s,
@@ -574,6 +615,8 @@ mod tests {
             iterations: it,
             residual: r,
             ms: 0.0,
+            halvings: 0,
+            load_steps: 0,
         };
         let v = [
             rec("converged", 2, 1e-9),

@@ -56,7 +56,10 @@ pub fn stepper(lattice: &Lattice, scene: &Scene, plan: &Plan) -> anyhow::Result<
             lumped_mass: false,
             gravity,
             linear_solver: LinearSolver::Auto,
-            tangent: crate::fem::Tangent::Consistent,
+            tangent: match scene.solver.interior_tangent.as_deref() {
+                Some("frozen") => crate::fem::Tangent::Frozen,
+                _ => crate::fem::Tangent::Consistent,
+            },
         },
     )?;
     if plan.dynamics() {

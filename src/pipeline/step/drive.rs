@@ -27,6 +27,8 @@ pub fn fit_activations(
         iterations: f.gauss_newton + 1,
         residual: f.rms_residual,
         ms: t.elapsed().as_secs_f64() * 1e3,
+        halvings: 0,
+        load_steps: 0,
     })
 }
 

@@ -7,7 +7,7 @@
 use super::drive;
 use super::Scratch;
 use crate::coupling::embedded::EmbeddedShell;
-use crate::fem::{ExtraTerms, SolveStatus};
+use crate::fem::{ExtraTerms, SolveReport, SolveStatus};
 use crate::pipeline::record::StageRecord;
 use crate::pipeline::setup::{Model, State};
 use anyhow::bail;
@@ -22,6 +22,11 @@ pub struct InteriorSchedule {
     /// Re-linearise the skin's stiffness Bᵀ K_x B every frame (else once, at rest).
     pub every_frame_stiffness: bool,
 }
+
+/// Halvings of one sub-step at most: a backward Euler step whose Newton solve does not
+/// converge is retried from its start as two steps of half the length, down to 1/16 of the
+/// sub-step; the record counts the halvings.
+pub const MAX_HALVINGS: usize = 4;
 
 /// Advance the interior over frame `k` towards the welded `target` (m) and record it.
 pub fn advance(
@@ -38,40 +43,26 @@ pub fn advance(
         iterations: 0,
         residual: 0.0,
         ms: 0.0,
+        halvings: 0,
+        load_steps: 0,
     };
     let q = &state.interior.q;
     let skin_force = coupling_terms(model, state.skin.as_ref(), q, scratch, schedule);
-    let mut stiffness = scratch.combined.clone().unwrap_or_default();
-    let base_len = stiffness.len();
-    let dynamics = schedule.substeps > 0;
-    for _ in 0..schedule.substeps.max(1) {
-        let be = &state.interior;
-        let mut force = drive::tracking_force(&model.tracking, &model.rows, &be.q, target);
-        if let Some(m) = state.muscles.as_ref() {
-            drive::add_muscle_terms(m, be, &mut stiffness, base_len, &mut force);
-        }
-        if let Some(fs) = &skin_force {
-            for (f, g) in force.iter_mut().zip(fs) {
-                *f += g;
-            }
-        }
-        let extra = ExtraTerms {
-            stiffness: &stiffness,
-            force: &force,
-        };
-        let rep = if dynamics {
-            state.interior.step(&scratch.zero_force, Some(&extra))?
-        } else {
-            state
-                .interior
-                .quasi_static(&scratch.zero_force, Some(&extra))?
-        };
+    let mut load = StepLoad {
+        stiffness: scratch.combined.clone().unwrap_or_default(),
+        base_len: 0,
+        skin_force,
+        target,
+        zero_force: &scratch.zero_force,
+    };
+    load.base_len = load.stiffness.len();
+    if schedule.substeps == 0 {
+        let rep = solve_once(model, state, &mut load, false)?;
         record.iterations += rep.iterations;
-        record.residual = rep.residual;
-        match rep.status {
-            SolveStatus::Converged => {}
-            SolveStatus::IterationLimit => record.status = "iteration_limit".into(),
-            SolveStatus::Stalled => record.status = "stalled".into(),
+        note(&mut record, &rep);
+    } else {
+        for _ in 0..schedule.substeps {
+            step_adaptive(model, state, &mut load, 0, &mut record)?;
         }
     }
     if state.interior.q.iter().any(|v| !v.is_finite()) {
@@ -81,6 +72,92 @@ pub fn advance(
     }
     record.ms = t.elapsed().as_secs_f64() * 1e3;
     Ok(record)
+}
+
+/// What every solve of one frame shares: the combined stiffness (tracking and skin; muscle
+/// terms are appended after `base_len` per solve), the skin's force, the target (m) and a
+/// zero external force.
+struct StepLoad<'a> {
+    stiffness: Vec<(usize, usize, f64)>,
+    base_len: usize,
+    skin_force: Option<Vec<f64>>,
+    target: &'a [Vector3<f64>],
+    zero_force: &'a [f64],
+}
+
+/// One backward Euler step of the stepper's current dt (`dynamics`) or one quasi-static solve,
+/// under the drive at the current positions and the frame's skin force.
+fn solve_once(
+    model: &Model,
+    state: &mut State,
+    load: &mut StepLoad,
+    dynamics: bool,
+) -> anyhow::Result<SolveReport> {
+    let be = &state.interior;
+    let mut force = drive::tracking_force(&model.tracking, &model.rows, &be.q, load.target);
+    if let Some(m) = state.muscles.as_ref() {
+        drive::add_muscle_terms(m, be, &mut load.stiffness, load.base_len, &mut force);
+    }
+    if let Some(fs) = &load.skin_force {
+        for (f, g) in force.iter_mut().zip(fs) {
+            *f += g;
+        }
+    }
+    let extra = ExtraTerms {
+        stiffness: &load.stiffness,
+        force: &force,
+    };
+    Ok(if dynamics {
+        state.interior.step(load.zero_force, Some(&extra))?
+    } else {
+        state.interior.quasi_static(load.zero_force, Some(&extra))?
+    })
+}
+
+/// One sub-step, retried as two half steps (recursively, [`MAX_HALVINGS`] deep) when its
+/// Newton solve does not converge; the halved steps' outcome is what the record keeps.
+fn step_adaptive(
+    model: &Model,
+    state: &mut State,
+    load: &mut StepLoad,
+    depth: usize,
+    record: &mut StageRecord,
+) -> anyhow::Result<()> {
+    let start = (
+        state.interior.q.clone(),
+        state.interior.v.clone(),
+        state.interior.time,
+    );
+    let rep = solve_once(model, state, load, true)?;
+    record.iterations += rep.iterations;
+    let ok = rep.status == SolveStatus::Converged && rep_finite(state);
+    if ok || depth >= MAX_HALVINGS {
+        note(record, &rep);
+        return Ok(());
+    }
+    let be = &mut state.interior;
+    (be.q, be.v, be.time) = start;
+    let dt = be.settings.dt;
+    be.settings.dt = 0.5 * dt;
+    record.halvings += 1;
+    let result = (0..2).try_for_each(|_| step_adaptive(model, state, load, depth + 1, record));
+    state.interior.settings.dt = dt;
+    result
+}
+
+/// Whether the interior's positions are all finite.
+fn rep_finite(state: &State) -> bool {
+    state.interior.q.iter().all(|v| v.is_finite())
+}
+
+/// Record a solve's residual and, when it did not converge, its status.
+fn note(record: &mut StageRecord, rep: &SolveReport) {
+    record.residual = rep.residual;
+    match rep.status {
+        SolveStatus::Converged => {}
+        SolveStatus::IterationLimit => record.status = "iteration_limit".into(),
+        SolveStatus::Stalled => record.status = "stalled".into(),
+    }
 }
 
 /// The skin's pull on the interior: its force Bᵀ F_x now (returned; the left-out skin's at

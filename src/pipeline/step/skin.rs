@@ -15,5 +15,11 @@ pub fn solve_skin(skin: &mut EmbeddedShell, q: &[f64]) -> anyhow::Result<StageRe
         iterations: rep.iterations,
         residual: rep.residual,
         ms: t.elapsed().as_secs_f64() * 1e3,
+        halvings: 0,
+        load_steps: if rep.increments > 1 {
+            rep.increments
+        } else {
+            0
+        },
     })
 }
