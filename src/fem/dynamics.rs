@@ -901,16 +901,17 @@ impl BackwardEuler {
         }
     }
 
-    /// The rotation-derivative part of each element's stiffness at `y` (projected), or none
-    /// when the settings ask for the frozen-rotation stiffness.
-    fn corrections_at(&self, y: &[f64]) -> Vec<Option<RotationCorrection>> {
+    /// The rotation-derivative part of each element's stiffness at `y` (exact, or with its
+    /// stress term projected to positive semi-definite when `project`), or none when the
+    /// settings ask for the frozen-rotation stiffness.
+    fn corrections_at(&self, y: &[f64], project: bool) -> Vec<Option<RotationCorrection>> {
         match self.settings.tangent {
             Tangent::Frozen => Vec::new(),
             Tangent::Consistent => {
                 let interior = &self.interior;
                 (0..interior.elements.len())
                     .into_par_iter()
-                    .map(|e| interior.rotation_correction(y, e, true))
+                    .map(|e| interior.rotation_correction(y, e, project))
                     .collect()
             }
         }
@@ -973,21 +974,25 @@ impl BackwardEuler {
     }
 
     /// Solve the prepared Newton system for `rhs` (free DOFs) with `solver` (resolved);
-    /// returns the solution and the CG iterations. `warm`: the first Newton iteration of a
-    /// time step, whose CG starts from and records the last step's first direction.
+    /// returns the solution and the CG iterations, or `None` when the matrix is not
+    /// positive definite and `may_fail` (the caller then tries a projected one). `warm`: the
+    /// first Newton iteration of a time step, whose CG starts from and records the last
+    /// step's first direction.
     fn solve_newton_system(
         &mut self,
         solver: LinearSolver,
         matrix_free: bool,
         mut rhs: Vec<f64>,
-        warm: bool,
-        time_step: bool,
-    ) -> Result<(Vec<f64>, usize), FemError> {
+        (warm, time_step, may_fail): (bool, bool, bool),
+    ) -> Result<Option<(Vec<f64>, usize)>, FemError> {
         let sys = self.system.as_mut().expect("system built");
         match solver {
             LinearSolver::Auto => unreachable!("resolved by the caller"),
             LinearSolver::Cholesky => {
                 if let Err(e) = self.solver.factorize(&sys.mat) {
+                    if may_fail {
+                        return Ok(None);
+                    }
                     return Err(if time_step {
                         FemError::Sparse(e)
                     } else {
@@ -997,7 +1002,7 @@ impl BackwardEuler {
                     });
                 }
                 self.solver.solve_in_place(&mut rhs);
-                Ok((rhs, 0))
+                Ok(Some((rhs, 0)))
             }
             LinearSolver::ConjugateGradient { rel_tol, max_iter } => {
                 // Warm start: the first Newton direction of the last time step (the
@@ -1019,7 +1024,7 @@ impl BackwardEuler {
                 if warm {
                     self.last_direction = Some(x.clone());
                 }
-                Ok((x, it))
+                Ok(Some((x, it)))
             }
         }
     }
@@ -1194,37 +1199,52 @@ impl NewtonProblem for EulerNewton<'_, '_> {
         }
     }
 
-    /// Solve [M_coef M + K_coef (K + K_x)] Δy = −K_coef ∇Φ.
+    /// Solve [M_coef M + K_coef (K + K_x)] Δy = −K_coef ∇Φ. With the consistent tangent the
+    /// exact Hessian is tried first (quadratic convergence); when it is not positive
+    /// definite or gives no descent direction, its stress term is projected and the system
+    /// solved again.
     fn direction(&mut self, iteration: usize) -> Result<Option<NewtonStatus>, FemError> {
         let time_step = self.terms.inertia.is_some();
-        let t0 = Instant::now();
-        let rotations = self.be.rotations_at(self.y);
         let nfree = self.be.system.as_ref().expect("system built").nfree;
         let solver = self.be.resolved_solver(3 * nfree, time_step);
         // CG without coupling terms multiplies element by element (no assembly); with
         // K_x it multiplies the assembled matrix.
         let matrix_free =
             matches!(solver, LinearSolver::ConjugateGradient { .. }) && self.terms.extra.is_none();
-        let corrections = self.be.corrections_at(self.y);
-        self.be
-            .prepare_matrix(&self.terms, rotations, corrections, matrix_free);
-        self.report.assembly_s += t0.elapsed().as_secs_f64();
-        let t1 = Instant::now();
-        let rhs = self.newton_rhs();
+        let consistent = self.be.settings.tangent == Tangent::Consistent;
         let warm = time_step && iteration == 0;
-        let (dy, cg_iterations) =
+        for project in [false, true] {
+            let last = project || !consistent;
+            let t0 = Instant::now();
+            let rotations = self.be.rotations_at(self.y);
+            let corrections = self.be.corrections_at(self.y, project);
             self.be
-                .solve_newton_system(solver, matrix_free, rhs, warm, time_step)?;
-        self.report.cg_iterations += cg_iterations;
-        self.report.solve_s += t1.elapsed().as_secs_f64();
-        let dir = self.scatter(&dy);
-        self.line = EulerLine {
-            slope: dir.iter().zip(&self.g).map(|(d, gi)| d * gi).sum(),
-            step_max: dir.iter().fold(0.0f64, |m, d| m.max(d.abs())),
-            dir,
-            trial: self.y.to_vec(),
-            accepted: None,
-        };
+                .prepare_matrix(&self.terms, rotations, corrections, matrix_free);
+            self.report.assembly_s += t0.elapsed().as_secs_f64();
+            let t1 = Instant::now();
+            let rhs = self.newton_rhs();
+            let flags = (warm, time_step, !last);
+            let solved = self
+                .be
+                .solve_newton_system(solver, matrix_free, rhs, flags)?;
+            self.report.solve_s += t1.elapsed().as_secs_f64();
+            let Some((dy, cg_iterations)) = solved else {
+                continue;
+            };
+            self.report.cg_iterations += cg_iterations;
+            let dir = self.scatter(&dy);
+            let slope: f64 = dir.iter().zip(&self.g).map(|(d, gi)| d * gi).sum();
+            if slope < 0.0 || last {
+                self.line = EulerLine {
+                    slope,
+                    step_max: dir.iter().fold(0.0f64, |m, d| m.max(d.abs())),
+                    dir,
+                    trial: self.y.to_vec(),
+                    accepted: None,
+                };
+                break;
+            }
+        }
         Ok(None)
     }
 

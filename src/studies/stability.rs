@@ -88,132 +88,139 @@ pub fn cases(quick: bool, n: usize, size: f64, seconds: f64) -> Vec<Case> {
         seconds,
         sliver: None,
     };
-    let scene = Scene::default();
-    let e_q = scene
-        .interior
-        .material()
-        .expect("default interior is valid")
-        .young;
-    let mut out = Vec::new();
-    let mut push = |name: &str, parameter: String, rig: SheetRig, scene: Scene, fps: f64| {
-        out.push(Case {
+    let mut set = CaseSet {
+        quick,
+        base,
+        scene: Scene::default(),
+        out: Vec::new(),
+    };
+    set.push("baseline", "defaults".into(), base, set.scene.clone(), 30.0);
+    set.materials();
+    set.loads();
+    set.time_steps();
+    set.meshes();
+    set.out
+}
+
+/// The cases being built: the sweep's size, the base sheet and scene, and the list.
+struct CaseSet {
+    quick: bool,
+    base: SheetRig,
+    scene: Scene,
+    out: Vec<Case>,
+}
+
+impl CaseSet {
+    fn push(&mut self, name: &str, parameter: String, rig: SheetRig, scene: Scene, fps: f64) {
+        self.out.push(Case {
             name: name.into(),
             parameter,
             rig,
             scene,
             fps,
         })
-    };
-    push("baseline", "defaults".into(), base, scene.clone(), 30.0);
-    let ratios: &[f64] = if quick {
-        &[10.0, 1e6]
-    } else {
-        &[10.0, 1e2, 1e3, 1e4, 1e5, 1e6]
-    };
-    for &r in ratios {
-        let mut s = scene.clone();
-        s.skin.young = Some(r * e_q);
-        push("stiffness_ratio", format!("E_x/E_q = {r:e}"), base, s, 30.0);
     }
-    let thick: &[f64] = if quick {
-        &[1e-4, 1e-1]
-    } else {
-        &[1e-4, 1e-3, 1e-2, 1e-1]
-    };
-    for &t in thick {
-        let mut s = scene.clone();
-        s.skin.thickness = Some(t * base.size);
-        push(
-            "thickness",
-            format!("h = {t:e} × size = {:.1e} m", t * base.size),
-            base,
-            s,
-            30.0,
-        );
+
+    /// The full range, or its ends when quick.
+    fn range<'a>(&self, quick: &'a [f64], full: &'a [f64]) -> &'a [f64] {
+        if self.quick {
+            quick
+        } else {
+            full
+        }
     }
-    let strains: &[f64] = if quick { &[0.5, 0.7] } else { &[0.3, 0.5, 0.7] };
-    for &c in strains {
-        push(
-            "compression",
-            format!("{:.0} %", c * 100.0),
-            SheetRig { strain: c, ..base },
-            scene.clone(),
-            30.0,
-        );
+
+    /// Stiffness ratios, skin thickness, and a skin far stiffer than the lattice.
+    fn materials(&mut self) {
+        let (base, scene) = (self.base, self.scene.clone());
+        let e_q = scene
+            .interior
+            .material()
+            .expect("default interior is valid")
+            .young;
+        for &r in self.range(&[10.0, 1e6], &[10.0, 1e2, 1e3, 1e4, 1e5, 1e6]) {
+            let mut s = scene.clone();
+            s.skin.young = Some(r * e_q);
+            self.push("stiffness_ratio", format!("E_x/E_q = {r:e}"), base, s, 30.0);
+        }
+        for &t in self.range(&[1e-4, 1e-1], &[1e-4, 1e-3, 1e-2, 1e-1]) {
+            let mut s = scene.clone();
+            s.skin.thickness = Some(t * base.size);
+            let what = format!("h = {t:e} × size = {:.1e} m", t * base.size);
+            self.push("thickness", what, base, s, 30.0);
+        }
+        // A skin far stiffer than the lattice: membrane stiffness E_x h ≈ 10⁶ × E_q ℓ; then
+        // the same ratio on a thin skin (λ ∝ h (E_x/E_q)^⅓ stays near the sheet's).
+        for t in [0.1, 1e-3] {
+            let mut s = scene.clone();
+            s.skin.young = Some(1e6 * e_q);
+            s.skin.thickness = Some(t * base.size);
+            let what = format!("E_x/E_q = 1e6, h = {t:e} × size");
+            self.push("stiff_skin", what, base, s, 30.0);
+        }
     }
-    let weights: &[f64] = if quick {
-        &[-1.0, 3.0]
-    } else {
-        &[-1.0, -0.5, 2.0, 3.0]
-    };
-    for &w in weights {
-        push(
-            "weight",
-            format!("blend weight → {w}"),
-            SheetRig { weight: w, ..base },
-            scene.clone(),
-            30.0,
-        );
+
+    /// Strong compression and extrapolated weights.
+    fn loads(&mut self) {
+        let (base, scene) = (self.base, self.scene.clone());
+        for &c in self.range(&[0.5, 0.7], &[0.3, 0.5, 0.7]) {
+            let rig = SheetRig { strain: c, ..base };
+            self.push(
+                "compression",
+                format!("{:.0} %", c * 100.0),
+                rig,
+                scene.clone(),
+                30.0,
+            );
+        }
+        for &w in self.range(&[-1.0, 3.0], &[-1.0, -0.5, 2.0, 3.0]) {
+            let rig = SheetRig { weight: w, ..base };
+            self.push(
+                "weight",
+                format!("blend weight → {w}"),
+                rig,
+                scene.clone(),
+                30.0,
+            );
+        }
     }
-    // The pipeline sub-steps a frame by at most dt: steps shorter than a frame (1/30 s) are
-    // sub-steps; for longer ones the sampling rate is 1/dt so that the step really is dt.
-    let dts: &[f64] = if quick {
-        &[0.005, 0.2]
-    } else {
-        &[0.005, 0.02, 0.05, 0.1, 0.2]
-    };
-    for &dt in dts {
-        let mut s = scene.clone();
-        s.dynamics.dt = Some(dt);
-        // At least two steps of dt after the rest frame, so the strain is really applied.
-        let rig = SheetRig {
-            seconds: base.seconds.max(2.0 * dt),
-            ..base
-        };
-        push(
-            "time_step",
-            format!("dt = {dt} s"),
-            rig,
-            s,
-            if dt < 1.0 / 30.0 { 30.0 } else { 1.0 / dt },
-        );
+
+    /// Time steps. The pipeline sub-steps a frame by at most dt: steps shorter than a frame
+    /// (1/30 s) are sub-steps; for longer ones the sampling rate is 1/dt so that the step
+    /// really is dt, on a clip at least two steps long so the strain is really applied.
+    fn time_steps(&mut self) {
+        let base = self.base;
+        for &dt in self.range(&[0.005, 0.2], &[0.005, 0.02, 0.05, 0.1, 0.2]) {
+            let mut s = self.scene.clone();
+            s.dynamics.dt = Some(dt);
+            let rig = SheetRig {
+                seconds: base.seconds.max(2.0 * dt),
+                ..base
+            };
+            let fps = if dt < 1.0 / 30.0 { 30.0 } else { 1.0 / dt };
+            self.push("time_step", format!("dt = {dt} s"), rig, s, fps);
+        }
     }
-    let slivers: &[f64] = if quick { &[1e-4] } else { &[1e-2, 1e-4] };
-    for &e in slivers {
-        push(
-            "degenerate_triangle",
-            format!("2 triangles of area {e:e} × ½ℓ²"),
-            SheetRig {
+
+    /// Degenerate triangles, and a shape that folds the skin over itself (refused).
+    fn meshes(&mut self) {
+        let base = self.base;
+        for &e in self.range(&[1e-4], &[1e-2, 1e-4]) {
+            let rig = SheetRig {
                 sliver: Some(e),
                 ..base
-            },
-            scene.clone(),
-            30.0,
-        );
+            };
+            let what = format!("2 triangles of area {e:e} × ½ℓ²");
+            self.push("degenerate_triangle", what, rig, self.scene.clone(), 30.0);
+        }
+        // Strain 1.5 maps x ↦ x + 1.5 (mid − x) on the left half: it turns over there.
+        let rig = SheetRig {
+            strain: 1.5,
+            ..base
+        };
+        let what = "left half turned over (strain 150 %)".into();
+        self.push("folding_shape", what, rig, self.scene.clone(), 30.0);
     }
-    {
-        // A skin far stiffer than the lattice: membrane stiffness E_x h ≈ 10⁶ × E_q ℓ.
-        let mut s = scene.clone();
-        s.skin.young = Some(1e6 * e_q);
-        s.skin.thickness = Some(0.1 * base.size);
-        push(
-            "stiff_skin",
-            "E_x/E_q = 1e6, h = 0.1 × size".into(),
-            base,
-            s.clone(),
-            30.0,
-        );
-        // The same stiffness ratio on a thin skin: λ ∝ h (E_x/E_q)^⅓ stays near the sheet's.
-        s.skin.thickness = Some(1e-3 * base.size);
-        push(
-            "stiff_skin",
-            "E_x/E_q = 1e6, h = 1e-3 × size".into(),
-            base,
-            s,
-            30.0,
-        );
-    }
-    out
 }
 
 /// Worst status over frames: the first non-`converged` status and how many frames had a

@@ -90,6 +90,7 @@ pub fn set_up(
     progress("setup", 0, 4);
     let (welded, record) = weld::weld_face(face, &path)?;
     log.stages.push(record);
+    select::check_folds(rig, plan, &welded, &path)?;
     let (lattice, record) = lattice::build_lattice(&welded.mesh, &scene.interior, &path)?;
     log.stages.push(record);
     progress("setup", 1, 4);

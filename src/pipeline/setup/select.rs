@@ -155,6 +155,92 @@ pub fn select_compressed<P: AsRef<[Vector3<f64>]>>(
     }
 }
 
+/// Dihedral turn (rad) across a skin edge beyond which the blend shapes are taken to fold
+/// the skin over itself: the two triangles' normals, which agree at rest, point more than
+/// 150° apart. The skin has no contact, so such targets are outside the model.
+pub const FOLD_ANGLE: f64 = 150.0 * std::f64::consts::PI / 180.0;
+
+/// The first edge of `rest` that `pose` folds over (see [`FOLD_ANGLE`]): the two triangles
+/// and the angle (rad) between their normals, or `None`.
+pub fn first_fold(rest: &TriMesh, pose: &[Vector3<f64>]) -> Option<(usize, usize, f64)> {
+    let normal = |p: &[Vector3<f64>], t: usize| {
+        let [a, b, c] = rest.triangles[t].map(|v| p[v]);
+        (b - a).cross(&(c - a)).try_normalize(1e-300)
+    };
+    let mut by_edge: HashMap<(usize, usize), usize> = HashMap::new();
+    let cos_fold = FOLD_ANGLE.cos();
+    for (t, tri) in rest.triangles.iter().enumerate() {
+        for k in 0..3 {
+            let (a, b) = (tri[k], tri[(k + 1) % 3]);
+            let Some(u) = by_edge.insert((a.min(b), a.max(b)), t) else {
+                continue;
+            };
+            let (Some(n0), Some(n1)) = (normal(&rest.positions, u), normal(&rest.positions, t))
+            else {
+                continue;
+            };
+            if n0.dot(&n1) <= 0.0 {
+                continue; // a crease at rest (or a non-manifold pair): not judged
+            }
+            if let (Some(p0), Some(p1)) = (normal(pose, u), normal(pose, t)) {
+                let c = p0.dot(&p1);
+                if c < cos_fold {
+                    return Some((u, t, c.clamp(-1.0, 1.0).acos()));
+                }
+            }
+        }
+    }
+    None
+}
+
+/// Refuse blend shapes that fold the welded skin over itself in some pose of the clip (or,
+/// for a still rig, some shape at weight 1): the error names the frame or shape, the two
+/// triangles, the angle and the limit.
+pub fn check_folds(rig: &Rig, plan: &Plan, welded: &Welded, path: &str) -> anyhow::Result<()> {
+    let (weights, what) = pose_weights(rig, plan);
+    let count = welded.mesh.positions.len();
+    for (k, w) in weights.iter().enumerate() {
+        let pose = weld_positions(&rig.blend(w), &welded.of_loaded, count);
+        if let Some((a, b, angle)) = first_fold(&welded.mesh, &pose) {
+            let which = match what {
+                PoseKind::Frames => format!("frame {k}"),
+                PoseKind::Shapes => {
+                    format!("shape {k} (\"{}\") at weight 1", rig.face().targets[k].name)
+                }
+            };
+            anyhow::bail!(
+                "{path}: the blend shapes fold the skin over itself: in {which}, skin triangles {a} and {b}, which share an edge, turn {:.0}° apart (limit {:.0}°). furrow's skin has no contact, so such targets are outside its model; check the shape weights (values far beyond 1) or the shape itself",
+                angle.to_degrees(),
+                FOLD_ANGLE.to_degrees()
+            );
+        }
+    }
+    Ok(())
+}
+
+/// What the poses of [`pose_weights`] are.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum PoseKind {
+    /// Every frame of the clip.
+    Frames,
+    /// Each shape alone at weight 1 (a still rig).
+    Shapes,
+}
+
+/// The weights of the poses the skin is judged on: every frame at the run's fps, or for a
+/// still rig each shape at weight 1.
+fn pose_weights(rig: &Rig, plan: &Plan) -> (Vec<Vec<f64>>, PoseKind) {
+    if plan.animated {
+        (plan.weights.clone(), PoseKind::Frames)
+    } else {
+        let n = rig.face().targets.len();
+        let w = (0..n)
+            .map(|i| (0..n).map(|j| if i == j { 1.0 } else { 0.0 }).collect())
+            .collect();
+        (w, PoseKind::Shapes)
+    }
+}
+
 /// The `select` stage: with `skin.simulate = "compressed"` (the default), the welded triangles
 /// some pose of the rig compresses past the threshold, grown by one λ (of the thickest skin);
 /// `None` with `"all"`. The poses are every frame of the clip at the run's fps (whatever
@@ -172,14 +258,7 @@ pub fn select_skin(
     let t = Instant::now();
     let onset = onset_strain(&plan.materials);
     let threshold = scene.skin.compression_threshold.unwrap_or(0.5 * onset);
-    let weights: Vec<Vec<f64>> = if plan.animated {
-        plan.weights.clone()
-    } else {
-        let n = rig.face().targets.len();
-        (0..n)
-            .map(|i| (0..n).map(|j| if i == j { 1.0 } else { 0.0 }).collect())
-            .collect()
-    };
+    let (weights, _) = pose_weights(rig, plan);
     let count = welded.mesh.positions.len();
     let poses = weights
         .iter()
@@ -225,6 +304,29 @@ mod tests {
         // Folded out of plane it is still measured in its own plane: a rigid fold keeps 1.
         let tilted = r.map(|p| Vector3::new(p.x, 0.0, p.y));
         assert!((smaller_stretch(r, tilted) - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_fold_is_found_and_a_bend_is_not() {
+        let rest = bump_sheet(9);
+        // Bending the sheet up by 90° along x = 0 is no fold.
+        let bend = |p: &Vector3<f64>| {
+            if p.x < 0.0 {
+                *p
+            } else {
+                Vector3::new(0.0, p.y, p.z + p.x)
+            }
+        };
+        let bent: Vec<Vector3<f64>> = rest.positions.iter().map(bend).collect();
+        assert!(first_fold(&rest, &bent).is_none());
+        // Mirroring the left half onto the right (x ↦ −x for x < 0) folds it over.
+        let folded: Vec<Vector3<f64>> = rest
+            .positions
+            .iter()
+            .map(|p| Vector3::new(p.x.abs(), p.y, p.z))
+            .collect();
+        let (a, b, angle) = first_fold(&rest, &folded).expect("a fold");
+        assert!(angle > FOLD_ANGLE && a != b, "{angle}");
     }
 
     #[test]
