@@ -1,10 +1,16 @@
-//! Membrane (stretch and shear) energy: isotropic Saint Venant–Kirchhoff per triangle with
-//! plane-stress Lamé parameters times thickness.
+//! Membrane (stretch and shear) energy per triangle with plane-stress Lamé parameters times
+//! thickness, μ = E_x / (2(1+ν)), λ = E_x ν / (1 − ν²), in one of two laws
+//! ([`MembraneLaw`]) with the same small-strain behaviour (uniaxial stress gives Young's
+//! modulus, biaxial strain E_x h / (1 − ν²)):
 //!
-//! Per triangle with rest area A and deformation gradient F (3 × 2, from the rest triangle's
-//! own 2D frame), Green strain E = ½ (FᵀF − I), energy
-//! W = A [ μh E:E + ½ λh (tr E)² ], μ = E_x / (2(1+ν)), λ = E_x ν / (1 − ν²) (plane stress),
-//! so that uniaxial stress gives Young's modulus and biaxial strain gives E_x h / (1 − ν²).
+//! - Saint Venant–Kirchhoff: with Green strain E = ½ (FᵀF − I) (F: 3 × 2, from the rest
+//!   triangle's own 2D frame), W = A [ μh E:E + ½ λh (tr E)² ]. Its uniaxial force
+//!   μ-part ∝ s (s² − 1) peaks at stretch s = 1/√3 and then falls: past 42 % compression the
+//!   sheet softens towards collapse.
+//! - Biot (corotated linear): with principal stretches s₁, s₂ of F,
+//!   W = A [ μh ((s₁ − 1)² + (s₂ − 1)²) + ½ λh (s₁ + s₂ − 2)² ], whose force grows linearly
+//!   in compression all the way to s = 0. Written through C = FᵀF: ‖U − I‖² = tr C − 2τ + 2
+//!   with τ = s₁ + s₂ = √(tr C + 2 √det C).
 //!
 //! The thickness may vary per triangle ([`MembraneEnergy::with_thickness`]): each element
 //! then uses μ h_t and λ h_t of its own thickness h_t (the stiffness of a plane-stress sheet
@@ -40,6 +46,8 @@ pub struct MembraneEnergy {
     /// Per element (μ h_t, λ h_t) at its own thickness h_t (N/m); all equal to
     /// (`mu_h`, `lambda_h`) for a uniform skin.
     pub element_lame: Vec<(f64, f64)>,
+    /// The constitutive law.
+    pub law: MembraneLaw,
     n_dofs: usize,
 }
 
@@ -69,13 +77,146 @@ pub fn membrane_rest(v: [usize; 3], p: [Vector3<f64>; 3]) -> Option<MembraneElem
     })
 }
 
-/// Energy (J) of one element at positions `x`; adds the 9-vector gradient and fills the
-/// row-major 9 × 9 Hessian when asked.
+/// The membrane's constitutive law (see the module notes).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum MembraneLaw {
+    /// Saint Venant–Kirchhoff (Green strain): softens beyond 42 % compression.
+    StVenantKirchhoff,
+    /// Biot strain (corotated linear): stable in compression (the default).
+    #[default]
+    Biot,
+}
+
+type S2 = [[f64; 2]; 2];
+
+/// √det C is floored at this fraction of tr C (a triangle flattened to a segment), where
+/// the Biot law's derivatives in C are singular.
+const FLAT: f64 = 1e-12;
+
+impl MembraneLaw {
+    /// Energy per rest area W(C) (J/m²) for the right Cauchy–Green tensor `c` and Lamé
+    /// parameters times thickness (N/m).
+    fn density(self, c: &S2, mu_h: f64, lambda_h: f64) -> f64 {
+        match self {
+            Self::StVenantKirchhoff => {
+                let e = [
+                    [0.5 * (c[0][0] - 1.0), 0.5 * c[0][1]],
+                    [0.5 * c[1][0], 0.5 * (c[1][1] - 1.0)],
+                ];
+                let tr = e[0][0] + e[1][1];
+                let ee = e[0][0] * e[0][0] + 2.0 * e[0][1] * e[0][1] + e[1][1] * e[1][1];
+                mu_h * ee + 0.5 * lambda_h * tr * tr
+            }
+            Self::Biot => {
+                let b = Biot::at(c);
+                mu_h * (c[0][0] + c[1][1] - 2.0 * b.tau + 2.0)
+                    + 0.5 * lambda_h * (b.tau - 2.0).powi(2)
+            }
+        }
+    }
+
+    /// Second Piola–Kirchhoff stress S = 2 ∂W/∂C (N/m).
+    fn stress(self, c: &S2, mu_h: f64, lambda_h: f64) -> S2 {
+        match self {
+            Self::StVenantKirchhoff => {
+                let e = [
+                    [0.5 * (c[0][0] - 1.0), 0.5 * c[0][1]],
+                    [0.5 * c[1][0], 0.5 * (c[1][1] - 1.0)],
+                ];
+                let tr = e[0][0] + e[1][1];
+                [
+                    [2.0 * mu_h * e[0][0] + lambda_h * tr, 2.0 * mu_h * e[0][1]],
+                    [2.0 * mu_h * e[1][0], 2.0 * mu_h * e[1][1] + lambda_h * tr],
+                ]
+            }
+            Self::Biot => {
+                let b = Biot::at(c);
+                let k = 2.0 * lambda_h * (b.tau - 2.0) - 4.0 * mu_h;
+                std::array::from_fn(|i| {
+                    std::array::from_fn(|j| k * b.t[i][j] + if i == j { 2.0 * mu_h } else { 0.0 })
+                })
+            }
+        }
+    }
+
+    /// The change dS of the stress for a change `dc` of C (N/m).
+    fn stress_change(self, c: &S2, dc: &S2, mu_h: f64, lambda_h: f64) -> S2 {
+        match self {
+            Self::StVenantKirchhoff => {
+                let de = dc.map(|r| r.map(|v| 0.5 * v));
+                let dtr = de[0][0] + de[1][1];
+                [
+                    [
+                        2.0 * mu_h * de[0][0] + lambda_h * dtr,
+                        2.0 * mu_h * de[0][1],
+                    ],
+                    [
+                        2.0 * mu_h * de[1][0],
+                        2.0 * mu_h * de[1][1] + lambda_h * dtr,
+                    ],
+                ]
+            }
+            Self::Biot => {
+                let b = Biot::at(c);
+                let ddot = |a: &S2, m: &S2| {
+                    (0..2)
+                        .flat_map(|i| (0..2).map(move |j| a[i][j] * m[i][j]))
+                        .sum::<f64>()
+                };
+                let dtau = ddot(&b.t, dc);
+                let dr = 0.5 * b.r * ddot(&b.inv, dc);
+                // d(C⁻¹) = −C⁻¹ dC C⁻¹.
+                let cdc: S2 = std::array::from_fn(|i| {
+                    std::array::from_fn(|j| (0..2).map(|k| b.inv[i][k] * dc[k][j]).sum())
+                });
+                let dinv: S2 = std::array::from_fn(|i| {
+                    std::array::from_fn(|j| -(0..2).map(|k| cdc[i][k] * b.inv[k][j]).sum::<f64>())
+                });
+                let k = 2.0 * lambda_h * (b.tau - 2.0) - 4.0 * mu_h;
+                std::array::from_fn(|i| {
+                    std::array::from_fn(|j| {
+                        let dt = -dtau / b.tau * b.t[i][j]
+                            + (dr * b.inv[i][j] + b.r * dinv[i][j]) / (2.0 * b.tau);
+                        k * dt + 2.0 * lambda_h * dtau * b.t[i][j]
+                    })
+                })
+            }
+        }
+    }
+}
+
+/// The Biot law's quantities at C: r = √det C (floored), C⁻¹, τ = √(tr C + 2r) and
+/// T = ∂τ/∂C = (I + r C⁻¹) / (2τ).
+struct Biot {
+    r: f64,
+    inv: S2,
+    tau: f64,
+    t: S2,
+}
+
+impl Biot {
+    fn at(c: &S2) -> Self {
+        let tr = c[0][0] + c[1][1];
+        let det = (c[0][0] * c[1][1] - c[0][1] * c[1][0]).max((FLAT * tr).powi(2));
+        let r = det.sqrt();
+        let inv = [
+            [c[1][1] / det, -c[0][1] / det],
+            [-c[1][0] / det, c[0][0] / det],
+        ];
+        let tau = (tr + 2.0 * r).sqrt();
+        let t = std::array::from_fn(|i| {
+            std::array::from_fn(|j| (if i == j { 1.0 } else { 0.0 } + r * inv[i][j]) / (2.0 * tau))
+        });
+        Self { r, inv, tau, t }
+    }
+}
+
+/// Energy (J) of one element at positions `x` under `law`; adds the 9-vector gradient and
+/// fills the row-major 9 × 9 Hessian when asked.
 pub fn membrane_element(
     el: &MembraneElement,
     x: [[f64; 3]; 3],
-    mu_h: f64,
-    lambda_h: f64,
+    (law, mu_h, lambda_h): (MembraneLaw, f64, f64),
     grad: Option<&mut [f64; 9]>,
     hess: Option<&mut [f64; 81]>,
 ) -> f64 {
@@ -96,21 +237,11 @@ pub fn membrane_element(
             cg[a][bb] = (0..3).map(|c| f[c][a] * f[c][bb]).sum();
         }
     }
-    let e = [
-        [0.5 * (cg[0][0] - 1.0), 0.5 * cg[0][1]],
-        [0.5 * cg[1][0], 0.5 * (cg[1][1] - 1.0)],
-    ];
-    let tr = e[0][0] + e[1][1];
-    let ee = e[0][0] * e[0][0] + 2.0 * e[0][1] * e[0][1] + e[1][1] * e[1][1];
-    let energy = el.area * (mu_h * ee + 0.5 * lambda_h * tr * tr);
+    let energy = el.area * law.density(&cg, mu_h, lambda_h);
     if grad.is_none() && hess.is_none() {
         return energy;
     }
-    // S = 2μh E + λh tr E I
-    let s = [
-        [2.0 * mu_h * e[0][0] + lambda_h * tr, 2.0 * mu_h * e[0][1]],
-        [2.0 * mu_h * e[1][0], 2.0 * mu_h * e[1][1] + lambda_h * tr],
-    ];
+    let s = law.stress(&cg, mu_h, lambda_h);
     if let Some(g) = grad {
         // P = F S; grad_i = A P b_i
         let mut p = [[0.0; 2]; 3];
@@ -136,22 +267,12 @@ pub fn membrane_element(
         for j in 0..3 {
             for d in 0..3 {
                 let fd = f[d];
-                // δE = ½(b_j f_dᵀ + f_d b_jᵀ)
-                let de = [
-                    [b[j][0] * fd[0], 0.5 * (b[j][0] * fd[1] + fd[0] * b[j][1])],
-                    [0.5 * (b[j][1] * fd[0] + fd[1] * b[j][0]), b[j][1] * fd[1]],
+                // δC = b_j f_dᵀ + f_d b_jᵀ
+                let dc = [
+                    [2.0 * b[j][0] * fd[0], b[j][0] * fd[1] + fd[0] * b[j][1]],
+                    [b[j][1] * fd[0] + fd[1] * b[j][0], 2.0 * b[j][1] * fd[1]],
                 ];
-                let dtr = de[0][0] + de[1][1];
-                let ds = [
-                    [
-                        2.0 * mu_h * de[0][0] + lambda_h * dtr,
-                        2.0 * mu_h * de[0][1],
-                    ],
-                    [
-                        2.0 * mu_h * de[1][0],
-                        2.0 * mu_h * de[1][1] + lambda_h * dtr,
-                    ],
-                ];
+                let ds = law.stress_change(&cg, &dc, mu_h, lambda_h);
                 let col = 3 * j + d;
                 for i in 0..3 {
                     let dsb = [
@@ -219,6 +340,7 @@ impl MembraneEnergy {
             mu_h,
             lambda_h,
             element_lame,
+            law: MembraneLaw::default(),
             n_dofs: 3 * rest.positions.len(),
         })
     }
@@ -237,10 +359,11 @@ impl MembraneEnergy {
             self.triplet_count(),
             "Hessian value buffer size"
         );
+        let law = self.law;
         element_hessians(values, 9, project, |i, h| {
             let (el, (mu_h, lambda_h)) = (&self.elements[i], self.element_lame[i]);
             let h: &mut [f64; 81] = h.try_into().expect("81 values per element");
-            membrane_element(el, gather3(x, el.v), mu_h, lambda_h, None, Some(h));
+            membrane_element(el, gather3(x, el.v), (law, mu_h, lambda_h), None, Some(h));
         });
     }
 }
@@ -283,6 +406,7 @@ impl Energy for MembraneEnergy {
     ) -> f64 {
         let want_g = grad.is_some();
         let ne = self.elements.len();
+        let law = self.law;
         let mut hbuf: Option<&mut [(usize, usize, f64)]> = None;
         if let Some(h) = hess {
             let start = h.len();
@@ -309,8 +433,7 @@ impl Energy for MembraneEnergy {
                         let e = membrane_element(
                             el,
                             gather3(x, el.v),
-                            mu_h,
-                            lambda_h,
+                            (law, mu_h, lambda_h),
                             g,
                             Some(&mut he),
                         );
@@ -336,7 +459,7 @@ impl Energy for MembraneEnergy {
                 .par_iter_mut()
                 .zip(self.elements.par_iter().zip(self.element_lame.par_iter()))
                 .map(|(g, (el, &(mu_h, lambda_h)))| {
-                    membrane_element(el, gather3(x, el.v), mu_h, lambda_h, Some(g), None)
+                    membrane_element(el, gather3(x, el.v), (law, mu_h, lambda_h), Some(g), None)
                 })
                 .collect::<Vec<f64>>()
                 .iter()
@@ -346,7 +469,7 @@ impl Energy for MembraneEnergy {
                 .par_iter()
                 .zip(self.element_lame.par_iter())
                 .map(|(el, &(mu_h, lambda_h))| {
-                    membrane_element(el, gather3(x, el.v), mu_h, lambda_h, None, None)
+                    membrane_element(el, gather3(x, el.v), (law, mu_h, lambda_h), None, None)
                 })
                 .collect::<Vec<f64>>()
                 .iter()
