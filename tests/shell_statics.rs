@@ -1,7 +1,9 @@
 //! Quasi-static checks of the shell with the constrained Newton solver: uniaxial tension
-//! against the StVK / plane-stress formulas, and Euler buckling of a pinned strip.
+//! against the exact relations of both membrane laws (Biot and StVK, plane stress), and
+//! Euler buckling of a pinned strip.
 
 use furrow::math::Energy;
+use furrow::shell::membrane::MembraneLaw;
 use furrow::shell::sheet::{equilateral_sheet, Sheet};
 use furrow::shell::{Shell, ShellMaterial};
 use furrow::solver::{LinearConstraints, SolveStatus, StaticProblem, StaticSettings, StaticSolver};
@@ -29,9 +31,10 @@ fn end_forces(sheet: &Sheet, fx: f64) -> Vec<f64> {
 /// Solve the sheet under end force `fx`, left end on rollers (x pinned), vertex 0 pinned
 /// in y, all z pinned; `pin_lateral` pins every y too (uniaxial strain). Returns the mean
 /// axial strain of the loaded end and the lateral strain.
-fn tension(fx: f64, pin_lateral: bool, mat: ShellMaterial) -> (f64, f64) {
+fn tension(fx: f64, pin_lateral: bool, mat: ShellMaterial, law: MembraneLaw) -> (f64, f64) {
     let sheet = equilateral_sheet(8, 4, 0.01);
-    let shell = Shell::new(sheet.mesh.clone(), mat).unwrap();
+    let mut shell = Shell::new(sheet.mesh.clone(), mat).unwrap();
+    shell.membrane.law = law;
     let n = sheet.mesh.vertex_count();
     let mut pinned: Vec<usize> = sheet.rows.iter().map(|r| 3 * r[0]).collect();
     pinned.push(1);
@@ -80,7 +83,7 @@ fn uniaxial_tension_reaches_the_predicted_strain() {
     // Small strain: linear theory, ε = F / (E h b) free lateral, F (1 − ν²) / (E h b) pinned.
     for (pin, modulus) in [(false, e), (true, e / (1.0 - nu * nu))] {
         let eps = 1e-4;
-        let (ex, ey) = tension(modulus * h * b * eps, pin, mat);
+        let (ex, ey) = tension(modulus * h * b * eps, pin, mat, MembraneLaw::default());
         assert!((ex / eps - 1.0).abs() < 0.01, "linear strain {ex} vs {eps}");
         if !pin {
             assert!((ey / (-nu * eps) - 1.0).abs() < 0.01, "lateral {ey}");
@@ -91,7 +94,7 @@ fn uniaxial_tension_reaches_the_predicted_strain() {
     for (pin, modulus) in [(false, e), (true, e / (1.0 - nu * nu))] {
         let eps: f64 = 0.01;
         let p = (1.0 + eps) * modulus * (eps + 0.5 * eps * eps);
-        let (ex, ey) = tension(p * h * b, pin, mat);
+        let (ex, ey) = tension(p * h * b, pin, mat, MembraneLaw::StVenantKirchhoff);
         assert!((ex / eps - 1.0).abs() < 1e-6, "StVK strain {ex} vs {eps}");
         if !pin {
             let e11 = eps + 0.5 * eps * eps;
@@ -99,6 +102,16 @@ fn uniaxial_tension_reaches_the_predicted_strain() {
             assert!((ey / lat - 1.0).abs() < 1e-6, "lateral {ey} vs {lat}");
         } else {
             assert!(ey.abs() < 1e-12);
+        }
+    }
+    // 5 % strain: Biot's exact relation is linear in the stretch, nominal stress M ε, and the
+    // free lateral stretch is −ν ε.
+    for (pin, modulus) in [(false, e), (true, e / (1.0 - nu * nu))] {
+        let eps: f64 = 0.05;
+        let (ex, ey) = tension(modulus * eps * h * b, pin, mat, MembraneLaw::Biot);
+        assert!((ex / eps - 1.0).abs() < 1e-6, "Biot strain {ex} vs {eps}");
+        if !pin {
+            assert!((ey / (-nu * eps) - 1.0).abs() < 1e-6, "lateral {ey}");
         }
     }
 }

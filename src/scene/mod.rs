@@ -79,6 +79,9 @@ pub struct SkinSection {
     /// Compression (1 − smaller principal stretch, dimensionless) beyond which a triangle can
     /// wrinkle; default half the bilayer's onset strain ε_c = ¼ (3 Ē_q / Ē_x)^(2/3).
     pub compression_threshold: Option<f64>,
+    /// The membrane law: `biot` (default: corotated linear, stable in compression) or
+    /// `stvk` (Saint Venant–Kirchhoff, which softens past 42 % compression; the reference).
+    pub membrane: Option<String>,
 }
 
 /// An axis-aligned box in world space (m).
@@ -350,6 +353,11 @@ impl Scene {
         if let Some(m) = s.simulate.as_deref() {
             if !matches!(m, "compressed" | "all") {
                 bail!("`skin.simulate` = \"{m}\": use \"compressed\" (the skin some frame compresses) or \"all\"");
+            }
+        }
+        if let Some(m) = s.membrane.as_deref() {
+            if !matches!(m, "biot" | "stvk") {
+                bail!("`skin.membrane` = \"{m}\": use \"biot\" (the default) or \"stvk\"");
             }
         }
         if let Some(t) = s.compression_threshold {

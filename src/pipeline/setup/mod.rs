@@ -66,6 +66,9 @@ pub struct State {
     pub skin: Option<EmbeddedShell>,
     /// The muscles and their activations, when muscles drive the interior.
     pub muscles: Option<MuscleDrive>,
+    /// The welded target of the last frame stepped (m): sub-steps of the next frame move
+    /// the target from it to that frame's, so a shorter step is also a smaller load step.
+    pub last_target: Option<Vec<nalgebra::Vector3<f64>>>,
 }
 
 /// The run's log: each stage's record in the order they were planned, and the warnings.
@@ -160,6 +163,7 @@ pub fn set_up(
         interior: stepper,
         skin,
         muscles,
+        last_target: None,
     };
     Ok((model, state))
 }

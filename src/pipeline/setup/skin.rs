@@ -273,6 +273,9 @@ fn shell_over(
         }
     };
     let mut shell = shell.with_context(|| format!("{path}: setting up the skin"))?;
+    if scene.skin.membrane.as_deref() == Some("stvk") {
+        shell.shell.membrane.law = crate::shell::membrane::MembraneLaw::StVenantKirchhoff;
+    }
     shell.set_continuation_levels(
         scene
             .solver

@@ -48,23 +48,28 @@ pub fn advance(
     };
     let q = &state.interior.q;
     let skin_force = coupling_terms(model, state.skin.as_ref(), q, scratch, schedule);
+    let from = state.last_target.take().unwrap_or_else(|| target.to_vec());
     let mut load = StepLoad {
         stiffness: scratch.combined.clone().unwrap_or_default(),
         base_len: 0,
         skin_force,
+        from: &from,
         target,
         zero_force: &scratch.zero_force,
     };
     load.base_len = load.stiffness.len();
     if schedule.substeps == 0 {
-        let rep = solve_once(model, state, &mut load, false)?;
+        let rep = solve_once(model, state, &mut load, false, 1.0)?;
         record.iterations += rep.iterations;
         note(&mut record, &rep);
     } else {
-        for _ in 0..schedule.substeps {
-            step_adaptive(model, state, &mut load, 0, &mut record)?;
+        let n = schedule.substeps as f64;
+        for i in 0..schedule.substeps {
+            let span = (i as f64 / n, (i + 1) as f64 / n);
+            step_adaptive(model, state, &mut load, (span, 0), &mut record)?;
         }
     }
+    state.last_target = Some(target.to_vec());
     if state.interior.q.iter().any(|v| !v.is_finite()) {
         bail!(
             "frame {k}: the interior became non-finite; lower dynamics.dt or stiffen the interior"
@@ -75,26 +80,38 @@ pub fn advance(
 }
 
 /// What every solve of one frame shares: the combined stiffness (tracking and skin; muscle
-/// terms are appended after `base_len` per solve), the skin's force, the target (m) and a
-/// zero external force.
+/// terms are appended after `base_len` per solve), the skin's force, the last frame's and
+/// this frame's targets (m) and a zero external force.
 struct StepLoad<'a> {
     stiffness: Vec<(usize, usize, f64)>,
     base_len: usize,
     skin_force: Option<Vec<f64>>,
+    from: &'a [Vector3<f64>],
     target: &'a [Vector3<f64>],
     zero_force: &'a [f64],
 }
 
 /// One backward Euler step of the stepper's current dt (`dynamics`) or one quasi-static solve,
-/// under the drive at the current positions and the frame's skin force.
+/// under the drive at the current positions towards the target at fraction `at` of the frame
+/// interval (linear between the last frame's and this frame's), and the frame's skin force.
 fn solve_once(
     model: &Model,
     state: &mut State,
     load: &mut StepLoad,
     dynamics: bool,
+    at: f64,
 ) -> anyhow::Result<SolveReport> {
     let be = &state.interior;
-    let mut force = drive::tracking_force(&model.tracking, &model.rows, &be.q, load.target);
+    let target: Vec<Vector3<f64>> = if at >= 1.0 {
+        load.target.to_vec()
+    } else {
+        load.from
+            .iter()
+            .zip(load.target)
+            .map(|(a, b)| a + (b - a) * at)
+            .collect()
+    };
+    let mut force = drive::tracking_force(&model.tracking, &model.rows, &be.q, &target);
     if let Some(m) = state.muscles.as_ref() {
         drive::add_muscle_terms(m, be, &mut load.stiffness, load.base_len, &mut force);
     }
@@ -114,13 +131,14 @@ fn solve_once(
     })
 }
 
-/// One sub-step, retried as two half steps (recursively, [`MAX_HALVINGS`] deep) when its
-/// Newton solve does not converge; the halved steps' outcome is what the record keeps.
+/// One sub-step over the fraction `span` of the frame interval, retried as two half steps
+/// (recursively, [`MAX_HALVINGS`] deep, each moving the target half as far) when its Newton
+/// solve does not converge; the halved steps' outcome is what the record keeps.
 fn step_adaptive(
     model: &Model,
     state: &mut State,
     load: &mut StepLoad,
-    depth: usize,
+    (span, depth): ((f64, f64), usize),
     record: &mut StageRecord,
 ) -> anyhow::Result<()> {
     let start = (
@@ -128,7 +146,7 @@ fn step_adaptive(
         state.interior.v.clone(),
         state.interior.time,
     );
-    let rep = solve_once(model, state, load, true)?;
+    let rep = solve_once(model, state, load, true, span.1)?;
     record.iterations += rep.iterations;
     let ok = rep.status == SolveStatus::Converged && rep_finite(state);
     if ok || depth >= MAX_HALVINGS {
@@ -140,7 +158,10 @@ fn step_adaptive(
     let dt = be.settings.dt;
     be.settings.dt = 0.5 * dt;
     record.halvings += 1;
-    let result = (0..2).try_for_each(|_| step_adaptive(model, state, load, depth + 1, record));
+    let mid = 0.5 * (span.0 + span.1);
+    let result = [(span.0, mid), (mid, span.1)]
+        .into_iter()
+        .try_for_each(|half| step_adaptive(model, state, load, (half, depth + 1), record));
     state.interior.settings.dt = dt;
     result
 }
