@@ -99,14 +99,14 @@ fn an_interior_step_that_needs_sub_stepping_gets_it_and_converges() {
     let case = stability::Case {
         name: "halving".into(),
         parameter: "two Newton iterations per step, 50 % compression in 2 frames".into(),
-        rig: SheetRig {
+        rig: stability::CaseRig::Sheet(SheetRig {
             n: 4,
             size: 0.04,
             strain: 0.5,
             weight: 1.0,
             seconds: 0.07,
             sliver: None,
-        },
+        }),
         scene,
         fps: 30.0,
     };
@@ -114,6 +114,26 @@ fn an_interior_step_that_needs_sub_stepping_gets_it_and_converges() {
     eprintln!("{}", stability::to_markdown(std::slice::from_ref(&row)));
     assert!(row.interior_halvings > 0, "{row:?}");
     assert_eq!(row.interior_status, "converged", "{row:?}");
+}
+
+/// The capture-shaped head at twice its performance's weights (its first half second, the
+/// jaw opening and brows moving at up to weight 2) converges in every frame and stage.
+#[test]
+fn the_capture_rig_at_twice_its_weights_converges() {
+    let case = stability::Case {
+        name: "capture_rig".into(),
+        parameter: "weights × 2, first 0.5 s".into(),
+        rig: stability::CaseRig::Head {
+            weight_scale: 2.0,
+            seconds: 0.5,
+        },
+        scene: Scene::default(),
+        fps: 30.0,
+    };
+    let row = stability::run_case(&case);
+    eprintln!("{}", stability::to_markdown(std::slice::from_ref(&row)));
+    assert_eq!(row.outcome, "converged", "{row:?}");
+    assert!(row.frames >= 15, "{row:?}");
 }
 
 /// The tradeoff sweep on a small sheet rig (thick skin so λ is large and the meshes small) and

@@ -25,11 +25,61 @@ pub struct Case {
     /// The extreme value, as text with its unit.
     pub parameter: String,
     /// The rig.
-    pub rig: SheetRig,
+    pub rig: CaseRig,
     /// The scene.
     pub scene: Scene,
     /// Frames per second.
     pub fps: f64,
+}
+
+/// The rig a case runs.
+#[derive(Debug, Clone, Copy)]
+pub enum CaseRig {
+    /// The sheet rig (see [`SheetRig`]).
+    Sheet(SheetRig),
+    /// The capture-shaped head of `furrow rig generate --kind head` (52 ARKit shapes), its
+    /// performance cut to the first `seconds` (s) and every weight multiplied by
+    /// `weight_scale`.
+    Head {
+        /// Factor on every weight of the performance.
+        weight_scale: f64,
+        /// Clip length kept (s).
+        seconds: f64,
+    },
+}
+
+impl CaseRig {
+    /// The rig, built in memory (the head through the compact writer, as in `rigs/`).
+    pub fn build(&self) -> anyhow::Result<crate::io::load::Rig> {
+        match *self {
+            Self::Sheet(s) => sheet_rig(&s),
+            Self::Head {
+                weight_scale,
+                seconds,
+            } => {
+                let mut h = crate::rig::head::generate();
+                let keep = h
+                    .keys
+                    .times
+                    .iter()
+                    .filter(|&&t| t <= seconds)
+                    .count()
+                    .max(2);
+                h.keys.times.truncate(keep);
+                h.keys.weights.truncate(keep);
+                for w in h.keys.weights.iter_mut().flatten() {
+                    *w *= weight_scale;
+                }
+                let bytes = crate::io::compact::rig_glb("head", &h.mesh, &h.targets, &h.keys)?;
+                let path = std::path::Path::new("head.glb");
+                Ok(crate::io::load::load_bytes(
+                    path,
+                    &bytes,
+                    &Default::default(),
+                )?)
+            }
+        }
+    }
 }
 
 /// How one case ended.
@@ -99,6 +149,19 @@ pub fn cases(quick: bool, n: usize, size: f64, seconds: f64) -> Vec<Case> {
     set.loads();
     set.time_steps();
     set.meshes();
+    if !quick {
+        // The capture-shaped head at twice its performance's weights: its first second.
+        set.out.push(Case {
+            name: "capture_rig".into(),
+            parameter: "rigs/head.glb, weights × 2, first 1 s".into(),
+            rig: CaseRig::Head {
+                weight_scale: 2.0,
+                seconds: 1.0,
+            },
+            scene: Scene::default(),
+            fps: 30.0,
+        });
+    }
     set.out
 }
 
@@ -115,7 +178,7 @@ impl CaseSet {
         self.out.push(Case {
             name: name.into(),
             parameter,
-            rig,
+            rig: CaseRig::Sheet(rig),
             scene,
             fps,
         })
@@ -265,7 +328,7 @@ pub fn run_case(c: &Case) -> StabilityRow {
         non_finite: false,
         message: String::new(),
     };
-    let result = sheet_rig(&c.rig).and_then(|rig| {
+    let result = c.rig.build().and_then(|rig| {
         pipeline::run(
             &rig,
             &RunOptions {
