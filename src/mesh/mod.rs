@@ -2,6 +2,7 @@
 
 use nalgebra::Vector3;
 
+pub mod intersect;
 pub mod quality;
 pub mod topology;
 

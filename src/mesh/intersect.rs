@@ -1,0 +1,176 @@
+//! Self-intersection of a deformed triangle mesh: whether some edge passes through a triangle
+//! it does not touch. furrow's skin has no contact, so a solve that ends with the skin through
+//! itself is reported as such rather than as converged.
+//!
+//! Triangles are binned by their bounding boxes on a uniform grid (cell about the mean
+//! edge; a sorted list of (cell, triangle), in parallel); pairs sharing a cell and no vertex
+//! are tested edge against triangle
+//! (Möller–Trumbore with the segment's parameter in [0, 1]). Pairs sharing a vertex are not
+//! judged (adjacent triangles touch by construction).
+
+use super::TriMesh;
+use nalgebra::Vector3;
+use rayon::prelude::*;
+
+type V3 = Vector3<f64>;
+
+/// The first pair of triangles of `mesh` (topology) at positions `x` (flat, m) that pass
+/// through each other (in the order of the grid's cell keys), or `None`.
+pub fn first_self_intersection(mesh: &TriMesh, x: &[f64]) -> Option<(usize, usize)> {
+    let p = |v: usize| V3::new(x[3 * v], x[3 * v + 1], x[3 * v + 2]);
+    let tris = &mesh.triangles;
+    if tris.is_empty() {
+        return None;
+    }
+    let edge_sum: f64 = tris
+        .iter()
+        .map(|t| (p(t[1]) - p(t[0])).norm() + (p(t[2]) - p(t[1])).norm())
+        .sum();
+    let cell = (0.5 * edge_sum / tris.len() as f64).max(1e-12);
+    let boxes: Vec<(V3, V3)> = tris
+        .par_iter()
+        .map(|tri| {
+            let pts = tri.map(p);
+            (
+                pts[0].inf(&pts[1]).inf(&pts[2]),
+                pts[0].sup(&pts[1]).sup(&pts[2]),
+            )
+        })
+        .collect();
+    // (cell key, triangle) for every cell a triangle's box overlaps, sorted by key: each run
+    // of one key is a cell's list (hash collisions only add candidate pairs).
+    let mut entries: Vec<(u64, u32)> = boxes
+        .par_iter()
+        .enumerate()
+        .flat_map_iter(|(t, &(lo, hi))| {
+            let a = (lo / cell).map(|c| c.floor() as i64);
+            let b = (hi / cell).map(|c| c.floor() as i64);
+            (a.x..=b.x).flat_map(move |i| {
+                (a.y..=b.y).flat_map(move |j| (a.z..=b.z).map(move |k| (key(i, j, k), t as u32)))
+            })
+        })
+        .collect();
+    entries.par_sort_unstable();
+    let mut starts: Vec<usize> = (0..entries.len())
+        .filter(|&n| n == 0 || entries[n].0 != entries[n - 1].0)
+        .collect();
+    starts.push(entries.len());
+    starts.par_windows(2).find_map_first(|w| {
+        let run = &entries[w[0]..w[1]];
+        for (n, &(_, s)) in run.iter().enumerate() {
+            for &(_, t) in &run[n + 1..] {
+                let (s, t) = (s as usize, t as usize);
+                let ((a0, a1), (b0, b1)) = (boxes[s], boxes[t]);
+                if (0..3).any(|c| a1[c] < b0[c] || b1[c] < a0[c]) {
+                    continue;
+                }
+                let (ts, tt) = (tris[s], tris[t]);
+                if ts.iter().any(|v| tt.contains(v)) {
+                    continue;
+                }
+                if pierces(ts.map(p), tt.map(p)) || pierces(tt.map(p), ts.map(p)) {
+                    return Some((s.min(t), s.max(t)));
+                }
+            }
+        }
+        None
+    })
+}
+
+/// A hash of grid cell (i, j, k).
+fn key(i: i64, j: i64, k: i64) -> u64 {
+    (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        ^ (j as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F)
+        ^ (k as u64).wrapping_mul(0x1656_67B1_9E37_79F9)
+}
+
+/// Whether an edge of triangle `a` passes through triangle `b`.
+fn pierces(a: [V3; 3], b: [V3; 3]) -> bool {
+    (0..3).any(|k| segment_hits(a[k], a[(k + 1) % 3], b))
+}
+
+/// Möller–Trumbore: the segment p → q meets the interior of triangle `t`.
+fn segment_hits(p: V3, q: V3, t: [V3; 3]) -> bool {
+    let d = q - p;
+    let (e1, e2) = (t[1] - t[0], t[2] - t[0]);
+    let h = d.cross(&e2);
+    let det = e1.dot(&h);
+    let scale = d.norm() * e1.norm() * e2.norm();
+    if det.abs() <= 1e-12 * scale {
+        return false; // parallel: coplanar contact is not judged
+    }
+    let f = 1.0 / det;
+    let s = p - t[0];
+    let u = f * s.dot(&h);
+    if !(0.0..=1.0).contains(&u) {
+        return false;
+    }
+    let qv = s.cross(&e1);
+    let v = f * d.dot(&qv);
+    if v < 0.0 || u + v > 1.0 {
+        return false;
+    }
+    let along = f * e2.dot(&qv);
+    (0.0..=1.0).contains(&along)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two separate triangles, then the second pushed through the first.
+    fn two(z: f64) -> (TriMesh, Vec<f64>) {
+        let pos = vec![
+            V3::new(0.0, 0.0, 0.0),
+            V3::new(1.0, 0.0, 0.0),
+            V3::new(0.0, 1.0, 0.0),
+            V3::new(0.2, 0.2, z),
+            V3::new(0.2, 0.2, z - 1.0),
+            V3::new(0.6, 0.2, z - 0.5),
+        ];
+        let x = pos.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
+        (TriMesh::new(pos, vec![[0, 1, 2], [3, 4, 5]]), x)
+    }
+
+    #[test]
+    fn a_triangle_through_another_is_found_and_one_beside_it_is_not() {
+        let (m, x) = two(0.5);
+        assert_eq!(first_self_intersection(&m, &x), Some((0, 1)));
+        let (m, x) = two(2.0);
+        assert_eq!(first_self_intersection(&m, &x), None);
+    }
+
+    #[test]
+    fn a_flat_sheet_and_its_fold_over_itself() {
+        let (n, h) = (6usize, 0.1);
+        let id = |i: usize, j: usize| j * (n + 1) + i;
+        let mut pos = Vec::new();
+        for j in 0..=n {
+            for i in 0..=n {
+                pos.push(V3::new(h * i as f64, h * j as f64, 0.0));
+            }
+        }
+        let mut tris = Vec::new();
+        for j in 0..n {
+            for i in 0..n {
+                tris.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+                tris.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+            }
+        }
+        let m = TriMesh::new(pos.clone(), tris);
+        let flat: Vec<f64> = pos.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
+        assert_eq!(first_self_intersection(&m, &flat), None);
+        // Fold the right half back over the left, dipping through it.
+        let folded: Vec<f64> = pos
+            .iter()
+            .flat_map(|p| {
+                if p.x <= 0.3 {
+                    [p.x, p.y, 0.0]
+                } else {
+                    [0.6 - p.x, p.y, 0.02 - (p.x - 0.3) * (p.y - 0.3)]
+                }
+            })
+            .collect();
+        assert!(first_self_intersection(&m, &folded).is_some());
+    }
+}
