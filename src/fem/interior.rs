@@ -220,17 +220,21 @@ impl Interior {
         let mut y = [0.0; 81];
         let mut u = [0.0; 81];
         let (r, fc) = self.element_prepare(x, e, frozen, &mut y[..n3], &mut u[..n3]);
-        // f = K₀ u as a sum of columns (K₀ is symmetric: column c = row c), which
-        // vectorises, unlike row dot products.
         let mut f = [0.0; 81];
-        for c in 0..n3 {
-            let uc = u[c];
+        self.k0_times(&u[..n3], &mut f[..n3]);
+        self.element_finish(&r, fc.as_ref(), &y[..n3], &u[..n3], &f[..n3], grad)
+    }
+
+    /// f += K₀ u for one element (N; u in m, 3K each) as a sum of columns (K₀ is
+    /// symmetric: column c = row c), which vectorises, unlike row dot products.
+    fn k0_times(&self, u: &[f64], f: &mut [f64]) {
+        let n3 = u.len();
+        for (c, &uc) in u.iter().enumerate() {
             let kc = &self.k0[c * n3..(c + 1) * n3];
-            for (fr, kv) in f[..n3].iter_mut().zip(kc) {
+            for (fr, kv) in f.iter_mut().zip(kc) {
                 *fr += kv * uc;
             }
         }
-        self.element_finish(&r, fc.as_ref(), &y[..n3], &u[..n3], &f[..n3], grad)
     }
 
     /// First half of [`Self::element_energy`]: the rotation R_e (and the centre deformation
@@ -326,12 +330,7 @@ impl Interior {
         let mut u = [0.0; 81];
         let (r, fc) = self.element_prepare(x, e, None, &mut y[..n3], &mut u[..n3]);
         let mut f = [0.0; 81];
-        for c in 0..n3 {
-            let kc = &self.k0[c * n3..(c + 1) * n3];
-            for (fr, kv) in f[..n3].iter_mut().zip(kc) {
-                *fr += kv * u[c];
-            }
-        }
+        self.k0_times(&u[..n3], &mut f[..n3]);
         let state = ElementState {
             r: &r,
             fc: fc.as_ref().expect("not frozen"),

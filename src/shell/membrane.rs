@@ -99,10 +99,7 @@ impl MembraneLaw {
     fn density(self, c: &S2, mu_h: f64, lambda_h: f64) -> f64 {
         match self {
             Self::StVenantKirchhoff => {
-                let e = [
-                    [0.5 * (c[0][0] - 1.0), 0.5 * c[0][1]],
-                    [0.5 * c[1][0], 0.5 * (c[1][1] - 1.0)],
-                ];
+                let e = green(c);
                 let tr = e[0][0] + e[1][1];
                 let ee = e[0][0] * e[0][0] + 2.0 * e[0][1] * e[0][1] + e[1][1] * e[1][1];
                 mu_h * ee + 0.5 * lambda_h * tr * tr
@@ -119,10 +116,7 @@ impl MembraneLaw {
     fn stress(self, c: &S2, mu_h: f64, lambda_h: f64) -> S2 {
         match self {
             Self::StVenantKirchhoff => {
-                let e = [
-                    [0.5 * (c[0][0] - 1.0), 0.5 * c[0][1]],
-                    [0.5 * c[1][0], 0.5 * (c[1][1] - 1.0)],
-                ];
+                let e = green(c);
                 let tr = e[0][0] + e[1][1];
                 [
                     [2.0 * mu_h * e[0][0] + lambda_h * tr, 2.0 * mu_h * e[0][1]],
@@ -183,6 +177,14 @@ impl MembraneLaw {
             }
         }
     }
+}
+
+/// The Green strain E = ½ (C − I).
+fn green(c: &S2) -> S2 {
+    [
+        [0.5 * (c[0][0] - 1.0), 0.5 * c[0][1]],
+        [0.5 * c[1][0], 0.5 * (c[1][1] - 1.0)],
+    ]
 }
 
 /// The Biot law's quantities at C: r = √det C (floored), C⁻¹, τ = √(tr C + 2r) and
