@@ -349,6 +349,11 @@ impl EmbeddedShell {
         Ok(())
     }
 
+    /// The pinned skin vertices (sorted), which follow B q.
+    pub fn pinned(&self) -> &[usize] {
+        &self.pinned_vertices
+    }
+
     /// The embedded surface B q (m) for node positions `q` (flat, 3 × nodes, m).
     pub fn embedded_positions(&self, q: &[f64]) -> Vec<Vector3<f64>> {
         self.rows

@@ -5,14 +5,20 @@
 //! Triangles are binned by their bounding boxes on a uniform grid (cell about the mean
 //! edge; a sorted list of (cell, triangle), in parallel); pairs sharing a cell and no vertex
 //! are tested edge against triangle
-//! (Möller–Trumbore with the segment's parameter in [0, 1]). Pairs sharing a vertex are not
-//! judged (adjacent triangles touch by construction).
+//! (Möller–Trumbore). Pairs sharing a vertex are not judged (adjacent triangles touch by
+//! construction), nor crossings within [`MARGIN`] of the triangle's border or the edge's ends:
+//! two pieces of skin a hair apart (a seam left by degenerate triangles that are not simulated)
+//! graze each other there without the skin passing through itself.
 
 use super::TriMesh;
 use nalgebra::Vector3;
 use rayon::prelude::*;
 
 type V3 = Vector3<f64>;
+
+/// Crossings closer than this fraction of the triangle (barycentric) or of the edge (its
+/// parameter) to their borders are grazing, not passing through.
+pub const MARGIN: f64 = 1e-2;
 
 /// The first pair of triangles of `mesh` (topology) at positions `x` (flat, m) that pass
 /// through each other (in the order of the grid's cell keys), or `None`.
@@ -89,7 +95,8 @@ fn pierces(a: [V3; 3], b: [V3; 3]) -> bool {
     (0..3).any(|k| segment_hits(a[k], a[(k + 1) % 3], b))
 }
 
-/// Möller–Trumbore: the segment p → q meets the interior of triangle `t`.
+/// Möller–Trumbore: the segment p → q meets the interior of triangle `t`, clear of both
+/// borders by [`MARGIN`].
 fn segment_hits(p: V3, q: V3, t: [V3; 3]) -> bool {
     let d = q - p;
     let (e1, e2) = (t[1] - t[0], t[2] - t[0]);
@@ -102,16 +109,16 @@ fn segment_hits(p: V3, q: V3, t: [V3; 3]) -> bool {
     let f = 1.0 / det;
     let s = p - t[0];
     let u = f * s.dot(&h);
-    if !(0.0..=1.0).contains(&u) {
+    if !(MARGIN..=1.0 - MARGIN).contains(&u) {
         return false;
     }
     let qv = s.cross(&e1);
     let v = f * d.dot(&qv);
-    if v < 0.0 || u + v > 1.0 {
+    if v < MARGIN || u + v > 1.0 - MARGIN {
         return false;
     }
     let along = f * e2.dot(&qv);
-    (0.0..=1.0).contains(&along)
+    (MARGIN..=1.0 - MARGIN).contains(&along)
 }
 
 #[cfg(test)]
@@ -172,5 +179,29 @@ mod tests {
             })
             .collect();
         assert!(first_self_intersection(&m, &folded).is_some());
+    }
+
+    /// Two triangles a hair apart along a seam, one tilted so its edge grazes the other's
+    /// border: not the skin through itself. Tilted further, it passes through.
+    #[test]
+    fn pieces_grazing_at_a_seam_are_not_an_intersection() {
+        let tilted = |dip: f64| {
+            let pos = vec![
+                V3::new(0.0, 0.0, 0.0),
+                V3::new(1.0, 0.0, 0.0),
+                V3::new(0.0, 1.0, 0.0),
+                V3::new(1.0 - 1e-4, 1e-4, 1e-3),
+                V3::new(0.5, 0.5 - 1e-4, -1e-3),
+                V3::new(1.0, 1.0, 0.0),
+            ];
+            let mut x: Vec<f64> = pos.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
+            x[3 * 4] -= dip;
+            x[3 * 4 + 1] -= dip;
+            (TriMesh::new(pos, vec![[0, 1, 2], [3, 4, 5]]), x)
+        };
+        let (m, x) = tilted(0.0);
+        assert_eq!(first_self_intersection(&m, &x), None);
+        let (m, x) = tilted(0.2);
+        assert_eq!(first_self_intersection(&m, &x), Some((0, 1)));
     }
 }

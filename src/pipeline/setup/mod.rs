@@ -180,7 +180,8 @@ fn simulated_skin(
     log: &mut Log,
 ) -> anyhow::Result<(Option<skin::SimulatedSkin>, LeftOut)> {
     let mesh = &s.refined.mesh;
-    let candidates = skin::select_triangles(mesh, s.scene, s.path, &mut log.warnings);
+    let (candidates, on_degenerate) =
+        skin::select_triangles(mesh, s.scene, s.path, &mut log.warnings);
     let per = 4usize.pow(s.refined.levels as u32);
     let (triangles, beyond): (Vec<usize>, Vec<usize>) = candidates
         .iter()
@@ -194,7 +195,8 @@ fn simulated_skin(
         log.stages.push(skin::skipped_shell(s.scene, compressed));
         None
     } else {
-        let (sim, record) = skin::build_selected_shell(s, &candidates, &triangles, &ring)?;
+        let (mut sim, record) = skin::build_selected_shell(s, &candidates, &triangles, &ring)?;
+        skin::pin_degenerate(&mut sim, &on_degenerate)?;
         log.stages.push(record);
         Some(sim)
     };
