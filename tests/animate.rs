@@ -353,7 +353,9 @@ fn robot_expressive_head_is_animated_to_a_valid_file() {
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let j: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
-    assert_eq!(j["face"], "Head_2");
+    // Head_4 is the one of the three heads with the same targets whose targets move.
+    assert_eq!(j["face"], "Head_4");
+    assert_eq!(j["rig_scale"]["metres_per_unit"], 1.0);
     assert_eq!(j["per_frame"].as_array().unwrap().len(), 12);
     let refine = j["stages"]
         .as_array()
@@ -375,27 +377,51 @@ fn robot_expressive_head_is_animated_to_a_valid_file() {
     }
 }
 
+/// RobotExpressive's face is 2.3 m tall in its file: a bare `animate` simulates it at human
+/// size (0.1 m per unit) and says so; `--scale 1` keeps its size, where the default skin is
+/// far too coarse, and the refusal names the face's size and the scale.
 #[test]
-fn a_too_coarse_skin_is_refused_with_the_numbers() {
+fn a_ten_times_human_face_is_scaled_and_scale_one_is_refused_with_the_numbers() {
     let Some(robot) = common::shared_data("RobotExpressive.glb") else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("r.glb");
+    let report = dir.path().join("r.json");
     let o = furrow()
         .arg("animate")
         .arg(&robot)
-        .arg("-o")
+        .args(["--frames", ":3", "--no-chunk", "-o"])
         .arg(&out)
+        .arg("--report")
+        .arg(&report)
         .output()
         .unwrap();
-    assert!(!o.status.success());
     let e = String::from_utf8_lossy(&o.stderr);
-    assert!(
-        e.contains("RobotExpressive.glb") && e.contains("too coarse") && e.contains("λ"),
-        "{e}"
-    );
-    assert!(!out.exists());
+    assert!(o.status.success(), "{e}");
+    assert!(e.contains("simulated at 0.1 m per file unit"), "{e}");
+    let j: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    assert_eq!(j["rig_scale"]["metres_per_unit"], 0.1);
+    let out1 = dir.path().join("r1.glb");
+    let o = furrow()
+        .arg("animate")
+        .arg(&robot)
+        .args(["--scale", "1", "-o"])
+        .arg(&out1)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    let e = String::from_utf8_lossy(&o.stderr);
+    for words in [
+        "RobotExpressive.glb",
+        "too coarse",
+        "λ",
+        "2.255 m tall",
+        "1 m per file unit",
+    ] {
+        assert!(e.contains(words), "lacks {words:?}: {e}");
+    }
+    assert!(!out1.exists());
 }
 
 #[test]

@@ -241,6 +241,26 @@ fn animation_channel_to_missing_node() {
     expect_refused(&p, &["node 7", "does not exist"]);
 }
 
+/// `inspect` refuses what `animate` refuses in a weight animation, with the same message.
+#[test]
+fn weights_that_do_not_match_keys_times_targets() {
+    // One key's weight dropped: 1 output value for 2 keys × 1 target.
+    let (_d, p) = mutated("short_weights.glb", |j, _| {
+        j["accessors"][4]["count"] = serde_json::json!(1)
+    });
+    expect_refused(&p, &["1 output values", "2 keys × 1"]);
+}
+
+#[test]
+fn key_times_that_do_not_increase() {
+    let (_d, p) = mutated("backwards_keys.glb", |j, b| {
+        b[108..112].copy_from_slice(&1.0f32.to_le_bytes());
+        b[112..116].copy_from_slice(&0.5f32.to_le_bytes());
+        j["accessors"][3]["min"] = serde_json::json!([0.5]);
+    });
+    expect_refused(&p, &["key times must increase"]);
+}
+
 #[test]
 fn unknown_required_extension() {
     let (_d, p) = mutated("draco.glb", |j, _| {

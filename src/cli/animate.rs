@@ -3,6 +3,7 @@
 use super::Output;
 use crate::io::atomic::{self, Overwrite};
 use crate::io::export::{self, FrameSet};
+use crate::io::units::ScaleSetting;
 use crate::io::{self as fio, LoadOptions};
 use crate::pipeline::chunk::{self, ChunkHeader};
 use crate::pipeline::frames::FrameRange;
@@ -41,6 +42,11 @@ pub struct AnimateArgs {
     /// The face mesh by name or index (default: the mesh with the most morph targets).
     #[arg(long)]
     pub mesh: Option<String>,
+    /// Metres per unit of the rig file, or `auto` (default; over the scene's `[rig] scale`):
+    /// a face larger or smaller than a human face by a power of ten is simulated at human
+    /// size and written back in the file's units.
+    #[arg(long, value_parser = crate::io::units::scale_arg)]
+    pub scale: Option<crate::io::units::ScaleSetting>,
     /// Replace existing output files.
     #[arg(long)]
     pub force: bool,
@@ -64,8 +70,8 @@ fn preflight(paths: &[&Path], force: bool) -> anyhow::Result<()> {
 }
 
 /// The settings that decide a run's result, hashed to tie chunks to one run.
-fn settings_hash(scene: &Scene, fps: f64, mesh: &Option<String>) -> String {
-    let v = serde_json::json!({ "scene": scene, "fps": fps, "mesh": mesh });
+fn settings_hash(scene: &Scene, fps: f64, mesh: &Option<String>, scale: f64) -> String {
+    let v = serde_json::json!({ "scene": scene, "fps": fps, "mesh": mesh, "scale": scale });
     chunk::fnv64(v.to_string().as_bytes())
 }
 
@@ -103,7 +109,7 @@ pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
     preflight(&outputs, a.force)?;
     let bytes = std::fs::read(&a.rig)
         .with_context(|| format!("{}: cannot read the rig", a.rig.display()))?;
-    let rig = fio::load::load_bytes(
+    let mut rig = fio::load::load_bytes(
         &a.rig,
         &bytes,
         &LoadOptions {
@@ -112,6 +118,7 @@ pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
         },
     )?;
     out.note(&rig.face_reason);
+    out.note(crate::io::units::apply(&mut rig, a.scale, scene.rig.scale));
     let count = rig.frame_weights(a.fps).len();
     let frames = match &a.frames {
         Some(t) if a.clamp_frames => {
@@ -151,13 +158,14 @@ pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
     if let Some(range) = frames.filter(|_| write_chunk) {
         let header = ChunkHeader {
             rig_hash: chunk::fnv64(&bytes),
-            settings_hash: settings_hash(&scene, a.fps, &a.mesh),
+            settings_hash: settings_hash(&scene, a.fps, &a.mesh, rig.scale.metres_per_unit),
             fps: a.fps,
             range,
             clip_frames: count,
             vertices: run.origin.len(),
             triangles: run.triangles.clone(),
             origin: chunk::origin_to_plain(&run.origin),
+            metres_per_unit: rig.scale.metres_per_unit,
         };
         chunk::write(
             &chunk_file,
@@ -247,6 +255,9 @@ pub struct BatchArgs {
     /// Frames per second.
     #[arg(long, default_value_t = 30.0)]
     pub fps: f64,
+    /// Metres per unit of every rig file, or `auto` (default; see `animate --scale`).
+    #[arg(long, value_parser = crate::io::units::scale_arg)]
+    pub scale: Option<crate::io::units::ScaleSetting>,
     /// Redo inputs whose outputs are finished.
     #[arg(long)]
     pub force: bool,
@@ -290,6 +301,7 @@ pub fn batch(a: BatchArgs, out: &Output) -> anyhow::Result<()> {
             report: Some(report.clone()),
             preview: None,
             mesh: None,
+            scale: a.scale,
             // An output without its report is an unfinished earlier attempt: redo it.
             force: true,
             no_chunk: false,
@@ -365,7 +377,7 @@ pub fn merge(a: MergeArgs, out: &Output) -> anyhow::Result<()> {
             a.rig.display()
         );
     }
-    let rig = fio::load::load_bytes(
+    let mut rig = fio::load::load_bytes(
         &a.rig,
         &bytes,
         &LoadOptions {
@@ -373,6 +385,13 @@ pub fn merge(a: MergeArgs, out: &Output) -> anyhow::Result<()> {
             animation: None,
         },
     )?;
+    // The frames are in the metres they were simulated in: write them back in file units.
+    let m = joined.header.metres_per_unit;
+    crate::io::units::apply(
+        &mut rig,
+        Some(ScaleSetting::metres(m, "the chunks' scale")?),
+        None,
+    );
     let origin = chunk::origin_from_plain(&joined.header.origin);
     if origin
         .iter()

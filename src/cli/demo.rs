@@ -23,6 +23,9 @@ pub struct DemoArgs {
     /// Also write one glTF per frame into OUT/frames.
     #[arg(long)]
     pub frames_dir: bool,
+    /// Metres per unit of the rig file, or `auto` (default; see `animate --scale`).
+    #[arg(long, value_parser = crate::io::units::scale_arg)]
+    pub scale: Option<crate::io::units::ScaleSetting>,
 }
 
 impl DemoArgs {
@@ -34,6 +37,7 @@ impl DemoArgs {
             frames: DEMO_FRAMES.into(),
             rig: None,
             frames_dir: false,
+            scale: None,
         }
     }
 }
@@ -83,6 +87,7 @@ pub fn run_demo(a: DemoArgs, out: &Output) -> anyhow::Result<crate::pipeline::re
         report: Some(a.out.join("report.json")),
         preview: Some(a.out.join("preview")),
         mesh: None,
+        scale: a.scale,
         // The demo's folder is its own: an earlier demo's files are replaced (and said so).
         force: true,
         no_chunk: true,

@@ -43,6 +43,10 @@ pub struct FitArgs {
     /// Also write a PNG of the activations over time (and the fit residual).
     #[arg(long)]
     pub plot: Option<PathBuf>,
+    /// Metres per unit of the rig file, or `auto` (default; see `animate --scale`); the
+    /// residuals and `--cell-size` are in simulated metres.
+    #[arg(long, value_parser = crate::io::units::scale_arg)]
+    pub scale: Option<crate::io::units::ScaleSetting>,
 }
 
 /// Parse `A:B` against `n` frames into a range; the error names `--frames`.
@@ -84,8 +88,9 @@ pub fn run(a: FitArgs, out: &Output) -> anyhow::Result<()> {
     let outputs: Vec<&PathBuf> = std::iter::once(&a.output).chain(a.plot.as_ref()).collect();
     atomic::check_free(&outputs, Overwrite::from_force(a.force))?;
     let t0 = Instant::now();
-    let rig = fio::load(&a.rig, &LoadOptions::default())?;
+    let mut rig = fio::load(&a.rig, &LoadOptions::default())?;
     out.note(&rig.face_reason);
+    out.note(crate::io::units::apply(&mut rig, a.scale, None));
     let face = rig.face();
     let mesh = TriMesh::new(face.positions.clone(), face.triangles.clone());
     let lattice = Lattice::build(

@@ -1,9 +1,12 @@
 //! `furrow inspect`: what a glTF file holds (meshes, counts, morph targets, animations,
 //! extensions), as text or JSON.
 
-use super::animation::AnimationInfo;
+use super::accessor::AccessorReader;
+use super::animation::{weight_track, AnimationInfo};
+use super::container::Container;
 use super::error::GltfResult;
 use super::load::load_instances;
+use super::mesh::MeshInstance;
 use super::mesh::VertexTransform;
 use serde::Serialize;
 use std::path::Path;
@@ -60,9 +63,12 @@ pub struct Summary {
     pub animations: Vec<AnimationInfo>,
 }
 
-/// Read `path` and summarise it.
+/// Read `path` and summarise it. A weight animation that `animate` would refuse (outputs
+/// that do not match keys × targets, key times that do not increase, non-finite weights) is
+/// refused here too, with the same message.
 pub fn summarize(path: &Path) -> GltfResult<Summary> {
     let (c, inst, animations) = load_instances(path)?;
+    check_weight_tracks(path, &c, &inst, &animations)?;
     let meshes = inst
         .iter()
         .map(|m| {
@@ -104,6 +110,22 @@ pub fn summarize(path: &Path) -> GltfResult<Summary> {
         meshes,
         animations,
     })
+}
+
+/// Read every `weights` channel that drives a mesh instance, as `animate` reads the face's.
+fn check_weight_tracks(
+    path: &Path,
+    c: &Container,
+    inst: &[MeshInstance],
+    animations: &[AnimationInfo],
+) -> GltfResult<()> {
+    let reader = AccessorReader::new(path, c);
+    for a in animations {
+        for m in inst.iter().filter(|m| !m.targets.is_empty()) {
+            weight_track(path, &reader, &c.json, a.index, m.node, m.targets.len())?;
+        }
+    }
+    Ok(())
 }
 
 impl std::fmt::Display for Summary {

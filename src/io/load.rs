@@ -39,6 +39,8 @@ pub struct Rig {
     pub track: Option<WeightTrack>,
     /// Extensions the file uses.
     pub extensions_used: Vec<String>,
+    /// The scale it is simulated at (metres per file unit; set by [`Rig::rescale`]).
+    pub scale: super::units::RigScale,
 }
 
 impl Rig {
@@ -103,6 +105,62 @@ fn instances_of(path: &Path, c: &Container) -> GltfResult<(Vec<MeshInstance>, Ve
     Ok((inst, anims))
 }
 
+/// Surface area of a mesh instance (world units²).
+fn area(m: &MeshInstance) -> f64 {
+    m.triangles
+        .iter()
+        .map(|t| {
+            0.5 * (m.positions[t[1]] - m.positions[t[0]])
+                .cross(&(m.positions[t[2]] - m.positions[t[0]]))
+                .norm()
+        })
+        .sum()
+}
+
+/// The default face among the instances with morph targets (`morphs`): of those whose
+/// targets move some vertex, the one with the most targets, and among equals the largest
+/// surface (an avatar carries the same shapes on its head, eyes and teeth: the head is the
+/// face); the reason names the other meshes that carried targets.
+fn pick_face(
+    instances: &[MeshInstance],
+    morphs: &[usize],
+    describe: impl Fn(usize) -> String,
+) -> (usize, String) {
+    let moves = |i: usize| {
+        instances[i]
+            .targets
+            .iter()
+            .any(|t| t.positions.iter().any(|d| d.norm_squared() > 0.0))
+    };
+    let moving: Vec<usize> = morphs.iter().copied().filter(|&i| moves(i)).collect();
+    let pool = if moving.is_empty() { morphs } else { &moving };
+    let best = pool
+        .iter()
+        .copied()
+        .max_by(|&a, &b| {
+            let key = |i: usize| (instances[i].targets.len(), area(&instances[i]));
+            let (ka, kb) = (key(a), key(b));
+            ka.0.cmp(&kb.0).then(ka.1.total_cmp(&kb.1)).then(b.cmp(&a))
+        })
+        .expect("non-empty");
+    if morphs.len() == 1 {
+        return (best, format!("face {}", describe(best)));
+    }
+    let others: Vec<String> = morphs
+        .iter()
+        .filter(|&&i| i != best)
+        .map(|&i| describe(i))
+        .collect();
+    let reason = format!(
+        "face {} chosen as the mesh with the most morph targets that move vertices, the largest \
+         surface among equals; {} other mesh(es) carry targets: {} (use --mesh to pick another)",
+        describe(best),
+        others.len(),
+        others.join(", ")
+    );
+    (best, reason)
+}
+
 /// Load the rig at `path` and choose its face and animation.
 pub fn load(path: &Path, opts: &LoadOptions) -> GltfResult<Rig> {
     let c = container::read(path)?;
@@ -158,19 +216,7 @@ fn load_container(path: &Path, c: Container, opts: &LoadOptions) -> GltfResult<R
                 }
             }
         }
-        None => {
-            let best = morphs
-                .iter()
-                .copied()
-                .max_by_key(|&i| (instances[i].targets.len(), usize::MAX - i))
-                .expect("non-empty");
-            let reason = if morphs.len() > 1 {
-                format!("face {} chosen as the mesh with the most morph targets of {} candidates (use --mesh to pick another)", describe(best), morphs.len())
-            } else {
-                format!("face {}", describe(best))
-            };
-            (best, reason)
-        }
+        None => pick_face(&instances, &morphs, describe),
     };
     let reader = AccessorReader::new(path, &c);
     let node = instances[face].node;
@@ -216,5 +262,6 @@ fn load_container(path: &Path, c: Container, opts: &LoadOptions) -> GltfResult<R
         animation,
         track,
         extensions_used,
+        scale: Default::default(),
     })
 }

@@ -14,6 +14,7 @@ pub mod mesh;
 pub mod meshopt_view;
 pub mod model;
 pub mod scene;
+pub mod units;
 
 pub use error::{GltfError, GltfResult};
 pub use load::{load, LoadOptions, Rig};

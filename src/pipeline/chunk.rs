@@ -36,6 +36,15 @@ pub struct ChunkHeader {
     pub triangles: Vec<[usize; 3]>,
     /// Exported vertex origins (loaded vertices, weights).
     pub origin: Vec<([usize; 3], [f64; 3])>,
+    /// Metres per file unit the frames were simulated at (their positions are in simulated
+    /// metres; `merge` writes them back in the file's units).
+    #[serde(default = "one")]
+    pub metres_per_unit: f64,
+}
+
+/// Chunks written before the rig scale existed were simulated as in the file.
+fn one() -> f64 {
+    1.0
 }
 
 /// A chunk read back.
@@ -201,6 +210,7 @@ mod tests {
                 vertices: 1,
                 triangles: vec![],
                 origin: vec![([0, 0, 0], [1.0, 0.0, 0.0])],
+                metres_per_unit: 1.0,
             },
             frames: (start..end)
                 .map(|k| vec![Vector3::new(k as f64, 0.5, -1.0)])

@@ -225,6 +225,7 @@ fn finish_report(
         rig: rig.path.display().to_string(),
         scene: opts.scene_path.clone(),
         face: face.name.clone(),
+        rig_scale: rig.scale.clone(),
         fps: opts.fps,
         frames: [plan.range.start, plan.range.end],
         materials: serde_json::json!({

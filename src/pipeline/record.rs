@@ -137,6 +137,10 @@ pub struct RunReport {
     pub scene: Option<String>,
     /// Face (skin) mesh name.
     pub face: String,
+    /// The scale the rig was simulated at (metres per file unit), the face's size in file
+    /// units and why; lengths in this report are simulated metres, the exported geometry is
+    /// in the file's units.
+    pub rig_scale: crate::io::units::RigScale,
     /// Frames per second.
     pub fps: f64,
     /// Frames written [start, end).

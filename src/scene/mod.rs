@@ -22,6 +22,8 @@ pub use thickness::{ThicknessRegion, ThicknessTexture};
 pub struct Scene {
     /// A name for reports.
     pub name: Option<String>,
+    /// The rig file's units.
+    pub rig: RigSection,
     /// The skin (thin shell).
     pub skin: SkinSection,
     /// The interior (lattice solid).
@@ -38,6 +40,17 @@ pub struct Scene {
     pub geometry: Option<Geometry>,
     /// The load applied to synthetic geometry (`furrow scene` only).
     pub load: Option<Load>,
+}
+
+/// `[rig]`: how the rig file is read.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RigSection {
+    /// Metres per file unit, or `"auto"` (default): a face larger or smaller than a human
+    /// face by a power of ten is simulated at human size and written back in its own units.
+    /// A scene whose materials are for another scale (a robot) sets `scale = 1`. Boxes and
+    /// regions of the scene are in simulated metres (after this scale).
+    pub scale: Option<crate::io::units::ScaleSetting>,
 }
 
 /// `[skin]`: the thin shell's material, thickness and resolution.

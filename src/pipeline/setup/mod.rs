@@ -102,6 +102,7 @@ pub fn set_up(
         welded: &welded,
         lattice: &lattice,
         scale: &plan.skin,
+        rig_scale: &rig.scale,
     };
     let (refined, record) = refine::refine_skin(&input, &scene.skin, &path)?;
     log.stages.push(record);

@@ -41,6 +41,8 @@ pub struct RefineInput<'a> {
     pub lattice: &'a Lattice,
     /// Thickness and critical wavelengths of the skin.
     pub scale: &'a SkinScale,
+    /// The scale the rig is simulated at (named when the skin is too coarse).
+    pub rig_scale: &'a crate::io::units::RigScale,
 }
 
 /// The `refine` stage: subdivide for the thinnest skin's wavelength (`skin.vertices_per_wavelength`,
@@ -62,7 +64,18 @@ pub fn refine_skin(
             max_levels: skin.refine_limit.unwrap_or(refine::DEFAULT_MAX_LEVELS),
         },
     )
-    .with_context(|| format!("{path}: the skin is too coarse for its wrinkles"))?;
+    .with_context(|| {
+        let size = crate::io::units::moved_extent(input.face);
+        format!(
+            "{path}: the skin is too coarse for its wrinkles (the face is {:.3} m tall, what its \
+             blend shapes move, simulated at {} m per file unit; a human face is {:.2}–{:.2} m: \
+             see `--scale`)",
+            size,
+            input.rig_scale.metres_per_unit,
+            crate::io::units::HUMAN_FACE_M.0,
+            crate::io::units::HUMAN_FACE_M.1,
+        )
+    })?;
     let r = &refined.report;
     let record = if r.levels > 0 {
         StagePlan::ran(
@@ -179,6 +192,7 @@ mod tests {
             welded: &welded,
             lattice: &lattice,
             scale: &scale,
+            rig_scale: &Default::default(),
         };
         let (skin, record) = refine_skin(&input, &SkinSection::default(), "sheet.glb").unwrap();
         assert!(record.is_ran(), "{}", record.why);

@@ -267,7 +267,8 @@ pub fn select_skin(
     let s = select_compressed(&welded.mesh, poses, threshold, margin);
     let why = format!(
         "{:.1} % of the skin's area simulated: compressed beyond {:.2} % (ε_c = {:.2} %) in some of {} {}, plus a margin of λ = {:.1} mm; the rest follows the blend shapes",
-        100.0 * s.area_fraction,
+        // max: an empty selection's fraction can be −0.0 in round-off.
+        (100.0 * s.area_fraction).max(0.0),
         100.0 * threshold,
         100.0 * onset,
         weights.len(),
