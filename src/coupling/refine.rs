@@ -68,14 +68,29 @@ pub struct RefineReport {
     pub vertices_per_wavelength: f64,
 }
 
+/// Where a refined triangle lies in the unrefined mesh: its ancestor triangle and the
+/// barycentric coordinates of its three corners in it (in the ancestor's corner order). Data
+/// that lives on the surface rather than moving with the shapes (UVs, thickness, skin
+/// weights, which element a vertex embeds in) follows these, not the subdivision weights.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Ancestor {
+    /// The unrefined triangle this one lies in.
+    pub triangle: usize,
+    /// Barycentric coordinates of each corner in `triangle` (each sums to one).
+    pub bary: [[f64; 3]; 3],
+}
+
 /// A refined skin: the mesh, the origin of each vertex, and the report.
 #[derive(Debug, Clone)]
 pub struct Refined {
     /// The refined mesh (positions in m); original vertices keep their indices.
     pub mesh: TriMesh,
     /// For each refined vertex, (original vertex, weight) pairs; weights sum to one and the
-    /// position is the weighted sum of the original positions.
+    /// position is the weighted sum of the original positions. This is the subdivision
+    /// operator S: blend-shape deltas are carried onto the refined mesh with it.
     pub origin: Vec<Vec<(usize, f64)>>,
+    /// For each refined triangle, its ancestor in the unrefined mesh.
+    pub ancestor: Vec<Ancestor>,
     /// What was done.
     pub report: RefineReport,
 }
@@ -189,6 +204,7 @@ pub fn refine_for_wavelength(
         }
         cur = next;
     }
+    let ancestor = uniform_ancestors(mesh, &cur, &origin, need);
     let edge1 = mean_edge(&cur);
     let report = RefineReport {
         levels: need,
@@ -203,8 +219,38 @@ pub fn refine_for_wavelength(
     Ok(Refined {
         mesh: cur,
         origin,
+        ancestor,
         report,
     })
+}
+
+/// Ancestors of `levels` of uniform 1-to-4 subdivision of `coarse` into `fine`: triangle f
+/// lies in coarse triangle f / 4^levels, and a corner's barycentric coordinates are its
+/// origin weights on that triangle's corners (a midpoint's origin lies on its ancestor).
+fn uniform_ancestors(
+    coarse: &TriMesh,
+    fine: &TriMesh,
+    origin: &[Vec<(usize, f64)>],
+    levels: usize,
+) -> Vec<Ancestor> {
+    let per = 4usize.pow(levels as u32);
+    fine.triangles
+        .iter()
+        .enumerate()
+        .map(|(f, tri)| {
+            let triangle = f / per;
+            let corners = coarse.triangles[triangle];
+            let bary = tri.map(|v| {
+                corners.map(|c| {
+                    origin[v]
+                        .iter()
+                        .find(|&&(o, _)| o == c)
+                        .map_or(0.0, |&(_, w)| w)
+                })
+            });
+            Ancestor { triangle, bary }
+        })
+        .collect()
 }
 
 /// Per-triangle values (e.g. skin thickness, m) carried from the unrefined mesh to the
@@ -316,8 +362,20 @@ mod tests {
         assert!(carry_face_values(&r, &vals[1..]).is_err());
     }
 
-    /// Every refined vertex sits at the weighted sum of its origins, weights sum to one.
+    /// Every refined vertex sits at the weighted sum of its origins, weights sum to one, and
+    /// every refined triangle's corners sit at their barycentric coordinates in the ancestor.
     fn check_origin(mesh0: &TriMesh, r: &Refined) {
+        assert_eq!(r.ancestor.len(), r.mesh.triangles.len());
+        for (tri, a) in r.mesh.triangles.iter().zip(&r.ancestor) {
+            let corners = mesh0.triangles[a.triangle].map(|v| mesh0.positions[v]);
+            for (k, &v) in tri.iter().enumerate() {
+                assert!((a.bary[k].iter().sum::<f64>() - 1.0).abs() < 1e-12);
+                let p = (0..3).fold(nalgebra::Vector3::zeros(), |acc, j| {
+                    acc + a.bary[k][j] * corners[j]
+                });
+                assert!((p - r.mesh.positions[v]).norm() < 1e-12);
+            }
+        }
         assert_eq!(r.origin.len(), r.mesh.positions.len());
         for (v, o) in r.origin.iter().enumerate() {
             let s: f64 = o.iter().map(|p| p.1).sum();

@@ -29,6 +29,10 @@ pub struct RefinedSkin {
     pub thickness: Option<Vec<f64>>,
     /// Subdivision levels: refined triangle t lies in welded triangle t / 4^levels.
     pub levels: usize,
+    /// For each refined triangle, the welded triangle it lies in and its corners'
+    /// barycentric coordinates there (UVs, thickness and other surface data follow these;
+    /// `Welded::loaded_triangle` leads on to the loaded triangle).
+    pub ancestor: Vec<refine::Ancestor>,
 }
 
 /// What the refinement works from: the loaded face, its weld, the lattice and the skin's scale.
@@ -114,6 +118,7 @@ pub fn refine_skin(
     let levels = refined.report.levels;
     let skin = RefinedSkin {
         levels,
+        ancestor: refined.ancestor,
         mesh: refined.mesh,
         target_of: refined.origin,
         origin,

@@ -54,6 +54,8 @@ pub struct Welded {
     pub loaded_of: Vec<usize>,
     /// Triangles dropped because welding collapsed them (zero area or repeated corners).
     pub dropped_triangles: usize,
+    /// For each welded triangle, the loaded triangle it comes from (same corner order).
+    pub loaded_triangle: Vec<usize>,
 }
 
 /// Weld vertices closer than `tol` (m): positions are snapped to a grid of `tol` and equal
@@ -101,20 +103,23 @@ pub fn weld(positions: &[Vector3<f64>], triangles: &[[usize; 3]], tol: f64) -> W
         of_loaded[i] = w;
     }
     let mut tris = Vec::with_capacity(triangles.len());
+    let mut loaded_triangle = Vec::with_capacity(triangles.len());
     let mut dropped = 0;
-    for t in triangles {
+    for (i, t) in triangles.iter().enumerate() {
         let w = [of_loaded[t[0]], of_loaded[t[1]], of_loaded[t[2]]];
         if w[0] == w[1] || w[1] == w[2] || w[0] == w[2] {
             dropped += 1;
             continue;
         }
         tris.push(w);
+        loaded_triangle.push(i);
     }
     Welded {
         mesh: TriMesh::new(welded_pos, tris),
         of_loaded,
         loaded_of,
         dropped_triangles: dropped,
+        loaded_triangle,
     }
 }
 
@@ -138,6 +143,7 @@ mod tests {
         assert_eq!(w.of_loaded, vec![0, 1, 2, 1, 3, 2]);
         assert_eq!(w.mesh.triangles, vec![[0, 1, 2], [1, 3, 2]]);
         assert_eq!(w.dropped_triangles, 1);
+        assert_eq!(w.loaded_triangle, vec![0, 1]);
         assert_eq!(w.loaded_of, vec![0, 1, 2, 4]);
     }
 }
