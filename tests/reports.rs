@@ -106,6 +106,7 @@ fn an_interior_step_that_needs_sub_stepping_gets_it_and_converges() {
             weight: 1.0,
             seconds: 0.07,
             sliver: None,
+            hold: 0.0,
         }),
         scene,
         fps: 30.0,

@@ -70,6 +70,23 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 30.0)]
         fps: f64,
     },
+    /// The skin's local solver (fresh factors of only the patches whose Hessian changed, the
+    /// default) against the global reference on the same skin, in one process: skin time,
+    /// factorisations, solves, and how far apart the wrinkles are.
+    #[command(
+        after_help = "Example:\n  furrow bench skin --rig rigs/face.glb --frames 0:40\n  furrow bench skin --rig rigs/head.glb --frames 0:10 --json"
+    )]
+    Skin {
+        /// The rig.
+        #[arg(long, default_value = "rigs/face.glb")]
+        rig: std::path::PathBuf,
+        /// Frames to run, `A:B` (end exclusive).
+        #[arg(long, default_value = "0:40")]
+        frames: String,
+        /// Frames per second at which the clip is sampled.
+        #[arg(long, default_value_t = 30.0)]
+        fps: f64,
+    },
     /// Activation fit: 52 muscles on a face lattice of about N cells, a 335-frame clip.
     #[command(after_help = "Example:\n  furrow bench fit\n  furrow bench fit --cells 2000 --json")]
     Fit {
@@ -134,6 +151,7 @@ pub fn run(c: BenchCommand, out: &Output) -> anyhow::Result<()> {
             force,
         } => suite(&dir, faces, elements, cells, !no_demo, force, out)?,
         BenchCommand::Select { rig, frames, fps } => select(&rig, &frames, fps, out)?,
+        BenchCommand::Skin { rig, frames, fps } => skin(&rig, &frames, fps, out)?,
         BenchCommand::Fit { cells, gn_frames } => {
             anyhow::ensure!(
                 (1..=1_000_000).contains(&cells),
@@ -154,8 +172,14 @@ pub fn run(c: BenchCommand, out: &Output) -> anyhow::Result<()> {
 }
 
 /// `furrow bench select`: the selected skin against the whole skin on a rig.
-fn select(rig: &std::path::Path, frames: &str, fps: f64, out: &Output) -> anyhow::Result<()> {
-    let loaded = crate::io::load::load(rig, &Default::default())?;
+/// The rig at `rig` (units decided as `animate` does) and the run options for `frames`.
+fn bench_rig(
+    rig: &std::path::Path,
+    frames: &str,
+    fps: f64,
+) -> anyhow::Result<(crate::io::load::Rig, crate::pipeline::RunOptions)> {
+    let mut loaded = crate::io::load::load(rig, &Default::default())?;
+    crate::io::units::apply(&mut loaded, None, None);
     let count = loaded.frame_weights(fps).len();
     let opts = crate::pipeline::RunOptions {
         scene: crate::scene::Scene::default(),
@@ -163,8 +187,20 @@ fn select(rig: &std::path::Path, frames: &str, fps: f64, out: &Output) -> anyhow
         fps,
         frames: Some(crate::pipeline::frames::FrameRange::parse(frames, count)?),
     };
+    Ok((loaded, opts))
+}
+
+fn select(rig: &std::path::Path, frames: &str, fps: f64, out: &Output) -> anyhow::Result<()> {
+    let (loaded, opts) = bench_rig(rig, frames, fps)?;
     let c = crate::studies::locality::compare_selection(&loaded, &opts)?;
     print(out, "bench select", &serde_json::to_value(&c)?);
+    Ok(())
+}
+
+fn skin(rig: &std::path::Path, frames: &str, fps: f64, out: &Output) -> anyhow::Result<()> {
+    let (loaded, opts) = bench_rig(rig, frames, fps)?;
+    let c = crate::studies::locality::compare_solvers(&loaded, &opts)?;
+    print(out, "bench skin", &serde_json::to_value(&c)?);
     Ok(())
 }
 

@@ -441,6 +441,18 @@ impl EmbeddedShell {
         Ok(rep)
     }
 
+    /// The residual norm of the current state against node positions `q` (N), as the
+    /// statics' convergence test sees it, and that test's tolerance (N): the state is an
+    /// equilibrium when the first is at most the second.
+    pub fn residual(&mut self, q: &[f64]) -> Result<(f64, f64), SolverError> {
+        self.check_q(q)?;
+        let bq = self.embedded_flat(q);
+        let mut p = self.problem.clone();
+        p.constraints.rhs = p.constraints.apply(&bq);
+        let r = self.solver.residual_norm(&self.shell, &p, &self.x)?;
+        Ok((r, self.solver.settings.tolerance))
+    }
+
     /// Let a failed skin solve be redone with its load change split into up to 2^`levels`
     /// equal increments (0, the default, turns this off). On the validation slab with a held,
     /// bent quadratic interior it turned load steps whose line search failed from the first

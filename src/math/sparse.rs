@@ -178,6 +178,25 @@ pub fn mul_vec_into(a: &SparseColMat<usize, f64>, x: &[f64], y: &mut [f64]) {
     }
 }
 
+/// y = A x for a structurally and numerically symmetric `a` stored with both triangles: each
+/// yᵢ is the dot product of column i with x (= row i), so rows are computed in parallel
+/// without write conflicts; the sum over a column runs in its stored order, so the result does
+/// not depend on the thread count.
+pub fn mul_sym_vec_into(a: &SparseColMat<usize, f64>, x: &[f64], y: &mut [f64]) {
+    use rayon::prelude::*;
+    let ar = a.as_ref();
+    y.par_iter_mut()
+        .with_min_len(2048)
+        .enumerate()
+        .for_each(|(i, yi)| {
+            *yi = ar
+                .row_idx_of_col(i)
+                .zip(ar.val_of_col(i))
+                .map(|(j, v)| v * x[j])
+                .sum();
+        });
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

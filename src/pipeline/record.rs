@@ -42,7 +42,7 @@ impl StagePlan {
 }
 
 /// One stage's numerical outcome in one frame.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct StageRecord {
     /// `converged`, `iteration_limit`, `line_search_failed`, `stalled`, `not_finite`,
     /// `self_intersecting` (the skin: a solve that ended with the skin through itself),
@@ -62,6 +62,15 @@ pub struct StageRecord {
     /// when it converged directly).
     #[serde(skip_serializing_if = "is_zero")]
     pub load_steps: usize,
+    /// Skin: factorisations of the whole skin's KKT matrix.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub factorizations: usize,
+    /// Skin: factorisations of patch blocks (`solver.skin_solver = "local"`).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub patch_factorizations: usize,
+    /// Skin: solves with a factor (GMRES iterations).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub linear_solves: usize,
 }
 
 fn is_zero(n: &usize) -> bool {
@@ -105,6 +114,12 @@ pub struct Totals {
     pub shell_ms: f64,
     /// Export milliseconds.
     pub export_ms: f64,
+    /// Skin factorisations of the whole KKT matrix, summed over frames.
+    pub skin_factorizations: usize,
+    /// Skin factorisations of patch blocks, summed over frames.
+    pub skin_patch_factorizations: usize,
+    /// Skin Newton iterations, summed over frames.
+    pub skin_iterations: usize,
     /// Wall time of the whole run (s).
     pub wall_s: f64,
 }
@@ -123,6 +138,11 @@ impl Totals {
         self.fit_ms += ms(&frame.fit);
         self.interior_ms += ms(&frame.interior);
         self.shell_ms += ms(&frame.shell);
+        if let Some(s) = &frame.shell {
+            self.skin_factorizations += s.factorizations;
+            self.skin_patch_factorizations += s.patch_factorizations;
+            self.skin_iterations += s.iterations;
+        }
     }
 }
 

@@ -179,6 +179,11 @@ pub struct SolverSection {
     /// When the skin's stiffness Bᵀ K_x B seen by the interior is recomputed: `once` (at
     /// rest; default, the force Bᵀ F_x is always current) or `every_frame` (the paper).
     pub skin_stiffness: Option<String>,
+    /// How the skin's Newton directions are solved: `local` (default: GMRES with the lagged
+    /// global factor and fresh factors of only the patches whose Hessian changed) or
+    /// `global` (the reference: a fresh factor of the whole skin whenever the lagged one
+    /// does not do). Both solve to the same residual test.
+    pub skin_solver: Option<String>,
 }
 
 /// `[export]`: what goes into the output files.
@@ -419,6 +424,11 @@ impl Scene {
         if let Some(m) = &self.solver.skin_stiffness {
             if m != "once" && m != "every_frame" {
                 bail!("`solver.skin_stiffness` must be \"once\" or \"every_frame\", got \"{m}\"");
+            }
+        }
+        if let Some(m) = &self.solver.skin_solver {
+            if m != "local" && m != "global" {
+                bail!("`solver.skin_solver` must be \"local\" or \"global\", got \"{m}\"");
             }
         }
         if let Some(m) = &self.export.surface {

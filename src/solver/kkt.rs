@@ -28,7 +28,7 @@
 const FAER_TASKS: usize = 2;
 
 use super::gmres::{fgmres, GmresReport};
-use crate::math::sparse::{mul_vec_into, Pattern, SparseError};
+use crate::math::sparse::{mul_sym_vec_into, Pattern, SparseError};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
 use faer::sparse::linalg::cholesky::{
@@ -525,7 +525,7 @@ impl KktSolver {
             let this = &mut *self;
             fgmres(
                 |v, out| {
-                    mul_vec_into(&a, v, out);
+                    mul_sym_vec_into(&a, v, out);
                     for i in nf..nf + nc {
                         out[i] += delta * v[i];
                     }
@@ -563,6 +563,85 @@ impl KktSolver {
             }
         }
         sum
+    }
+
+    /// The assembled KKT matrix (free dofs, then constraint rows; both triangles; −δ on the
+    /// constraint diagonal), when one is.
+    pub(crate) fn assembled(&self) -> Option<&SparseColMat<usize, f64>> {
+        self.base.as_ref()
+    }
+
+    /// The matrix of the current factor (the assembled one of its time, shift included),
+    /// when the last factorisation succeeded.
+    pub(crate) fn factored_matrix(&self) -> Option<&SparseColMat<usize, f64>> {
+        self.matrix.as_ref().filter(|_| self.factored)
+    }
+
+    /// (free dofs, constraint rows) of the assembled system.
+    pub(crate) fn sizes(&self) -> (usize, usize) {
+        (self.n_free, self.n_cons)
+    }
+
+    /// δ of the assembled matrix (N/m).
+    pub(crate) fn delta(&self) -> f64 {
+        self.delta
+    }
+
+    /// Value slot of the diagonal entry of KKT index `j` in the assembled matrix.
+    pub(crate) fn diagonal_slot(&self, j: usize) -> usize {
+        self.diag_pos[j]
+    }
+
+    /// Apply the current factor's inverse to `rhs` in place (one forward and backward
+    /// solve with the regularised, shifted matrix: a preconditioner, not a solution).
+    pub(crate) fn apply_factor(&mut self, rhs: &mut [f64]) {
+        self.raw_solve(rhs);
+    }
+
+    /// GMRES on the last assembled matrix with δ removed and `shifts` (KKT index, N/m) added
+    /// to its diagonal, preconditioned by the current (lagged) factor followed by
+    /// `correct(a, r, z)`, which may improve z ≈ A⁻¹ r given the assembled matrix `a` and the
+    /// preconditioned vector's input `r`; at most `max_solves` iterations, relative tolerance
+    /// `rel_tol`, giving up early when hopeless.
+    pub(crate) fn solve_lagged_with(
+        &mut self,
+        rhs: &mut [f64],
+        max_solves: usize,
+        rel_tol: f64,
+        shifts: &[(usize, f64)],
+        mut correct: impl FnMut(&SparseColMat<usize, f64>, &[f64], &mut [f64]),
+    ) -> GmresReport {
+        assert!(self.factored, "solve_lagged_with before a successful factorize");
+        let b = rhs.to_vec();
+        let (nf, nc, delta) = (self.n_free, self.n_cons, self.delta);
+        let a = self.base.take().expect("assembled matrix");
+        let mut r = vec![0.0; nf + nc];
+        let rep = {
+            let this = &mut *self;
+            fgmres(
+                |v, out| {
+                    mul_sym_vec_into(&a, v, out);
+                    for i in nf..nf + nc {
+                        out[i] += delta * v[i];
+                    }
+                    for &(i, t) in shifts {
+                        out[i] += t * v[i];
+                    }
+                },
+                |v| {
+                    r.copy_from_slice(v);
+                    this.raw_solve(v);
+                    correct(&a, &r, v);
+                },
+                &b,
+                rhs,
+                rel_tol.max(1e-15),
+                max_solves.max(1),
+                true,
+            )
+        };
+        self.base = Some(a);
+        rep
     }
 
     fn raw_solve(&mut self, rhs: &mut [f64]) {

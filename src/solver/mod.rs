@@ -5,6 +5,7 @@ pub mod kkt;
 pub mod linesearch;
 pub mod newton;
 pub mod ordering;
+pub mod patch;
 pub mod statics;
 pub mod status;
 

@@ -22,6 +22,7 @@
 use super::kkt::{KktBlocks, KktFactorInfo, KktSolver};
 use super::linesearch::{judge, EnergyMerit, Trial};
 use super::newton::{self, Check, NewtonLimits, NewtonProblem, Rejection, Verdict};
+use super::patch::{PatchSet, PatchSettings};
 use super::status::{SolveReport, SolveStatus};
 use crate::math::sparse::SparseError;
 use crate::math::Energy;
@@ -122,6 +123,11 @@ pub struct StaticSettings {
     /// rule alone (`false`); thin shells moving out of plane need `true` (see
     /// [`super::linesearch`]).
     pub energy_merit: bool,
+    /// Solve Newton directions with the lagged global factor and fresh factors of only the
+    /// patches whose Hessian changed ([`super::patch`]); `None`: the global reference (a
+    /// fresh global factor whenever the lagged one does not do within `lagged_solves`).
+    #[serde(default)]
+    pub patches: Option<PatchSettings>,
 }
 
 impl Default for StaticSettings {
@@ -136,6 +142,7 @@ impl Default for StaticSettings {
             lagged_solves: 5,
             max_line_search: 30,
             energy_merit: false,
+            patches: None,
         }
     }
 }
@@ -186,6 +193,9 @@ impl StaticSettings {
                 "max_line_search must be at least 1".into(),
             ));
         }
+        if let Some(p) = &self.patches {
+            p.validate().map_err(SolverError::Settings)?;
+        }
         Ok(())
     }
 }
@@ -215,6 +225,9 @@ pub struct StaticSolver {
     lag_layout: Option<FactorLayout>,
     /// GMRES iterations of the last lagged direction (0 after a fresh factorisation).
     lag_last_iterations: usize,
+    /// The patches of the current KKT layout (with `settings.patches`), and the count of
+    /// symbolic analyses when they were built (a new analysis is a new layout).
+    patches: Option<(PatchSet, usize)>,
 }
 
 /// What a factorisation was built for besides the Hessian: the free constraint entries, the
@@ -354,6 +367,10 @@ fn empty_report() -> SolveReport {
         line_search_s: 0.0,
         total_s: 0.0,
         increments: 1,
+        patch_directions: 0,
+        patch_factorizations: 0,
+        patches_active: 0,
+        patch_shifts: 0,
     }
 }
 
@@ -511,6 +528,9 @@ impl StaticSolver {
     fn factor_fresh(&mut self, shift: f64, projected: bool, m: &Model) -> KktFactorInfo {
         let info = self.kkt.factor(shift);
         self.lag_last_iterations = 0;
+        if let Some((p, _)) = &mut self.patches {
+            p.clear();
+        }
         self.lag_layout = (info.inertia_ok && !projected && shift == 0.0).then(|| FactorLayout {
             cfree: m.s.cfree.clone(),
             pinned: m.p.pinned.clone(),
@@ -551,7 +571,7 @@ impl StaticSolver {
         let cap = self.settings.lagged_solves;
         cap > 0
             && self.kkt.is_factored()
-            && 2 * self.lag_last_iterations <= cap
+            && (self.settings.patches.is_some() || 2 * self.lag_last_iterations <= cap)
             && self.lag_layout.as_ref().is_some_and(|l| {
                 l.dofs == m.s.free_of.len()
                     && l.gamma == m.gamma
@@ -588,6 +608,86 @@ impl StaticSolver {
         } else {
             // The next direction is factorised afresh.
             self.lag_last_iterations = cap;
+        }
+        ok
+    }
+
+    /// The patches of the current KKT layout, built when there are none or the layout
+    /// changed; free dof positions are read from `x` (m).
+    fn ensure_patches(&mut self, m: &Model, x: &[f64], settings: PatchSettings) {
+        let count = self.kkt.symbolic_count;
+        let (nf, nc) = self.kkt.sizes();
+        let current = self
+            .patches
+            .as_ref()
+            .is_some_and(|(p, c)| *c == count && p.fits(nf, nc));
+        if current {
+            return;
+        }
+        let positions: Vec<[f64; 3]> = m
+            .s
+            .free
+            .iter()
+            .map(|&d| {
+                let v = 3 * (d / 3);
+                [x[v], x[v + 1], x[v + 2]]
+            })
+            .collect();
+        self.patches = Some((PatchSet::build(nf, nc, &positions, settings), count));
+    }
+
+    /// Try the Newton direction for the assembled (exact) KKT matrix by GMRES with the lagged
+    /// global factor and fresh factors of the patches whose Hessian changed since it
+    /// ([`super::patch`]; the caller has found the lagged factor usable): `rhs` becomes the
+    /// direction and true is returned when GMRES converged within the patches'
+    /// `max_solves` and the direction has positive curvature on the free dofs; false (and
+    /// `rhs` left alone) when the changed patches hold too much of the skin or GMRES did not
+    /// get there, so a fresh global factor is made.
+    fn patched_direction(
+        &mut self,
+        m: &Model,
+        x: &[f64],
+        lin_tol: f64,
+        rhs: &mut [f64],
+        rep: &mut SolveReport,
+    ) -> bool {
+        let Some(settings) = self.settings.patches else {
+            return false;
+        };
+        self.ensure_patches(m, x, settings);
+        let StaticSolver { kkt, patches, .. } = self;
+        let set = &mut patches.as_mut().expect("patches built").0;
+        let work = set.prepare(kkt);
+        rep.patch_factorizations += work.factorizations;
+        rep.patch_shifts += work.shifted;
+        rep.factor_s += work.factor_s;
+        if work.share > settings.max_share {
+            self.lag_last_iterations = self.settings.lagged_solves;
+            return false;
+        }
+        let t = Instant::now();
+        let shifts = set.shifts();
+        let (nf, _) = kkt.sizes();
+        let mut shift = vec![0.0; nf];
+        for &(i, tau) in &shifts {
+            shift[i] = tau;
+        }
+        let delta = kkt.delta();
+        let mut d = rhs.to_vec();
+        let g = kkt.solve_lagged_with(&mut d, settings.max_solves, lin_tol, &shifts, |a, r, z| {
+            set.correct(a, delta, &shift, r, z)
+        });
+        rep.linear_solves += g.iterations;
+        rep.solve_s += t.elapsed().as_secs_f64();
+        let ok = g.converged && d.iter().all(|v| v.is_finite()) && kkt.curvature(&d[..nf]) > 0.0;
+        if ok {
+            rhs.copy_from_slice(&d);
+            rep.lagged_directions += 1;
+            rep.patch_directions += 1;
+            rep.patches_active += work.active;
+            self.lag_last_iterations = 0;
+        } else {
+            self.lag_last_iterations = self.settings.lagged_solves;
         }
         ok
     }
@@ -797,6 +897,26 @@ impl StaticSolver {
         self.multipliers = end.mu;
         self.last_x = end.x;
         self.last_pinned = p.pinned.clone();
+    }
+
+    /// The residual norm ‖[∇E − f + γCᵀμ; γ(Cx − d)]‖ (N) of `x` with the multipliers of the
+    /// last solve: the quantity every solve's convergence test compares with the tolerance,
+    /// evaluated the way the global reference evaluates it.
+    pub fn residual_norm(
+        &mut self,
+        e: &dyn Energy,
+        p: &StaticProblem,
+        x: &[f64],
+    ) -> Result<f64, SolverError> {
+        let s = self.setup(e, p, x)?;
+        let gamma = self.gamma.unwrap_or(1.0);
+        let m = Model { e, p, s: &s, gamma };
+        let mu = if self.multipliers.len() == p.constraints.rows {
+            self.multipliers.clone()
+        } else {
+            vec![0.0; p.constraints.rows]
+        };
+        Ok(m.point(x.to_vec(), mu).rn)
     }
 
     /// Solve for equilibrium from the warm start `x` (updated in place; pinned dofs keep
@@ -1052,10 +1172,13 @@ impl StaticNewton<'_, '_> {
         let rep = &mut *self.rep;
         self.solver
             .assemble_hessian(m, &self.at.x, false, &mut self.have_hessian, rep)?;
-        Ok((
-            self.solver.lagged_direction(m, lin_tol, step, rep),
-            Some(false),
-        ))
+        let done = if self.solver.settings.patches.is_some() {
+            self.solver
+                .patched_direction(m, &self.at.x, lin_tol, step, rep)
+        } else {
+            self.solver.lagged_direction(m, lin_tol, step, rep)
+        };
+        Ok((done, Some(false)))
     }
 
     /// Factorise the KKT matrix with the first Hessian of
@@ -1069,6 +1192,7 @@ impl StaticNewton<'_, '_> {
         let (m, solver, rep) = (&self.model, &mut *self.solver, &mut *self.rep);
         let modes = solver.hessian_attempts();
         for (k, &(project, shift)) in modes.iter().enumerate() {
+            let last = k + 1 == modes.len();
             if self.have_hessian != Some(project) || assembled != Some(project) {
                 solver.assemble_hessian(m, &self.at.x, project, &mut self.have_hessian, rep)?;
                 assembled = Some(project);
@@ -1076,7 +1200,6 @@ impl StaticNewton<'_, '_> {
             let info = solver.factor_fresh(shift * m.gamma, project, m);
             rep.factor_s += info.numeric_s;
             rep.factorizations += 1;
-            let last = k + 1 == modes.len();
             if info.inertia_ok || (last && solver.kkt.is_factored()) {
                 if k > 0 {
                     rep.modified_hessian_steps += 1;

@@ -70,6 +70,19 @@ pub struct SolveReport {
     /// split the change of constraint target and pinned positions (0 before any solve).
     #[serde(default)]
     pub increments: usize,
+    /// Newton directions (and predictor steps) solved with the lagged global factor and
+    /// fresh factors of the changed patches ([`super::patch`]).
+    #[serde(default)]
+    pub patch_directions: usize,
+    /// Patch factorisations made (each of one patch's block, not of the whole system).
+    #[serde(default)]
+    pub patch_factorizations: usize,
+    /// Patches corrected, summed over the patched directions.
+    #[serde(default)]
+    pub patches_active: usize,
+    /// Patch factorisations that needed a shift to pass their inertia test.
+    #[serde(default)]
+    pub patch_shifts: usize,
 }
 
 impl SolveReport {
@@ -80,6 +93,10 @@ impl SolveReport {
         self.modified_hessian_steps += other.modified_hessian_steps;
         self.factorizations += other.factorizations;
         self.lagged_directions += other.lagged_directions;
+        self.patch_directions += other.patch_directions;
+        self.patch_factorizations += other.patch_factorizations;
+        self.patches_active += other.patches_active;
+        self.patch_shifts += other.patch_shifts;
         self.linear_solves += other.linear_solves;
         self.assembly_s += other.assembly_s;
         self.symbolic_s += other.symbolic_s;

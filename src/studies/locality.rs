@@ -2,6 +2,9 @@
 //! frame compresses past the wrinkling threshold is simulated) against the reference that
 //! simulates all of it, in one process: the skin's time, the share of the skin simulated, and
 //! the phase-free difference of the wrinkle amplitude per 2λ region ([`super::tradeoff`]).
+//! And temporal locality: the skin's local solver (fresh factors of only the patches whose
+//! Hessian changed, `solver.skin_solver = "local"`) against the global reference, on the same
+//! selected skin, in one process.
 
 use super::tradeoff::{amplitude_error, amplitude_map, region_size};
 use crate::io::load::Rig;
@@ -70,4 +73,151 @@ pub fn compare_selection(rig: &Rig, opts: &RunOptions) -> anyhow::Result<Selecti
         amplitude_error: error,
         region_m: region,
     })
+}
+
+/// One run of the solver comparison.
+#[derive(Debug, Clone, Serialize)]
+pub struct SolverRun {
+    /// `global` (the reference) or `local`.
+    pub solver: String,
+    /// Milliseconds in the skin's solves over the frames.
+    pub shell_ms: f64,
+    /// Skin Newton iterations over the frames.
+    pub iterations: usize,
+    /// Factorisations of the whole skin's KKT matrix.
+    pub factorizations: usize,
+    /// Factorisations of patch blocks.
+    pub patch_factorizations: usize,
+    /// Solves with a factor (GMRES iterations).
+    pub linear_solves: usize,
+    /// Frames not converged in some stage.
+    pub frames_not_converged: usize,
+    /// Wall time of the run (s).
+    pub wall_s: f64,
+}
+
+/// The skin solvers compared: both runs, the speed-up of the skin and how far apart the
+/// wrinkles are.
+#[derive(Debug, Clone, Serialize)]
+pub struct SolverComparison {
+    /// Shell vertices simulated (the same in both runs).
+    pub simulated_vertices: usize,
+    /// The reference (global) and the local run.
+    pub runs: Vec<SolverRun>,
+    /// Skin time of the global run over the local run's.
+    pub shell_speedup: f64,
+    /// Phase-free relative difference of the wrinkle amplitude per region (dimensionless).
+    pub amplitude_error: f64,
+    /// Largest distance between the two runs' exported vertices over every frame (m).
+    pub max_difference_m: f64,
+    /// Largest wrinkle depth of the reference over every frame (m).
+    pub max_depth_m: f64,
+    /// Region side of the amplitude maps (m), 2λ.
+    pub region_m: f64,
+}
+
+fn run_solver(rig: &Rig, opts: &RunOptions, solver: &str) -> anyhow::Result<(SolverRun, RunOutput)> {
+    let mut o = opts.clone();
+    o.scene.solver.skin_solver = Some(solver.to_string());
+    let out = pipeline::run(rig, &o, &|_, _, _| {})?;
+    let t = &out.report.totals;
+    let solves = out
+        .report
+        .per_frame
+        .iter()
+        .filter_map(|f| f.shell.as_ref())
+        .map(|s| s.linear_solves)
+        .sum();
+    let run = SolverRun {
+        solver: solver.into(),
+        shell_ms: t.shell_ms,
+        iterations: t.skin_iterations,
+        factorizations: t.skin_factorizations,
+        patch_factorizations: t.skin_patch_factorizations,
+        linear_solves: solves,
+        frames_not_converged: t.frames_not_converged,
+        wall_s: t.wall_s,
+    };
+    Ok((run, out))
+}
+
+/// Run `opts` on `rig` with the global skin solver (the reference) and the local one.
+pub fn compare_solvers(rig: &Rig, opts: &RunOptions) -> anyhow::Result<SolverComparison> {
+    let (reference, global) = run_solver(rig, opts, "global")?;
+    let (local_run, local) = run_solver(rig, opts, "local")?;
+    let region = region_size(&global);
+    let error = amplitude_error(
+        &amplitude_map(&local, region),
+        &amplitude_map(&global, region),
+    );
+    let mut max_difference_m: f64 = 0.0;
+    let mut max_depth_m: f64 = 0.0;
+    for ((a, b), s) in local.frames.iter().zip(&global.frames).zip(&global.smooth) {
+        for ((p, q), r) in a.iter().zip(b).zip(s) {
+            max_difference_m = max_difference_m.max((p - q).norm());
+            max_depth_m = max_depth_m.max((q - r).norm());
+        }
+    }
+    Ok(SolverComparison {
+        simulated_vertices: global.report.sizes["simulated_vertices"]
+            .as_u64()
+            .unwrap_or(0) as usize,
+        shell_speedup: reference.shell_ms / local_run.shell_ms.max(1e-9),
+        runs: vec![reference, local_run],
+        amplitude_error: error,
+        max_difference_m,
+        max_depth_m,
+        region_m: region,
+    })
+}
+
+/// The reference's residual test applied to every frame of a run: how many frames were
+/// checked, how many failed, the worst residual (N) and the tolerance (N).
+#[derive(Debug, Clone, Serialize)]
+pub struct ResidualCheck {
+    /// Frames stepped.
+    pub frames: usize,
+    /// Frames whose final skin state fails the test.
+    pub failed: usize,
+    /// Largest residual norm over the frames (N).
+    pub worst_residual: f64,
+    /// The test's tolerance (N).
+    pub tolerance: f64,
+}
+
+/// Step every frame of `opts` on `rig` and, after each, evaluate the skin's residual at its
+/// final state the way the global reference tests convergence.
+pub fn check_with_global(rig: &Rig, opts: &RunOptions) -> anyhow::Result<ResidualCheck> {
+    use crate::pipeline::step::{interior::InteriorSchedule, step_frame, Scratch, StepOptions};
+    let plan = pipeline::plan::Plan::new(rig, opts)?;
+    let mut log = pipeline::setup::Log::default();
+    let (model, mut state) = pipeline::setup::set_up(rig, &opts.scene, &plan, &mut log, &|_, _, _| {})?;
+    let options = StepOptions {
+        schedule: InteriorSchedule {
+            substeps: plan.substeps,
+            every_frame_stiffness: false,
+        },
+        simulated_surface: false,
+        fps: plan.fps,
+    };
+    let mut scratch = Scratch::new(model.lattice.node_count());
+    let mut check = ResidualCheck {
+        frames: 0,
+        failed: 0,
+        worst_residual: 0.0,
+        tolerance: 0.0,
+    };
+    for k in 0..plan.range.end {
+        step_frame(rig, &plan.weights[k], k, &model, &mut state, &mut scratch, options)?;
+        let q = state.interior.q.clone();
+        let skin = state.skin.as_mut().ok_or_else(|| anyhow::anyhow!("no skin is simulated"))?;
+        let (r, tol) = skin.residual(&q)?;
+        check.frames += 1;
+        check.tolerance = tol;
+        check.worst_residual = check.worst_residual.max(r);
+        if r > tol {
+            check.failed += 1;
+        }
+    }
+    Ok(check)
 }

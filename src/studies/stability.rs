@@ -137,6 +137,7 @@ pub fn cases(quick: bool, n: usize, size: f64, seconds: f64) -> Vec<Case> {
         weight: 1.0,
         seconds,
         sliver: None,
+        hold: 0.0,
     };
     let mut set = CaseSet {
         quick,
@@ -687,6 +688,7 @@ mod tests {
             ms: 0.0,
             halvings: 0,
             load_steps: 0,
+..Default::default()
         };
         let v = [
             rec("converged", 2, 1e-9),

@@ -57,6 +57,9 @@ pub struct SheetRig {
     /// of an edge, so the triangles it shares with the vertex on its right have area
     /// ½ `sliver` ℓ² (ℓ the edge, m). `None`: a regular sheet.
     pub sliver: Option<f64>,
+    /// Seconds the final weight is held after the ramp (the clip then lasts `seconds` +
+    /// `hold`).
+    pub hold: f64,
 }
 
 impl Default for SheetRig {
@@ -69,6 +72,7 @@ impl Default for SheetRig {
             weight: 1.0,
             seconds: 0.3,
             sliver: None,
+            hold: 0.0,
         }
     }
 }
@@ -103,10 +107,14 @@ pub fn sheet_rig(s: &SheetRig) -> anyhow::Result<Rig> {
         .map(|p| Vector3::new((p.x - mid).abs() * s.strain, 0.0, 0.0))
         .collect();
     let mesh = TriMesh::new(pos, tris);
-    let keys = WeightKeys {
+    let mut keys = WeightKeys {
         times: vec![0.0, s.seconds],
         weights: vec![vec![0.0], vec![s.weight]],
     };
+    if s.hold > 0.0 {
+        keys.times.push(s.seconds + s.hold);
+        keys.weights.push(vec![s.weight]);
+    }
     let target = MorphTarget {
         name: "squeeze".into(),
         positions: deltas,

@@ -9,6 +9,7 @@ use crate::coupling::refine;
 use crate::mesh::TriMesh;
 use crate::pipeline::record::StagePlan;
 use crate::scene::Scene;
+use crate::solver::patch::PatchSettings;
 use crate::solver::statics::{HessianMode, StaticSettings};
 use anyhow::{anyhow, Context};
 use std::collections::HashSet;
@@ -260,6 +261,26 @@ enum ClusterSource {
 /// frames that converge directly never pay for it.
 pub const DEFAULT_SKIN_CONTINUATION: usize = 2;
 
+/// The local skin solver's patches for wavelength `lambda` (m), unless the scene asks for the
+/// global reference (`solver.skin_solver = "global"`): cells of side λ with an overlap of
+/// λ/2 (a cluster's half-width), refactorised where a Hessian column moved by more than
+/// [`PATCH_CHANGE`] of its diagonal.
+fn patch_settings(scene: &Scene, lambda: f64) -> Option<PatchSettings> {
+    if scene.solver.skin_solver.as_deref() == Some("global") {
+        return None;
+    }
+    Some(PatchSettings {
+        size: lambda,
+        overlap: 0.5 * lambda,
+        change: PATCH_CHANGE,
+        max_share: 0.5,
+        max_solves: 20,
+    })
+}
+
+/// Relative change of a Hessian column beyond which the local solver refactorises its patch.
+pub const PATCH_CHANGE: f64 = 0.3;
+
 /// The embedded shell over `triangles`, whose sub-mesh and refined vertices are `part`
 /// ([`sub_mesh`]), with the scene's skin, thickness and statics settings.
 fn shell_over(
@@ -282,6 +303,7 @@ fn shell_over(
         max_iterations: scene.solver.shell_iterations.unwrap_or(60),
         hessian: HessianMode::Auto,
         energy_merit: true,
+        patches: patch_settings(scene, input.lambda),
         ..StaticSettings::default()
     };
     let material = scene.skin.material()?;

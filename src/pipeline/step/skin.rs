@@ -30,5 +30,8 @@ pub fn solve_skin(skin: &mut EmbeddedShell, q: &[f64]) -> anyhow::Result<StageRe
         } else {
             0
         },
+        factorizations: rep.factorizations,
+        patch_factorizations: rep.patch_factorizations,
+        linear_solves: rep.linear_solves,
     })
 }
