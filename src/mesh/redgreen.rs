@@ -13,14 +13,17 @@
 //! ([`super::butterfly`]), faded to the plain midpoint across the band (the fade τ is 1 on
 //! the region's vertices and falls linearly to 0 over the band's rings of vertices), so the
 //! coarse triangles beyond the band, and their green closures, stay exactly flat; with
-//! [`Smoothing::Midpoint`] every new vertex is an edge midpoint. Coarse vertices keep their
-//! positions and indices and come first.
+//! [`Smoothing::Midpoint`] every new vertex is an edge midpoint. Where the smoothing would
+//! fold the surface (a child triangle turned over against its parent, as near slivers of a
+//! distorted mesh) or a parent is degenerate, its new vertices fall back to midpoints. Coarse
+//! vertices keep their positions and indices and come first.
 //!
 //! Each refined triangle also knows its ancestor ([`Ancestor`]): the coarse triangle it lies
 //! in and its corners' barycentric coordinates there, as midpoint subdivision would put them
 //! (the flat position), which is what surface data (UVs, thickness, skin weights) follows.
 
 use super::butterfly::Rings;
+use super::quality::triangle_quality;
 use super::TriMesh;
 use nalgebra::Vector3;
 use std::collections::{HashMap, VecDeque};
@@ -56,6 +59,10 @@ impl Smoothing {
         }
     }
 }
+
+/// Quality (2 r_in / r_circ) below which a triangle is too degenerate for its new vertices
+/// to be smoothed: they stay at the midpoints of its edges.
+pub const DEGENERATE_QUALITY: f64 = 1e-3;
 
 /// Weights over the coarse vertices (vertex, weight), sorted by vertex, summing to one: a
 /// refined vertex's row of S (dimensionless).
@@ -122,6 +129,9 @@ struct Work<'a> {
     weights: Vec<Weights>,
     positions: Vec<Vector3<f64>>,
     mids: HashMap<(usize, usize), usize>,
+    /// Per new vertex (from the coarse vertex count on): its edge and whether it is the
+    /// plain midpoint.
+    edge: Vec<([usize; 2], bool)>,
 }
 
 impl Work<'_> {
@@ -145,6 +155,7 @@ impl Work<'_> {
             (Smoothing::Butterfly, Some(r)) if tau > 0.0 => r.stencil(a, b),
             _ => None,
         };
+        let plain = stencil.is_none();
         let mut terms = Vec::with_capacity(12);
         match stencil {
             Some(s) => {
@@ -162,7 +173,53 @@ impl Work<'_> {
         self.weights.push(row);
         self.positions.push(p);
         self.mids.insert(key, m);
+        self.edge.push(([a, b], plain));
         m
+    }
+
+    /// Put new vertex `v` at the plain midpoint of its edge.
+    fn make_plain(&mut self, v: usize) {
+        let i = v - self.coarse.positions.len();
+        let ([a, b], plain) = self.edge[i];
+        if !plain {
+            self.weights[v] = combine(&[(a, 0.5), (b, 0.5)], &self.weights);
+            self.positions[v] = apply(&self.weights[v], &self.coarse.positions);
+            self.edge[i].1 = true;
+        }
+    }
+
+    /// Fall back to midpoints where the smoothing would fold the surface: the new vertices of
+    /// a child whose normal turns by more than 90° from its parent's (`split`: the first
+    /// child's index in `pieces` and the parent's corners), and of every parent too
+    /// degenerate to have a normal ([`DEGENERATE_QUALITY`]). Repeats until nothing folds
+    /// (midpoints alone never fold: their children lie in the parent's plane).
+    fn unfold(&mut self, pieces: &[Piece], split: &[(usize, [usize; 3])]) {
+        let n0 = self.coarse.positions.len();
+        loop {
+            let mut fold = Vec::new();
+            for &(at, parent) in split {
+                let pp = parent.map(|v| self.positions[v]);
+                let np = (pp[1] - pp[0]).cross(&(pp[2] - pp[0]));
+                let degenerate = triangle_quality(pp).0 < DEGENERATE_QUALITY;
+                for child in &pieces[at..at + 4] {
+                    let c = child.v.map(|v| self.positions[v]);
+                    let nc = (c[1] - c[0]).cross(&(c[2] - c[0]));
+                    if degenerate || nc.dot(&np) <= 0.0 {
+                        fold.extend(
+                            child
+                                .v
+                                .iter()
+                                .copied()
+                                .filter(|&v| v >= n0 && !self.edge[v - n0].1),
+                        );
+                    }
+                }
+            }
+            if fold.is_empty() {
+                return;
+            }
+            fold.into_iter().for_each(|v| self.make_plain(v));
+        }
     }
 
     /// The flat position (m) at barycentric `b` in coarse triangle `t`.
@@ -178,12 +235,15 @@ impl Work<'_> {
             let tris: Vec<[usize; 3]> = pieces.iter().map(|p| p.v).collect();
             Rings::new(&self.positions, &tris)
         });
+        let first_new = self.positions.len();
         let mut out = Vec::with_capacity(pieces.len() * 2);
+        let mut split = Vec::new();
         for p in pieces {
             if level[p.anc] <= done {
                 out.push(p);
                 continue;
             }
+            split.push((out.len(), p.v));
             let [a, b, c] = p.v;
             let [ba, bb, bc] = p.bary;
             let (mab, mbc, mca) = (mid(ba, bb), mid(bb, bc), mid(bc, ba));
@@ -191,6 +251,9 @@ impl Work<'_> {
             let bcv = self.midpoint(b, c, (p.anc, mbc), rings.as_ref());
             let ca = self.midpoint(c, a, (p.anc, mca), rings.as_ref());
             out.extend(red_children(&p, [ab, bcv, ca], [mab, mbc, mca]));
+        }
+        if self.positions.len() > first_new {
+            self.unfold(&out, &split);
         }
         out
     }
@@ -361,6 +424,7 @@ pub fn refine(mesh: &TriMesh, region: &[bool], levels: usize, smoothing: Smoothi
         weights: (0..n).map(|v| vec![(v, 1.0)]).collect(),
         positions: mesh.positions.clone(),
         mids: HashMap::new(),
+        edge: Vec::new(),
     };
     let eye = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
     let mut pieces: Vec<Piece> = mesh
@@ -391,5 +455,56 @@ pub fn refine(mesh: &TriMesh, region: &[bool], levels: usize, smoothing: Smoothi
         ancestor,
         green,
         level,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A flat n × n grid of unit squares split by diagonals, with vertex (n/2, n/2) moved
+    /// along x by (1 − ε) of an edge: two triangles of area ε/2 beside it (m).
+    fn sliver_grid(n: usize, eps: f64) -> TriMesh {
+        let id = |i: usize, j: usize| j * (n + 1) + i;
+        let mut p: Vec<Vector3<f64>> = (0..=n)
+            .flat_map(|j| (0..=n).map(move |i| Vector3::new(i as f64, j as f64, 0.0)))
+            .collect();
+        p[id(n / 2, n / 2)].x += 1.0 - eps;
+        let mut t = Vec::new();
+        for j in 0..n {
+            for i in 0..n {
+                t.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+                t.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+            }
+        }
+        TriMesh::new(p, t)
+    }
+
+    /// Around a sliver the butterfly stencils of a distorted mesh would turn children over;
+    /// those new vertices fall back to midpoints, so no refined triangle faces down, and the
+    /// flat sheet stays flat.
+    #[test]
+    fn smoothing_never_folds_a_sliver_over() {
+        let m = sliver_grid(8, 1e-4);
+        let all = vec![true; m.triangles.len()];
+        let r = refine(&m, &all, 2, Smoothing::Butterfly);
+        let flat = refine(&m, &all, 2, Smoothing::Midpoint);
+        let moved = (0..r.mesh.positions.len())
+            .filter(|&v| r.mesh.positions[v] != flat.mesh.positions[v])
+            .count();
+        assert!(moved > 0, "the butterfly rule moved nothing");
+        for (f, t) in r.mesh.triangles.iter().enumerate() {
+            let p = t.map(|v| r.mesh.positions[v]);
+            assert!(p.iter().all(|x| x.z == 0.0));
+            let (ra, ancestor) = (p, r.ancestor[f].triangle);
+            let area = (ra[1] - ra[0]).cross(&(ra[2] - ra[0])).z;
+            let q = m.triangles[ancestor].map(|v| m.positions[v]);
+            let coarse = (q[1] - q[0]).cross(&(q[2] - q[0])).z;
+            // Same orientation as its ancestor (slivers' children may be flat, not flipped).
+            assert!(
+                area * coarse.signum() >= 0.0,
+                "triangle {f} folded over: {area}"
+            );
+        }
     }
 }
