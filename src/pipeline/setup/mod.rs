@@ -1,7 +1,8 @@
 //! The set-up: everything built once before the frame loop, one stage per module, in the order
-//! they run: [`weld`] the loaded face into one skin, build the [`lattice`] over it, [`refine`]
-//! the skin for the critical wavelength and embed it, select the simulated [`skin`] and build
-//! its shell and clusters, the [`interior`] stepper and tracking energy, and the [`muscles`].
+//! they run: [`weld`] the loaded face into one skin, build the [`lattice`] over it, [`select`]
+//! the welded triangles that can wrinkle, [`refine`] them for the critical wavelength and
+//! embed the skin, build the simulated [`skin`]'s shell and clusters, the [`interior`] stepper
+//! and tracking energy, and the [`muscles`].
 //! Each stage returns its result and its record for the report.
 //!
 //! What the set-up builds splits in two: the [`Model`], fixed for the run (meshes, maps,
@@ -97,18 +98,19 @@ pub fn set_up(
     let (lattice, record) = lattice::build_lattice(&welded.mesh, &scene.interior, &path)?;
     log.stages.push(record);
     progress("setup", 1, 4);
+    let (selection, record) = select::select_skin(rig, scene, plan, &welded);
+    log.stages.push(record);
     let input = refine::RefineInput {
         face,
         welded: &welded,
         lattice: &lattice,
         scale: &plan.skin,
         rig_scale: &rig.scale,
+        region: selection.as_ref().map(|s| s.simulated.as_slice()),
     };
     let (refined, record) = refine::refine_skin(&input, &scene.skin, &path)?;
     log.stages.push(record);
     progress("setup", 2, 4);
-    let (selection, record) = select::select_skin(rig, scene, plan, &welded);
-    log.stages.push(record);
     let nodes = lattice.node_count();
     let input = skin::ShellInput {
         refined: &refined,
@@ -183,10 +185,12 @@ fn simulated_skin(
     let mesh = &s.refined.mesh;
     let (candidates, on_degenerate) =
         skin::select_triangles(mesh, s.scene, s.path, &mut log.warnings);
-    let per = 4usize.pow(s.refined.levels as u32);
+    // The selected welded triangles were refined whole: their refined triangles are all
+    // red, at the full level; the transition band lies outside them.
+    let ancestor = &s.refined.ancestor;
     let (triangles, beyond): (Vec<usize>, Vec<usize>) = candidates
         .iter()
-        .partition(|&&t| selection.is_none_or(|sel| sel.simulated[t / per]));
+        .partition(|&&t| selection.is_none_or(|sel| sel.simulated[ancestor[t].triangle]));
     let ring = skin::border_ring(mesh, &candidates, &triangles);
     let mut in_ring = vec![false; mesh.triangles.len()];
     ring.iter().for_each(|&t| in_ring[t] = true);
