@@ -87,6 +87,14 @@ fn assert_conforming(coarse: &TriMesh, flat: &TriMesh) {
     }
 }
 
+/// Per triangle of `m`: all its corners above height `y` (m).
+fn above(m: &TriMesh, y: f64) -> Vec<bool> {
+    m.triangles
+        .iter()
+        .map(|t| t.iter().all(|&v| m.positions[v].y > y))
+        .collect()
+}
+
 /// The face rig welded (its seams joined), as the pipeline refines it.
 fn welded_face() -> TriMesh {
     let rig = furrow::rig::face::generate();
@@ -101,11 +109,7 @@ fn a_partly_refined_face_is_conforming_with_green_closures() {
     // boundaries elsewhere.
     let (lo, hi) = m.bounding_box().unwrap();
     let cut = lo.y + 0.66 * (hi.y - lo.y);
-    let region: Vec<bool> = m
-        .triangles
-        .iter()
-        .map(|t| t.iter().all(|&v| m.positions[v].y > cut))
-        .collect();
+    let region = above(&m, cut);
     for levels in [1, 2, 3] {
         let flat = redgreen::refine(&m, &region, levels, Smoothing::Midpoint);
         let smooth = redgreen::refine(&m, &region, levels, Smoothing::Butterfly);
@@ -234,11 +238,7 @@ fn fades(m: &TriMesh, r: &RedGreen, fade: &[f64]) -> Vec<f64> {
 fn the_smoothing_fades_to_midpoints_across_the_band() {
     let m = icosphere(2);
     // The upper cap refined twice: a band of one ring at one level, then green closures.
-    let region: Vec<bool> = m
-        .triangles
-        .iter()
-        .map(|t| t.iter().all(|&v| m.positions[v].y > 0.3))
-        .collect();
+    let region = above(&m, 0.3);
     let flat = redgreen::refine(&m, &region, 2, Smoothing::Midpoint);
     let smooth = redgreen::refine(&m, &region, 2, Smoothing::Butterfly);
     assert_conforming(&m, &flat.mesh);
@@ -279,11 +279,7 @@ fn levels_come_from_the_region_and_the_refusal_names_them() {
     // A sphere whose upper cap is twice as fine as the rest: the cap needs a level less than
     // the mean edge of the whole mesh says.
     let coarse = icosphere(2);
-    let cap: Vec<bool> = coarse
-        .triangles
-        .iter()
-        .map(|t| t.iter().all(|&v| coarse.positions[v].y > 0.2))
-        .collect();
+    let cap = above(&coarse, 0.2);
     let mut m = redgreen::refine(&coarse, &cap, 1, Smoothing::Midpoint);
     m.mesh.positions.iter_mut().for_each(|p| *p = p.normalize());
     let region: Vec<bool> = m.ancestor.iter().map(|a| cap[a.triangle]).collect();

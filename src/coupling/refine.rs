@@ -24,7 +24,7 @@
 //! coordinates there): surface data and the lattice element a vertex embeds in follow that.
 
 use crate::lattice::{Lattice, MaterialPoint};
-use crate::mesh::redgreen::{self, Weights};
+use crate::mesh::redgreen::{self, RedGreen};
 pub use crate::mesh::redgreen::{Ancestor, Smoothing};
 use crate::mesh::TriMesh;
 use anyhow::bail;
@@ -88,19 +88,13 @@ pub struct RefineReport {
     pub smoothing: Smoothing,
 }
 
-/// A refined skin: the mesh, the subdivision operator, the ancestors, and the report.
+/// A refined skin: the subdivision (the mesh, with original vertices keeping their indices
+/// and positions; the operator S, whose rows carry the rest shape and the blend-shape deltas
+/// onto it; the ancestors; the green triangles) and the report.
 #[derive(Debug, Clone)]
 pub struct Refined {
-    /// The refined mesh (positions in m); original vertices keep their indices and positions.
-    pub mesh: TriMesh,
-    /// The subdivision operator S: for each refined vertex, (original vertex, weight) pairs
-    /// summing to one whose weighted sum of original positions is its position (m);
-    /// blend-shape deltas are carried onto the refined mesh with it.
-    pub weights: Vec<Weights>,
-    /// For each refined triangle, its ancestor in the unrefined mesh.
-    pub ancestor: Vec<Ancestor>,
-    /// For each refined triangle: a green (transition) triangle.
-    pub green: Vec<bool>,
+    /// The subdivision.
+    pub subdivision: RedGreen,
     /// What was done.
     pub report: RefineReport,
 }
@@ -226,10 +220,7 @@ pub fn refine_region(
         smoothing: settings.smoothing,
     };
     Ok(Refined {
-        mesh: rg.mesh,
-        weights: rg.weights,
-        ancestor: rg.ancestor,
-        green: rg.green,
+        subdivision: rg,
         report,
     })
 }
@@ -257,17 +248,17 @@ pub fn embed_refined(
             coarse.positions.len()
         );
     }
-    let n = refined.mesh.positions.len();
+    let n = refined.subdivision.mesh.positions.len();
     // Each vertex's first triangle and its corner there.
     let mut first: Vec<Option<(usize, usize)>> = vec![None; n];
-    for (f, tri) in refined.mesh.triangles.iter().enumerate() {
+    for (f, tri) in refined.subdivision.mesh.triangles.iter().enumerate() {
         for (k, &v) in tri.iter().enumerate() {
             first[v].get_or_insert((f, k));
         }
     }
     let mut out = Vec::with_capacity(n);
     for (v, at) in first.iter().enumerate() {
-        let p = refined.mesh.positions[v];
+        let p = refined.subdivision.mesh.positions[v];
         if v < n0 {
             out.push(lattice.locate_in_element(lattice.vertex_points[v].element, &p));
             continue;
@@ -275,7 +266,7 @@ pub fn embed_refined(
         let Some((f, k)) = *at else {
             bail!("refined vertex {v} is on no triangle");
         };
-        let anc = &refined.ancestor[f];
+        let anc = &refined.subdivision.ancestor[f];
         let corners = coarse.triangles[anc.triangle];
         let mut order = [0, 1, 2];
         order.sort_by(|&i, &j| anc.bary[k][j].total_cmp(&anc.bary[k][i]));
@@ -330,26 +321,41 @@ mod tests {
     /// by midpoints has the same topology, and every refined triangle's corners sit at their
     /// barycentric coordinates in the ancestor where midpoint subdivision puts them.
     fn check(mesh0: &TriMesh, r: &Refined, flat: &Refined) {
-        assert_eq!(r.mesh.triangles, flat.mesh.triangles);
-        assert_eq!(r.ancestor, flat.ancestor);
-        assert_eq!(r.ancestor.len(), r.mesh.triangles.len());
-        for (tri, a) in r.mesh.triangles.iter().zip(&r.ancestor) {
+        assert_eq!(
+            r.subdivision.mesh.triangles,
+            flat.subdivision.mesh.triangles
+        );
+        assert_eq!(r.subdivision.ancestor, flat.subdivision.ancestor);
+        assert_eq!(
+            r.subdivision.ancestor.len(),
+            r.subdivision.mesh.triangles.len()
+        );
+        for (tri, a) in r
+            .subdivision
+            .mesh
+            .triangles
+            .iter()
+            .zip(&r.subdivision.ancestor)
+        {
             let corners = mesh0.triangles[a.triangle].map(|v| mesh0.positions[v]);
             for (k, &v) in tri.iter().enumerate() {
                 assert!((a.bary[k].iter().sum::<f64>() - 1.0).abs() < 1e-12);
                 let p = (0..3).fold(Vector3::zeros(), |acc, j| acc + a.bary[k][j] * corners[j]);
-                assert!((p - flat.mesh.positions[v]).norm() < 1e-12);
+                assert!((p - flat.subdivision.mesh.positions[v]).norm() < 1e-12);
             }
         }
-        assert_eq!(r.weights.len(), r.mesh.positions.len());
-        for (v, o) in r.weights.iter().enumerate() {
+        assert_eq!(
+            r.subdivision.weights.len(),
+            r.subdivision.mesh.positions.len()
+        );
+        for (v, o) in r.subdivision.weights.iter().enumerate() {
             let s: f64 = o.iter().map(|p| p.1).sum();
             assert!((s - 1.0).abs() < 1e-12);
             let p = redgreen::apply(o, &mesh0.positions);
-            assert_eq!(p, r.mesh.positions[v]);
+            assert_eq!(p, r.subdivision.mesh.positions[v]);
             if v < mesh0.positions.len() {
                 assert_eq!(o, &vec![(v, 1.0)]);
-                assert_eq!(r.mesh.positions[v], mesh0.positions[v]);
+                assert_eq!(r.subdivision.mesh.positions[v], mesh0.positions[v]);
             }
         }
     }
@@ -366,26 +372,29 @@ mod tests {
         let s = RefineSettings::default();
         let r0 = refine_for_wavelength(m, 10e-3, &s).unwrap();
         assert_eq!(r0.report.levels, 0);
-        assert_eq!(r0.mesh, *m);
+        assert_eq!(r0.subdivision.mesh, *m);
         let r1 = refine_for_wavelength(m, 3e-3, &s).unwrap();
         let edges = Topology::new(m).unwrap().edges.len();
         assert_eq!(r1.report.levels, 1);
         assert_eq!(r1.report.transition_triangles, 0);
-        assert_eq!(r1.mesh.positions.len(), m.positions.len() + edges);
-        assert_eq!(r1.mesh.triangles.len(), 4 * m.triangles.len());
+        assert_eq!(
+            r1.subdivision.mesh.positions.len(),
+            m.positions.len() + edges
+        );
+        assert_eq!(r1.subdivision.mesh.triangles.len(), 4 * m.triangles.len());
         // Every child edge is half a parent edge (the inner triangle's edges are halves of the
         // opposite sides), so the mean halves up to the mix of edge lengths (2 %).
         let ratio = r1.report.mean_edge_after / r1.report.mean_edge_before;
         assert!((ratio - 0.5).abs() < 0.01, "{ratio}");
         assert!(r1.report.vertices_per_wavelength >= 6.0, "{:?}", r1.report);
-        assert!((r1.mesh.area() - m.area()).abs() < 1e-12 * m.area());
-        assert!(r1.mesh.positions.iter().all(|p| p.z == 0.0));
-        for t in 0..r1.mesh.triangles.len() {
-            let [a, b, c] = r1.mesh.triangles[t];
-            let p = &r1.mesh.positions;
+        assert!((r1.subdivision.mesh.area() - m.area()).abs() < 1e-12 * m.area());
+        assert!(r1.subdivision.mesh.positions.iter().all(|p| p.z == 0.0));
+        for t in 0..r1.subdivision.mesh.triangles.len() {
+            let [a, b, c] = r1.subdivision.mesh.triangles[t];
+            let p = &r1.subdivision.mesh.positions;
             assert!((p[b] - p[a]).cross(&(p[c] - p[a])).z > 0.0);
         }
-        Topology::new(&r1.mesh).unwrap();
+        Topology::new(&r1.subdivision.mesh).unwrap();
         check(
             m,
             &r1,
@@ -440,29 +449,31 @@ mod tests {
         let r = refine_region(&m, Some(&region), 1.2e-3, &s).unwrap();
         let whole = refine_for_wavelength(&m, 1.2e-3, &s).unwrap();
         assert_eq!(r.report.levels, 3);
-        assert!(r.mesh.positions.len() < whole.mesh.positions.len() * 2 / 3);
+        assert!(
+            r.subdivision.mesh.positions.len() < whole.subdivision.mesh.positions.len() * 2 / 3
+        );
         assert!(r.report.transition_triangles > 0 && r.report.band_triangles > 0);
         assert_eq!(
             r.report.region_triangles,
             region.iter().filter(|&&x| x).count()
         );
         let mut untouched = 0;
-        for (f, a) in r.ancestor.iter().enumerate() {
+        for (f, a) in r.subdivision.ancestor.iter().enumerate() {
             if region[a.triangle] {
-                assert!(!r.green[f]);
+                assert!(!r.subdivision.green[f]);
             }
             if a.bary == [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]] {
-                assert_eq!(r.mesh.triangles[f], m.triangles[a.triangle]);
+                assert_eq!(r.subdivision.mesh.triangles[f], m.triangles[a.triangle]);
                 untouched += 1;
             }
         }
         assert!(untouched > m.triangles.len() / 4, "{untouched}");
         let flat = refine_region(&m, Some(&region), 1.2e-3, &midpoint()).unwrap();
         check(&m, &r, &flat);
-        Topology::new(&r.mesh).unwrap();
+        Topology::new(&r.subdivision.mesh).unwrap();
         // With nothing selected nothing is refined.
         let none = refine_region(&m, Some(&vec![false; region.len()]), 1.2e-3, &s).unwrap();
-        assert_eq!(none.mesh, m);
+        assert_eq!(none.subdivision.mesh, m);
     }
 
     /// The face rig's mesh refined for the paper's λ = 4.04 mm: the report is consistent,
@@ -483,10 +494,11 @@ mod tests {
         check(m, &r, &flat);
         // The smoothing moves new vertices off the facets by a fraction of an edge.
         let moved = r
+            .subdivision
             .mesh
             .positions
             .iter()
-            .zip(&flat.mesh.positions)
+            .zip(&flat.subdivision.mesh.positions)
             .map(|(p, q)| (p - q).norm())
             .fold(0.0, f64::max);
         println!(
@@ -500,19 +512,19 @@ mod tests {
         let q = lat.rest_flat();
         let mut worst: f64 = 0.0;
         for (v, mp) in pts.iter().enumerate() {
-            worst = worst.max((lat.position(&q, mp) - r.mesh.positions[v]).norm());
+            worst = worst.max((lat.position(&q, mp) - r.subdivision.mesh.positions[v]).norm());
         }
         println!("refined embedding: max |B q_rest − x| = {worst:.2e} m");
         assert!(worst < 1e-9, "{worst}");
         // Each new vertex is in an element of its (first triangle's) ancestor's corners.
-        let mut first = vec![None; r.mesh.positions.len()];
-        for (f, tri) in r.mesh.triangles.iter().enumerate() {
+        let mut first = vec![None; r.subdivision.mesh.positions.len()];
+        for (f, tri) in r.subdivision.mesh.triangles.iter().enumerate() {
             for &v in tri {
                 first[v].get_or_insert(f);
             }
         }
-        for v in m.positions.len()..r.mesh.positions.len() {
-            let a = &r.ancestor[first[v].unwrap()];
+        for v in m.positions.len()..r.subdivision.mesh.positions.len() {
+            let a = &r.subdivision.ancestor[first[v].unwrap()];
             let elements = m.triangles[a.triangle].map(|c| lat.vertex_points[c].element);
             assert!(elements.contains(&pts[v].element), "vertex {v}");
         }

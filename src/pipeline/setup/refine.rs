@@ -90,7 +90,11 @@ pub fn refine_skin(
     })?;
     let record = refine_record(&refined.report, t);
     let thickness = match input.scale.face_thickness.as_deref() {
-        Some(h) => Some(refined_thickness(input.welded, &refined.ancestor, h)),
+        Some(h) => Some(refined_thickness(
+            input.welded,
+            &refined.subdivision.ancestor,
+            h,
+        )),
         None => None,
     };
     let points = refine::embed_refined(input.lattice, &input.welded.mesh, &refined)?;
@@ -98,11 +102,16 @@ pub fn refine_skin(
     for (v, n, w) in refine::embedding_triplets(input.lattice, &points) {
         rows[v].push((n, w));
     }
-    let origin = export_origins(&refined.mesh, &refined.ancestor, input.face, input.welded);
+    let origin = export_origins(
+        &refined.subdivision.mesh,
+        &refined.subdivision.ancestor,
+        input.face,
+        input.welded,
+    );
     let skin = RefinedSkin {
-        ancestor: refined.ancestor,
-        mesh: refined.mesh,
-        target_of: refined.weights,
+        ancestor: refined.subdivision.ancestor,
+        mesh: refined.subdivision.mesh,
+        target_of: refined.subdivision.weights,
         origin,
         rows,
         thickness,
@@ -275,7 +284,7 @@ mod tests {
         };
         let r = refine::refine_for_wavelength(&welded.mesh, 1.0, &flat).unwrap();
         assert_eq!(r.report.levels, 3);
-        let origin = export_origins(&r.mesh, &r.ancestor, &face, &welded);
+        let origin = export_origins(&r.subdivision.mesh, &r.subdivision.ancestor, &face, &welded);
         for (v, o) in origin.iter().enumerate() {
             assert!((o.weights.iter().sum::<f64>() - 1.0).abs() < 1e-12);
             assert!(o.weights.iter().all(|&w| w >= 0.0));
@@ -291,7 +300,10 @@ mod tests {
                 assert!(o.vertices == [3, 4, 5], "vertex {v}: {o:?}");
             }
             // Refined by midpoints, the mesh is where the origin says.
-            assert!((at - r.mesh.positions[v]).norm() < 1e-12, "vertex {v}");
+            assert!(
+                (at - r.subdivision.mesh.positions[v]).norm() < 1e-12,
+                "vertex {v}"
+            );
         }
     }
 }
