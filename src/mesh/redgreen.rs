@@ -135,8 +135,9 @@ struct Work<'a> {
 }
 
 impl Work<'_> {
-    /// The new vertex on edge (a, b), at barycentric `bary` in coarse triangle `anc`: made
-    /// once, by the butterfly stencil of `rings` faded towards the midpoint.
+    /// The new vertex on edge (a, b), which lies at `at` = (coarse triangle, barycentric
+    /// coordinates there) when flat: made once, by the butterfly stencil of `rings` faded
+    /// towards the midpoint by the fade τ at that point.
     fn midpoint(
         &mut self,
         a: usize,
