@@ -11,7 +11,7 @@
 //! | layer | modules | what it is |
 //! | ---: | --- | --- |
 //! | 0 | [`math`] | sparse assembly, dense helpers, finite-difference checkers, the `Energy` trait |
-//! | 1 | [`mesh`] | triangle meshes, topology, quality |
+//! | 1 | [`mesh`] | triangle meshes, topology, quality, local smooth refinement (red-green, butterfly) |
 //! | 2 | [`solver`] | Newton and line search, KKT, sparse factorisations, statics status |
 //! | 3 | [`io`] | glTF in and out: meshes, morph targets, animations; nothing physical |
 //! | 4 | [`rig`] | the project's own face rig generator (for `rigs/`, tests and benchmarks) |

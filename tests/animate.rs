@@ -339,7 +339,14 @@ fn robot_expressive_head_is_animated_to_a_valid_file() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("robot.glb");
     let report = dir.path().join("robot.json");
-    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/robot.toml");
+    // No frame of the robot's clip compresses its skin enough to wrinkle, so by default its
+    // skin is neither simulated nor refined; simulating all of it refines the coarse head,
+    // whose export (skinned, beside 18 other meshes) must stay valid.
+    let text =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/robot.toml"))
+            .unwrap()
+            .replace("[skin]\n", "[skin]\nsimulate = \"all\"\n");
+    let scene = write_scene(dir.path(), "robot.toml", &text);
     let o = furrow()
         .arg("animate")
         .arg(&robot)
@@ -379,7 +386,8 @@ fn robot_expressive_head_is_animated_to_a_valid_file() {
 
 /// RobotExpressive's face is 2.3 m tall in its file: a bare `animate` simulates it at human
 /// size (0.1 m per unit) and says so; `--scale 1` keeps its size, where the default skin is
-/// far too coarse, and the refusal names the face's size and the scale.
+/// far too coarse to simulate (its whole skin, as no frame compresses it enough to be
+/// selected), and the refusal names the face's size and the scale.
 #[test]
 fn a_ten_times_human_face_is_scaled_and_scale_one_is_refused_with_the_numbers() {
     let Some(robot) = common::shared_data("RobotExpressive.glb") else {
@@ -403,9 +411,12 @@ fn a_ten_times_human_face_is_scaled_and_scale_one_is_refused_with_the_numbers() 
     let j: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
     assert_eq!(j["rig_scale"]["metres_per_unit"], 0.1);
     let out1 = dir.path().join("r1.glb");
+    let all = write_scene(dir.path(), "all.toml", "[skin]\nsimulate = \"all\"\n");
     let o = furrow()
         .arg("animate")
         .arg(&robot)
+        .arg("--scene")
+        .arg(&all)
         .args(["--scale", "1", "-o"])
         .arg(&out1)
         .output()

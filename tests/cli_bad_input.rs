@@ -93,14 +93,19 @@ fn tiny_rig_itself_is_accepted() {
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    // A 1 m square of two triangles cannot carry a 1 mm skin's 2 cm wrinkles: refused, with
+    // A 1 m square of two triangles cannot carry a 1 mm skin's 2 cm wrinkles: simulated
+    // whole (its lift stretches it, so none of it would be selected), it is refused, with
     // the numbers, and nothing written.
     let out = tempfile::tempdir().unwrap();
+    let all = out.path().join("all.toml");
+    std::fs::write(&all, "[skin]\nsimulate = \"all\"\n").unwrap();
     let o = Command::new(env!("CARGO_BIN_EXE_furrow"))
-        .args(["--quiet", "demo", "--rig"])
+        .args(["--quiet", "animate"])
         .arg(&p)
-        .arg("--out")
-        .arg(out.path())
+        .arg("--scene")
+        .arg(&all)
+        .arg("-o")
+        .arg(out.path().join("face_wrinkled.glb"))
         .output()
         .unwrap();
     assert_eq!(o.status.code(), Some(2));

@@ -1,27 +1,33 @@
 //! Skin refinement for the wrinkle wavelength: wrinkles of length λ need several shell
-//! vertices per λ, so a skin mesh that is too coarse is refined by 1-to-4 midpoint
-//! subdivision (no smoothing: the surface stays exactly where it was, so the embedding and
-//! the rest shape are unchanged) up to a user limit of levels.
+//! vertices per λ, so a skin mesh that is too coarse is refined where the skin is simulated
+//! (the `select` stage's triangles, or all of it) by 1-to-4 subdivision up to a user limit of
+//! levels, with a conforming red-green transition to the coarse rest
+//! ([`crate::mesh::redgreen`]). New vertices are placed by the interpolating modified
+//! butterfly rule ([`crate::mesh::butterfly`]): coarse vertices stay where they are and the
+//! refined surface is smooth rather than faceted (the skin's rest angles would keep facets as
+//! creases), faded to plain midpoints across the transition band, so the coarse skin beyond it
+//! keeps its exact shape.
 //!
-//! The criterion is λ / ā ≥ N, ā the mean edge length, N the vertices per wavelength
-//! (default [`DEFAULT_VERTICES_PER_WAVELENGTH`] = 6). Why 6: a sinusoid of wavenumber k
-//! sampled at spacing a has the discrete (hinge / second-difference) curvature
-//! 2(1 − cos ka)/a² = k² sinc²(ka/2); at N = 6 (ka = π/3) that is 0.91 k², so the bending
-//! energy of the wave is 17% low and the wavelength, which scales as the cube root of the
-//! bending rigidity, is about 6% short. At N = 4 the wavelength would be 15% short and at
+//! The criterion is λ / ā ≥ N, ā the mean edge length of the triangles to refine, N the
+//! vertices per wavelength (default [`DEFAULT_VERTICES_PER_WAVELENGTH`] = 6). Why 6: a
+//! sinusoid of wavenumber k sampled at spacing a has the discrete (hinge / second-difference)
+//! curvature 2(1 − cos ka)/a² = k² sinc²(ka/2); at N = 6 (ka = π/3) that is 0.91 k², so the
+//! bending energy of the wave is 17% low and the wavelength, which scales as the cube root of
+//! the bending rigidity, is about 6% short. At N = 4 the wavelength would be 15% short and at
 //! N = 2 (Nyquist) the wave cannot be represented at all; N = 8 gives under 2%. Six is the
 //! smallest count whose error stays within the validation's 15% bound with a margin, at a
 //! quarter of the vertices N = 12 would need; validation scenes use more.
 //!
-//! Every refined vertex carries its origin: weights over the original vertices (a midpoint
-//! is ½ + ½ of its edge's ends; after several levels the weights are barycentric in an
-//! original triangle), so exporters can map per-vertex data and [`embed_refined`] can locate
-//! the new vertices in the lattice.
+//! Every refined vertex carries its row of the subdivision operator S (weights over the
+//! unrefined vertices): blend shapes are carried onto the refined mesh with it. Every refined
+//! triangle carries its [`Ancestor`] (the unrefined triangle and its corners' barycentric
+//! coordinates there): surface data and the lattice element a vertex embeds in follow that.
 
 use crate::lattice::{Lattice, MaterialPoint};
+use crate::mesh::redgreen::{self, RedGreen};
+pub use crate::mesh::redgreen::{Ancestor, Smoothing};
 use crate::mesh::TriMesh;
 use anyhow::bail;
-use std::collections::HashMap;
 
 /// Default number of skin vertices per wrinkle wavelength (see the module notes).
 pub const DEFAULT_VERTICES_PER_WAVELENGTH: f64 = 6.0;
@@ -29,13 +35,15 @@ pub const DEFAULT_VERTICES_PER_WAVELENGTH: f64 = 6.0;
 /// Default largest number of subdivision levels (each multiplies the vertex count by ~4).
 pub const DEFAULT_MAX_LEVELS: usize = 3;
 
-/// How far a skin may be refined.
+/// How far, and how, a skin may be refined.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RefineSettings {
     /// Required vertices per wavelength N = λ / mean edge (dimensionless, ≥ 2).
     pub vertices_per_wavelength: f64,
     /// Largest number of 1-to-4 subdivision levels allowed.
     pub max_levels: usize,
+    /// How new vertices are placed (default: the modified butterfly rule).
+    pub smoothing: Smoothing,
 }
 
 impl Default for RefineSettings {
@@ -43,6 +51,7 @@ impl Default for RefineSettings {
         Self {
             vertices_per_wavelength: DEFAULT_VERTICES_PER_WAVELENGTH,
             max_levels: DEFAULT_MAX_LEVELS,
+            smoothing: Smoothing::Butterfly,
         }
     }
 }
@@ -50,58 +59,62 @@ impl Default for RefineSettings {
 /// What refinement did (for the user's report).
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct RefineReport {
-    /// Subdivision levels applied (0 when the mesh was fine enough).
+    /// Subdivision levels applied to the refined region (0 when it was fine enough).
     pub levels: usize,
-    /// Vertex count before and after.
+    /// Vertex count before.
     pub vertices_before: usize,
     /// Vertex count after refinement.
     pub vertices_after: usize,
+    /// Triangle count before.
+    pub triangles_before: usize,
     /// Triangle count after refinement.
     pub triangles_after: usize,
-    /// Mean edge length before (m).
+    /// Unrefined triangles of the region, each refined `levels` times.
+    pub region_triangles: usize,
+    /// Refined triangles of the transition band outside the region: red at fewer levels
+    /// and the green closures.
+    pub band_triangles: usize,
+    /// Green (1-to-2 and 1-to-3 closure) triangles among them.
+    pub transition_triangles: usize,
+    /// Mean edge length of the region before (m).
     pub mean_edge_before: f64,
-    /// Mean edge length after (m).
+    /// Mean edge length of the region after (m).
     pub mean_edge_after: f64,
     /// The wrinkle wavelength λ the mesh was refined for (m).
     pub wavelength: f64,
-    /// λ / mean edge after refinement (vertices per wavelength).
+    /// λ / mean edge of the region after refinement (vertices per wavelength).
     pub vertices_per_wavelength: f64,
+    /// How new vertices were placed.
+    pub smoothing: Smoothing,
 }
 
-/// Where a refined triangle lies in the unrefined mesh: its ancestor triangle and the
-/// barycentric coordinates of its three corners in it (in the ancestor's corner order). Data
-/// that lives on the surface rather than moving with the shapes (UVs, thickness, skin
-/// weights, which element a vertex embeds in) follows these, not the subdivision weights.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Ancestor {
-    /// The unrefined triangle this one lies in.
-    pub triangle: usize,
-    /// Barycentric coordinates of each corner in `triangle` (each sums to one).
-    pub bary: [[f64; 3]; 3],
-}
-
-/// A refined skin: the mesh, the origin of each vertex, and the report.
+/// A refined skin: the subdivision (the mesh, with original vertices keeping their indices
+/// and positions; the operator S, whose rows carry the rest shape and the blend-shape deltas
+/// onto it; the ancestors; the green triangles) and the report.
 #[derive(Debug, Clone)]
 pub struct Refined {
-    /// The refined mesh (positions in m); original vertices keep their indices.
-    pub mesh: TriMesh,
-    /// For each refined vertex, (original vertex, weight) pairs; weights sum to one and the
-    /// position is the weighted sum of the original positions. This is the subdivision
-    /// operator S: blend-shape deltas are carried onto the refined mesh with it.
-    pub origin: Vec<Vec<(usize, f64)>>,
-    /// For each refined triangle, its ancestor in the unrefined mesh.
-    pub ancestor: Vec<Ancestor>,
+    /// The subdivision.
+    pub subdivision: RedGreen,
     /// What was done.
     pub report: RefineReport,
 }
 
 /// Mean edge length (m) over the unique edges of `mesh` (0 for a mesh without triangles).
 pub fn mean_edge(mesh: &TriMesh) -> f64 {
+    mean_edge_of(mesh, |_| true)
+}
+
+/// Mean edge length (m) over the unique edges of the triangles `t` of `mesh` with `keep(t)`
+/// (0 when there are none).
+pub fn mean_edge_of(mesh: &TriMesh, keep: impl Fn(usize) -> bool) -> f64 {
     let mut seen = std::collections::HashSet::new();
     let (mut sum, mut count) = (0.0, 0usize);
-    for t in &mesh.triangles {
+    for (t, tri) in mesh.triangles.iter().enumerate() {
+        if !keep(t) {
+            continue;
+        }
         for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
+            let (a, b) = (tri[k], tri[(k + 1) % 3]);
             if seen.insert((a.min(b), a.max(b))) {
                 sum += (mesh.positions[a] - mesh.positions[b]).norm();
                 count += 1;
@@ -115,43 +128,18 @@ pub fn mean_edge(mesh: &TriMesh) -> f64 {
     }
 }
 
-/// One level of 1-to-4 midpoint subdivision. Returns the new mesh and, for each new vertex
-/// (after the old ones, which keep their indices), the two old vertices it is the midpoint of.
-/// Winding is preserved.
-pub fn subdivide(mesh: &TriMesh) -> (TriMesh, Vec<[usize; 2]>) {
-    let n = mesh.positions.len();
-    let mut positions = mesh.positions.clone();
-    let mut mids: HashMap<(usize, usize), usize> = HashMap::new();
-    let mut parents = Vec::new();
-    let mut mid = |a: usize, b: usize, positions: &mut Vec<nalgebra::Vector3<f64>>| {
-        let key = (a.min(b), a.max(b));
-        *mids.entry(key).or_insert_with(|| {
-            positions.push(0.5 * (mesh.positions[a] + mesh.positions[b]));
-            parents.push([key.0, key.1]);
-            n + parents.len() - 1
-        })
-    };
-    let mut triangles = Vec::with_capacity(4 * mesh.triangles.len());
-    for &[a, b, c] in &mesh.triangles {
-        let ab = mid(a, b, &mut positions);
-        let bc = mid(b, c, &mut positions);
-        let ca = mid(c, a, &mut positions);
-        triangles.push([a, ab, ca]);
-        triangles.push([ab, b, bc]);
-        triangles.push([ca, bc, c]);
-        triangles.push([ab, bc, ca]);
-    }
-    (TriMesh::new(positions, triangles), parents)
-}
-
-/// Refine `mesh` until it holds `settings.vertices_per_wavelength` vertices per wavelength
-/// `lambda` (m), by midpoint subdivision (surface unchanged). Refuses, saying what would be
-/// needed, when more than `settings.max_levels` levels would be required.
+/// Refine the whole of `mesh` until it holds `settings.vertices_per_wavelength` vertices per
+/// wavelength `lambda` (m) ([`refine_region`] with every triangle).
 pub fn refine_for_wavelength(
     mesh: &TriMesh,
     lambda: f64,
     settings: &RefineSettings,
 ) -> anyhow::Result<Refined> {
+    refine_region(mesh, None, lambda, settings)
+}
+
+/// Check the wavelength and the settings.
+fn check_inputs(mesh: &TriMesh, lambda: f64, settings: &RefineSettings) -> anyhow::Result<()> {
     if !(lambda.is_finite() && lambda > 0.0) {
         bail!("wrinkle wavelength must be a positive length in metres, got {lambda}");
     }
@@ -165,132 +153,126 @@ pub fn refine_for_wavelength(
     if mesh.triangles.is_empty() {
         bail!("the skin mesh has no triangles to refine");
     }
-    let edge0 = mean_edge(mesh);
+    Ok(())
+}
+
+/// Refine the `region` triangles of `mesh` (all with `None`) until they hold
+/// `settings.vertices_per_wavelength` vertices per wavelength `lambda` (m), with a conforming
+/// transition to the rest (see the module notes). Refuses, saying what would be needed, when
+/// more than `settings.max_levels` levels would be required.
+pub fn refine_region(
+    mesh: &TriMesh,
+    region: Option<&[bool]>,
+    lambda: f64,
+    settings: &RefineSettings,
+) -> anyhow::Result<Refined> {
+    check_inputs(mesh, lambda, settings)?;
+    let all = vec![true; mesh.triangles.len()];
+    let region = region.unwrap_or(&all);
+    if region.len() != mesh.triangles.len() {
+        bail!(
+            "{} region flags for a skin of {} triangles",
+            region.len(),
+            mesh.triangles.len()
+        );
+    }
+    let npl = settings.vertices_per_wavelength;
+    let edge0 = mean_edge_of(mesh, |t| region[t]);
     // Each level halves every edge: levels = ⌈log₂(N ā / λ)⌉.
-    let need = (npl * edge0 / lambda).log2().ceil().max(0.0) as usize;
+    let need = if edge0 > 0.0 {
+        (npl * edge0 / lambda).log2().ceil().max(0.0) as usize
+    } else {
+        0
+    };
     if need > settings.max_levels {
+        let region_vertices = mesh.positions.len() as f64 * region_share(region);
         bail!(
             "the skin mesh is too coarse for wrinkles of wavelength λ = {:.3} mm: its mean edge \
              is {:.3} mm ({:.2} vertices per λ, {npl} needed), which takes {need} levels of \
-             1-to-4 subdivision (about {} vertices) but max_levels = {}; raise the limit, \
+             1-to-4 subdivision (about {:.0} vertices) but max_levels = {}; raise the limit, \
              give a finer skin mesh, or use a thicker or stiffer skin (larger λ)",
             lambda * 1e3,
             edge0 * 1e3,
             lambda / edge0,
-            mesh.positions.len() * 4usize.pow(need as u32),
+            region_vertices * 4f64.powi(need as i32),
             settings.max_levels
         );
     }
-    let mut cur = mesh.clone();
-    let mut origin: Vec<Vec<(usize, f64)>> =
-        (0..mesh.positions.len()).map(|v| vec![(v, 1.0)]).collect();
-    for _ in 0..need {
-        let (next, parents) = subdivide(&cur);
-        for [a, b] in parents {
-            let mut w: Vec<(usize, f64)> = origin[a]
-                .iter()
-                .chain(&origin[b])
-                .map(|&(v, x)| (v, 0.5 * x))
-                .collect();
-            w.sort_by_key(|p| p.0);
-            let mut merged: Vec<(usize, f64)> = Vec::with_capacity(w.len());
-            for (v, x) in w {
-                match merged.last_mut() {
-                    Some(last) if last.0 == v => last.1 += x,
-                    _ => merged.push((v, x)),
-                }
-            }
-            origin.push(merged);
-        }
-        cur = next;
-    }
-    let ancestor = uniform_ancestors(mesh, &cur, &origin, need);
-    let edge1 = mean_edge(&cur);
+    let rg = redgreen::refine(mesh, region, need, settings.smoothing);
+    let edge1 = mean_edge_of(&rg.mesh, |f| region[rg.ancestor[f].triangle]);
+    let in_band =
+        |f: usize| !region[rg.ancestor[f].triangle] && rg.level[rg.ancestor[f].triangle] > 0;
     let report = RefineReport {
         levels: need,
         vertices_before: mesh.positions.len(),
-        vertices_after: cur.positions.len(),
-        triangles_after: cur.triangles.len(),
+        vertices_after: rg.mesh.positions.len(),
+        triangles_before: mesh.triangles.len(),
+        triangles_after: rg.mesh.triangles.len(),
+        region_triangles: region.iter().filter(|&&r| r).count(),
+        band_triangles: (0..rg.mesh.triangles.len())
+            .filter(|&f| in_band(f) || rg.green[f])
+            .count(),
+        transition_triangles: rg.green.iter().filter(|&&g| g).count(),
         mean_edge_before: edge0,
         mean_edge_after: edge1,
         wavelength: lambda,
-        vertices_per_wavelength: lambda / edge1,
+        vertices_per_wavelength: if edge1 > 0.0 { lambda / edge1 } else { 0.0 },
+        smoothing: settings.smoothing,
     };
     Ok(Refined {
-        mesh: cur,
-        origin,
-        ancestor,
+        subdivision: rg,
         report,
     })
 }
 
-/// Ancestors of `levels` of uniform 1-to-4 subdivision of `coarse` into `fine`: triangle f
-/// lies in coarse triangle f / 4^levels, and a corner's barycentric coordinates are its
-/// origin weights on that triangle's corners (a midpoint's origin lies on its ancestor).
-fn uniform_ancestors(
-    coarse: &TriMesh,
-    fine: &TriMesh,
-    origin: &[Vec<(usize, f64)>],
-    levels: usize,
-) -> Vec<Ancestor> {
-    let per = 4usize.pow(levels as u32);
-    fine.triangles
-        .iter()
-        .enumerate()
-        .map(|(f, tri)| {
-            let triangle = f / per;
-            let corners = coarse.triangles[triangle];
-            let bary = tri.map(|v| {
-                corners.map(|c| {
-                    origin[v]
-                        .iter()
-                        .find(|&&(o, _)| o == c)
-                        .map_or(0.0, |&(_, w)| w)
-                })
-            });
-            Ancestor { triangle, bary }
-        })
-        .collect()
+/// Share of the triangles flagged in `region` (0–1).
+fn region_share(region: &[bool]) -> f64 {
+    region.iter().filter(|&&r| r).count() as f64 / region.len().max(1) as f64
 }
 
-/// Per-triangle values (e.g. skin thickness, m) carried from the unrefined mesh to the
-/// refined one: each level of [`subdivide`] replaces triangle t by triangles 4t..4t+3, so a
-/// refined triangle f inherits the value of original triangle f / 4^levels. Fails when
-/// `values` does not hold one value per original triangle.
-pub fn carry_face_values(refined: &Refined, values: &[f64]) -> anyhow::Result<Vec<f64>> {
-    let per = 4usize.pow(refined.report.levels as u32);
-    if values.len() * per != refined.mesh.triangles.len() {
+/// Material points of the vertices of `refined` in `lattice`, whose `vertex_points` embed the
+/// unrefined mesh `coarse`, at their rest (smoothed) positions. An unrefined vertex stays in its own
+/// element; a new vertex goes into the element of one of its ancestor triangle's corners
+/// (nearest corner first, the one whose cell contains it, else the least outside), so
+/// superimposed elements (upper and lower lip in one cell) keep their skin.
+pub fn embed_refined(
+    lattice: &Lattice,
+    coarse: &TriMesh,
+    refined: &Refined,
+) -> anyhow::Result<Vec<MaterialPoint>> {
+    let n0 = lattice.vertex_points.len();
+    if n0 != coarse.positions.len() {
         bail!(
-            "{} per-triangle values for a mesh of {} triangles refined {} level(s) ({} triangles)",
-            values.len(),
-            refined.mesh.triangles.len() / per,
-            refined.report.levels,
-            refined.mesh.triangles.len()
+            "the lattice embeds {n0} vertices but the unrefined mesh has {}; build the lattice \
+             over the unrefined mesh",
+            coarse.positions.len()
         );
     }
-    Ok((0..refined.mesh.triangles.len())
-        .map(|f| values[f / per])
-        .collect())
-}
-
-/// Material points of the refined vertices in `lattice`, whose `vertex_points` embed the
-/// original mesh: each new vertex goes into the element of one of its original vertices
-/// (the one whose cell contains it, else the nearest), so superimposed elements (upper and
-/// lower lip) keep their skin.
-pub fn embed_refined(lattice: &Lattice, refined: &Refined) -> anyhow::Result<Vec<MaterialPoint>> {
-    let n0 = lattice.vertex_points.len();
-    let mut out = Vec::with_capacity(refined.mesh.positions.len());
-    for (v, o) in refined.origin.iter().enumerate() {
-        let p = refined.mesh.positions[v];
+    let n = refined.subdivision.mesh.positions.len();
+    // Each vertex's first triangle and its corner there.
+    let mut first: Vec<Option<(usize, usize)>> = vec![None; n];
+    for (f, tri) in refined.subdivision.mesh.triangles.iter().enumerate() {
+        for (k, &v) in tri.iter().enumerate() {
+            first[v].get_or_insert((f, k));
+        }
+    }
+    let mut out = Vec::with_capacity(n);
+    for (v, at) in first.iter().enumerate() {
+        let p = refined.subdivision.mesh.positions[v];
+        if v < n0 {
+            out.push(lattice.locate_in_element(lattice.vertex_points[v].element, &p));
+            continue;
+        }
+        let Some((f, k)) = *at else {
+            bail!("refined vertex {v} is on no triangle");
+        };
+        let anc = &refined.subdivision.ancestor[f];
+        let corners = coarse.triangles[anc.triangle];
+        let mut order = [0, 1, 2];
+        order.sort_by(|&i, &j| anc.bary[k][j].total_cmp(&anc.bary[k][i]));
         let mut best: Option<(f64, MaterialPoint)> = None;
-        for &(ov, _) in o {
-            if ov >= n0 {
-                bail!(
-                    "the lattice embeds {n0} vertices but the refined mesh refers to original \
-                     vertex {ov}; build the lattice over the unrefined mesh"
-                );
-            }
-            let mp = lattice.locate_in_element(lattice.vertex_points[ov].element, &p);
+        for i in order {
+            let mp = lattice.locate_in_element(lattice.vertex_points[corners[i]].element, &p);
             // Distance (in cells) outside [0, 1]³; 0 inside.
             let out_by = mp
                 .xi
@@ -301,7 +283,7 @@ pub fn embed_refined(lattice: &Lattice, refined: &Refined) -> anyhow::Result<Vec
                 best = Some((out_by, mp));
             }
         }
-        out.push(best.expect("origin is never empty").1);
+        out.push(best.expect("three corners").1);
     }
     Ok(out)
 }
@@ -325,72 +307,64 @@ mod tests {
     use crate::lattice::LatticeSettings;
     use crate::mesh::topology::Topology;
     use crate::shell::sheet::equilateral_sheet;
+    use nalgebra::Vector3;
 
-    /// Two levels: each refined triangle's value is its original ancestor's, checked
-    /// geometrically (the refined centroid lies inside the ancestor triangle); a list of the
-    /// wrong length is refused.
-    #[test]
-    fn face_values_follow_their_ancestor_triangle() {
-        let m = equilateral_sheet(4, 3, 1e-3).mesh;
-        let r = refine_for_wavelength(&m, 1.6e-3, &RefineSettings::default()).unwrap();
-        assert_eq!(r.report.levels, 2);
-        let vals: Vec<f64> = (0..m.triangles.len()).map(|t| t as f64).collect();
-        let carried = carry_face_values(&r, &vals).unwrap();
-        for (f, tri) in r.mesh.triangles.iter().enumerate() {
-            let c = tri
-                .iter()
-                .map(|&v| r.mesh.positions[v])
-                .sum::<nalgebra::Vector3<f64>>()
-                / 3.0;
-            let [a, b, d] = m.triangles[carried[f] as usize].map(|v| m.positions[v]);
-            // Barycentric coordinates of c in the ancestor (all > 0 inside).
-            let area =
-                |p: nalgebra::Vector3<f64>,
-                 q: nalgebra::Vector3<f64>,
-                 s: nalgebra::Vector3<f64>| { (q - p).cross(&(s - p)).z };
-            let tot = area(a, b, d);
-            let l = [
-                area(c, b, d) / tot,
-                area(a, c, d) / tot,
-                area(a, b, c) / tot,
-            ];
-            assert!(
-                l.iter().all(|&x| x > 0.0),
-                "refined {f} outside ancestor: {l:?}"
-            );
+    fn midpoint() -> RefineSettings {
+        RefineSettings {
+            smoothing: Smoothing::Midpoint,
+            ..RefineSettings::default()
         }
-        assert!(carry_face_values(&r, &vals[1..]).is_err());
     }
 
-    /// Every refined vertex sits at the weighted sum of its origins, weights sum to one, and
-    /// every refined triangle's corners sit at their barycentric coordinates in the ancestor.
-    fn check_origin(mesh0: &TriMesh, r: &Refined) {
-        assert_eq!(r.ancestor.len(), r.mesh.triangles.len());
-        for (tri, a) in r.mesh.triangles.iter().zip(&r.ancestor) {
+    /// S reproduces every refined position from the unrefined ones with weights summing to
+    /// one, and leaves the unrefined vertices exactly where they were; the refinement `flat`
+    /// by midpoints has the same topology, and every refined triangle's corners sit at their
+    /// barycentric coordinates in the ancestor where midpoint subdivision puts them.
+    fn check(mesh0: &TriMesh, r: &Refined, flat: &Refined) {
+        assert_eq!(
+            r.subdivision.mesh.triangles,
+            flat.subdivision.mesh.triangles
+        );
+        assert_eq!(r.subdivision.ancestor, flat.subdivision.ancestor);
+        assert_eq!(
+            r.subdivision.ancestor.len(),
+            r.subdivision.mesh.triangles.len()
+        );
+        for (tri, a) in r
+            .subdivision
+            .mesh
+            .triangles
+            .iter()
+            .zip(&r.subdivision.ancestor)
+        {
             let corners = mesh0.triangles[a.triangle].map(|v| mesh0.positions[v]);
             for (k, &v) in tri.iter().enumerate() {
                 assert!((a.bary[k].iter().sum::<f64>() - 1.0).abs() < 1e-12);
-                let p = (0..3).fold(nalgebra::Vector3::zeros(), |acc, j| {
-                    acc + a.bary[k][j] * corners[j]
-                });
-                assert!((p - r.mesh.positions[v]).norm() < 1e-12);
+                let p = (0..3).fold(Vector3::zeros(), |acc, j| acc + a.bary[k][j] * corners[j]);
+                assert!((p - flat.subdivision.mesh.positions[v]).norm() < 1e-12);
             }
         }
-        assert_eq!(r.origin.len(), r.mesh.positions.len());
-        for (v, o) in r.origin.iter().enumerate() {
+        assert_eq!(
+            r.subdivision.weights.len(),
+            r.subdivision.mesh.positions.len()
+        );
+        for (v, o) in r.subdivision.weights.iter().enumerate() {
             let s: f64 = o.iter().map(|p| p.1).sum();
             assert!((s - 1.0).abs() < 1e-12);
-            let p = o.iter().fold(nalgebra::Vector3::zeros(), |acc, &(u, w)| {
-                acc + w * mesh0.positions[u]
-            });
-            assert!((p - r.mesh.positions[v]).norm() < 1e-12);
+            let p = redgreen::apply(o, &mesh0.positions);
+            assert_eq!(p, r.subdivision.mesh.positions[v]);
+            if v < mesh0.positions.len() {
+                assert_eq!(o, &vec![(v, 1.0)]);
+                assert_eq!(r.subdivision.mesh.positions[v], mesh0.positions[v]);
+            }
         }
     }
 
     /// A sheet of edge 1 mm: λ = 10 mm needs nothing; λ = 3 mm needs one level (6 × 1/3 = 2
     /// → log₂ 2 = 1), which halves every edge, quadruples the triangles, adds one vertex per
-    /// edge, (about) halves the mean edge, keeps the area and the winding; λ = 0.1 mm would need 6 levels and is refused
-    /// with a message that names λ, the edge, and max_levels.
+    /// edge, (about) halves the mean edge, keeps the sheet flat, its area and the winding
+    /// (butterfly reproduces a regular flat grid); λ = 0.1 mm would need 6 levels and is
+    /// refused with a message that names λ, the edge, and max_levels.
     #[test]
     fn sheet_refinement_levels_counts_and_refusal() {
         let sheet = equilateral_sheet(10, 8, 1e-3);
@@ -398,36 +372,42 @@ mod tests {
         let s = RefineSettings::default();
         let r0 = refine_for_wavelength(m, 10e-3, &s).unwrap();
         assert_eq!(r0.report.levels, 0);
-        assert_eq!(r0.mesh, *m);
+        assert_eq!(r0.subdivision.mesh, *m);
         let r1 = refine_for_wavelength(m, 3e-3, &s).unwrap();
         let edges = Topology::new(m).unwrap().edges.len();
         assert_eq!(r1.report.levels, 1);
-        assert_eq!(r1.mesh.positions.len(), m.positions.len() + edges);
-        assert_eq!(r1.mesh.triangles.len(), 4 * m.triangles.len());
+        assert_eq!(r1.report.transition_triangles, 0);
+        assert_eq!(
+            r1.subdivision.mesh.positions.len(),
+            m.positions.len() + edges
+        );
+        assert_eq!(r1.subdivision.mesh.triangles.len(), 4 * m.triangles.len());
         // Every child edge is half a parent edge (the inner triangle's edges are halves of the
         // opposite sides), so the mean halves up to the mix of edge lengths (2 %).
         let ratio = r1.report.mean_edge_after / r1.report.mean_edge_before;
         assert!((ratio - 0.5).abs() < 0.01, "{ratio}");
         assert!(r1.report.vertices_per_wavelength >= 6.0, "{:?}", r1.report);
-        assert!((r1.mesh.area() - m.area()).abs() < 1e-15);
-        for t in 0..r1.mesh.triangles.len() {
-            let [a, b, c] = r1.mesh.triangles[t];
-            let p = &r1.mesh.positions;
+        assert!((r1.subdivision.mesh.area() - m.area()).abs() < 1e-12 * m.area());
+        assert!(r1.subdivision.mesh.positions.iter().all(|p| p.z == 0.0));
+        for t in 0..r1.subdivision.mesh.triangles.len() {
+            let [a, b, c] = r1.subdivision.mesh.triangles[t];
+            let p = &r1.subdivision.mesh.positions;
             assert!((p[b] - p[a]).cross(&(p[c] - p[a])).z > 0.0);
         }
-        Topology::new(&r1.mesh).unwrap();
-        check_origin(m, &r1);
-        let r2 = refine_for_wavelength(
+        Topology::new(&r1.subdivision.mesh).unwrap();
+        check(
             m,
-            1.2e-3,
-            &RefineSettings {
-                vertices_per_wavelength: 6.0,
-                max_levels: 3,
-            },
-        )
-        .unwrap();
+            &r1,
+            &refine_for_wavelength(m, 3e-3, &midpoint()).unwrap(),
+        );
+        let three = RefineSettings { max_levels: 3, ..s };
+        let r2 = refine_for_wavelength(m, 1.2e-3, &three).unwrap();
         assert_eq!(r2.report.levels, 3);
-        check_origin(m, &r2);
+        let flat = RefineSettings {
+            smoothing: Smoothing::Midpoint,
+            ..three
+        };
+        check(m, &r2, &refine_for_wavelength(m, 1.2e-3, &flat).unwrap());
         let err = refine_for_wavelength(m, 0.1e-3, &s)
             .unwrap_err()
             .to_string();
@@ -440,7 +420,7 @@ mod tests {
         assert!(refine_for_wavelength(m, -1.0, &s).is_err());
         let bad = RefineSettings {
             vertices_per_wavelength: 1.0,
-            max_levels: 3,
+            ..s
         };
         assert!(refine_for_wavelength(m, 3e-3, &bad)
             .unwrap_err()
@@ -448,9 +428,57 @@ mod tests {
             .contains("vertices_per_wavelength"));
     }
 
+    /// Half a sheet refined: the levels come from the region's edges, only the region and a
+    /// band around it are refined (no green triangle in the region), the far half keeps its
+    /// triangles as they were, and the report counts it.
+    #[test]
+    fn only_the_region_and_its_band_are_refined() {
+        let m = equilateral_sheet(16, 12, 1e-3).mesh;
+        let centroid_x = |t: usize| {
+            m.triangles[t]
+                .iter()
+                .map(|&v| m.positions[v].x)
+                .sum::<f64>()
+                / 3.0
+        };
+        let mid = m.positions.iter().map(|p| p.x).fold(0.0, f64::max) / 2.0;
+        let region: Vec<bool> = (0..m.triangles.len())
+            .map(|t| centroid_x(t) < mid)
+            .collect();
+        let s = RefineSettings::default();
+        let r = refine_region(&m, Some(&region), 1.2e-3, &s).unwrap();
+        let whole = refine_for_wavelength(&m, 1.2e-3, &s).unwrap();
+        assert_eq!(r.report.levels, 3);
+        assert!(
+            r.subdivision.mesh.positions.len() < whole.subdivision.mesh.positions.len() * 2 / 3
+        );
+        assert!(r.report.transition_triangles > 0 && r.report.band_triangles > 0);
+        assert_eq!(
+            r.report.region_triangles,
+            region.iter().filter(|&&x| x).count()
+        );
+        let mut untouched = 0;
+        for (f, a) in r.subdivision.ancestor.iter().enumerate() {
+            if region[a.triangle] {
+                assert!(!r.subdivision.green[f]);
+            }
+            if a.bary == [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]] {
+                assert_eq!(r.subdivision.mesh.triangles[f], m.triangles[a.triangle]);
+                untouched += 1;
+            }
+        }
+        assert!(untouched > m.triangles.len() / 4, "{untouched}");
+        let flat = refine_region(&m, Some(&region), 1.2e-3, &midpoint()).unwrap();
+        check(&m, &r, &flat);
+        Topology::new(&r.subdivision.mesh).unwrap();
+        // With nothing selected nothing is refined.
+        let none = refine_region(&m, Some(&vec![false; region.len()]), 1.2e-3, &s).unwrap();
+        assert_eq!(none.subdivision.mesh, m);
+    }
+
     /// The face rig's mesh refined for the paper's λ = 4.04 mm: the report is consistent,
-    /// origins reproduce positions, the area is unchanged, and the refined vertices embedded
-    /// in the face's lattice (through their origins' elements) sit where they are at rest.
+    /// S and the ancestors check out, and the refined vertices embedded in the face's lattice
+    /// (in an element of their ancestor's corners) sit where they are at rest.
     #[test]
     fn face_rig_refinement_and_embedding() {
         let rig = crate::rig::face::generate();
@@ -462,17 +490,44 @@ mod tests {
         assert_eq!(r.report.levels, want);
         assert!(r.report.levels >= 1, "face edge {edge}");
         assert!(r.report.vertices_per_wavelength >= 6.0);
-        assert!((r.mesh.area() - m.area()).abs() < 1e-12 * m.area().max(1.0));
-        check_origin(m, &r);
+        let flat = refine_for_wavelength(m, 4.04e-3, &midpoint()).unwrap();
+        check(m, &r, &flat);
+        // The smoothing moves new vertices off the facets by a fraction of an edge.
+        let moved = r
+            .subdivision
+            .mesh
+            .positions
+            .iter()
+            .zip(&flat.subdivision.mesh.positions)
+            .map(|(p, q)| (p - q).norm())
+            .fold(0.0, f64::max);
+        println!(
+            "largest move off the facets: {:.3} mm (edge {:.3} mm)",
+            moved * 1e3,
+            edge * 1e3
+        );
+        assert!(moved > 0.0 && moved < 0.5 * edge, "{moved}");
         let lat = Lattice::build(m, &LatticeSettings::default()).unwrap();
-        let pts = embed_refined(&lat, &r).unwrap();
+        let pts = embed_refined(&lat, m, &r).unwrap();
         let q = lat.rest_flat();
         let mut worst: f64 = 0.0;
         for (v, mp) in pts.iter().enumerate() {
-            worst = worst.max((lat.position(&q, mp) - r.mesh.positions[v]).norm());
+            worst = worst.max((lat.position(&q, mp) - r.subdivision.mesh.positions[v]).norm());
         }
         println!("refined embedding: max |B q_rest − x| = {worst:.2e} m");
         assert!(worst < 1e-9, "{worst}");
+        // Each new vertex is in an element of its (first triangle's) ancestor's corners.
+        let mut first = vec![None; r.subdivision.mesh.positions.len()];
+        for (f, tri) in r.subdivision.mesh.triangles.iter().enumerate() {
+            for &v in tri {
+                first[v].get_or_insert(f);
+            }
+        }
+        for v in m.positions.len()..r.subdivision.mesh.positions.len() {
+            let a = &r.subdivision.ancestor[first[v].unwrap()];
+            let elements = m.triangles[a.triangle].map(|c| lat.vertex_points[c].element);
+            assert!(elements.contains(&pts[v].element), "vertex {v}");
+        }
         let t = embedding_triplets(&lat, &pts);
         assert!(t
             .iter()

@@ -2,8 +2,10 @@
 
 use nalgebra::Vector3;
 
+pub mod butterfly;
 pub mod intersect;
 pub mod quality;
+pub mod redgreen;
 pub mod topology;
 
 /// A triangle mesh. Positions are in metres (world space); triangles index into `positions`

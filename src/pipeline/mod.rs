@@ -1,11 +1,12 @@
-//! The whole job on one rig: load, weld the face into a skin, refine it for the wavelength,
-//! build the lattice, drive the interior, solve the skin, and hand back the wrinkled frames,
+//! The whole job on one rig: load, weld the face into a skin, build the lattice, select the
+//! skin that can wrinkle and refine it for the wavelength, drive the interior, solve the skin,
+//! and hand back the wrinkled frames,
 //! running only the stages the scene needs (the report says which ran and why the others did
 //! not).
 //!
 //! [`run`] reads as its stages: the [`plan`] checks the rig and the options, the [`setup`]
-//! builds the model and the initial state (weld, lattice, refine, clusters, interior,
-//! muscles), and the [`step`] advances every frame (blend → drive → interior → skin →
+//! builds the model and the initial state (weld, lattice, select, refine, clusters,
+//! interior, muscles), and the [`step`] advances every frame (blend → drive → interior → skin →
 //! compose), each stage in its own module with its own record for the report ([`record`]).
 //!
 //! Per frame k (time k / fps):

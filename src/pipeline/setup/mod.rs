@@ -1,7 +1,8 @@
 //! The set-up: everything built once before the frame loop, one stage per module, in the order
-//! they run: [`weld`] the loaded face into one skin, build the [`lattice`] over it, [`refine`]
-//! the skin for the critical wavelength and embed it, select the simulated [`skin`] and build
-//! its shell and clusters, the [`interior`] stepper and tracking energy, and the [`muscles`].
+//! they run: [`weld`] the loaded face into one skin, build the [`lattice`] over it, [`select`]
+//! the welded triangles that can wrinkle, [`refine`] them for the critical wavelength and
+//! embed the skin, build the simulated [`skin`]'s shell and clusters, the [`interior`] stepper
+//! and tracking energy, and the [`muscles`].
 //! Each stage returns its result and its record for the report.
 //!
 //! What the set-up builds splits in two: the [`Model`], fixed for the run (meshes, maps,
@@ -97,18 +98,20 @@ pub fn set_up(
     let (lattice, record) = lattice::build_lattice(&welded.mesh, &scene.interior, &path)?;
     log.stages.push(record);
     progress("setup", 1, 4);
+    let (selection, record) = select::select_skin(rig, scene, plan, &welded);
+    log.stages.push(record);
+    let region = simulated_region(selection.as_ref(), skin::within_mask(&welded.mesh, scene));
     let input = refine::RefineInput {
         face,
         welded: &welded,
         lattice: &lattice,
         scale: &plan.skin,
         rig_scale: &rig.scale,
+        region: region.as_deref(),
     };
     let (refined, record) = refine::refine_skin(&input, &scene.skin, &path)?;
     log.stages.push(record);
     progress("setup", 2, 4);
-    let (selection, record) = select::select_skin(rig, scene, plan, &welded);
-    log.stages.push(record);
     let nodes = lattice.node_count();
     let input = skin::ShellInput {
         refined: &refined,
@@ -117,7 +120,8 @@ pub fn set_up(
         lambda: plan.skin.lambda,
         path: &path,
     };
-    let (simulated, left_out) = simulated_skin(&input, selection.as_ref(), log)?;
+    let compressed = selection.is_none_or(|sel| sel.simulated.contains(&true));
+    let (simulated, left_out) = simulated_skin(&input, region.as_deref(), compressed, log)?;
     progress("setup", 3, 4);
     let stepper = interior::stepper(&lattice, scene, plan)?;
     let young = scene.interior.material()?.young;
@@ -172,27 +176,43 @@ pub fn set_up(
 /// The left-out skin and its rest stiffness, when the selection leaves some out.
 type LeftOut = Option<(skin::SimulatedSkin, skin::Stiffness)>;
 
-/// The simulated skin (the selected, non-degenerate triangles inside the mask, with its shell
-/// and clusters) and the rest stiffness of the skin the selection left out; records the
-/// `clusters` stage, or the `shell` stage as skipped.
+/// The welded triangles whose skin may be simulated, refined and solved: those the selection
+/// keeps that meet the mask; `None` when that is all of them.
+fn simulated_region(
+    selection: Option<&select::Selection>,
+    mask: Option<Vec<bool>>,
+) -> Option<Vec<bool>> {
+    match (selection, mask) {
+        (None, mask) => mask,
+        (Some(s), None) => Some(s.simulated.clone()),
+        (Some(s), Some(m)) => Some(s.simulated.iter().zip(m).map(|(&a, b)| a && b).collect()),
+    }
+}
+
+/// The simulated skin (the non-degenerate triangles inside the mask whose welded ancestor is
+/// in `region`, with its shell and clusters) and the rest stiffness of the skin the selection
+/// left out; records the `clusters` stage, or the `shell` stage as skipped (`compressed`: some
+/// skin was compressed enough to be selected).
 fn simulated_skin(
     s: &skin::ShellInput,
-    selection: Option<&select::Selection>,
+    region: Option<&[bool]>,
+    compressed: bool,
     log: &mut Log,
 ) -> anyhow::Result<(Option<skin::SimulatedSkin>, LeftOut)> {
     let mesh = &s.refined.mesh;
     let (candidates, on_degenerate) =
         skin::select_triangles(mesh, s.scene, s.path, &mut log.warnings);
-    let per = 4usize.pow(s.refined.levels as u32);
+    // The region's welded triangles were refined whole: their refined triangles are all
+    // red, at the full level; the transition band lies outside them.
+    let ancestor = &s.refined.ancestor;
     let (triangles, beyond): (Vec<usize>, Vec<usize>) = candidates
         .iter()
-        .partition(|&&t| selection.is_none_or(|sel| sel.simulated[t / per]));
+        .partition(|&&t| region.is_none_or(|r| r[ancestor[t].triangle]));
     let ring = skin::border_ring(mesh, &candidates, &triangles);
     let mut in_ring = vec![false; mesh.triangles.len()];
     ring.iter().for_each(|&t| in_ring[t] = true);
     let left_out: Vec<usize> = beyond.into_iter().filter(|&t| !in_ring[t]).collect();
     let shell = if triangles.is_empty() {
-        let compressed = selection.is_none_or(|sel| sel.simulated.contains(&true));
         log.stages.push(skin::skipped_shell(s.scene, compressed));
         None
     } else {

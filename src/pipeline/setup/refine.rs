@@ -1,9 +1,12 @@
-//! The `refine` stage: the welded skin subdivided until it holds enough vertices per critical
-//! wavelength, embedded in the lattice, with the maps the export needs (each refined vertex's
-//! blend-shape target as a combination of welded vertices, and its loaded origin).
+//! The `refine` stage: the welded skin subdivided where it is simulated until it holds enough
+//! vertices per critical wavelength, smoothly (modified butterfly) and with a conforming
+//! transition to the coarse skin left out (see [`crate::coupling::refine`]), embedded in the
+//! lattice, with the maps the export needs: each refined vertex's blend-shape target as a
+//! combination of welded vertices (the subdivision operator S), and its place in the loaded
+//! face (barycentric in its ancestor's loaded triangle).
 
 use super::weld::Welded;
-use crate::coupling::refine::{self, RefineSettings};
+use crate::coupling::refine::{self, Ancestor, RefineReport, RefineSettings};
 use crate::io::export::VertexOrigin;
 use crate::io::mesh::MeshInstance;
 use crate::lattice::Lattice;
@@ -19,23 +22,23 @@ use std::time::Instant;
 pub struct RefinedSkin {
     /// The refined skin mesh (m); the welded vertices keep their indices and come first.
     pub mesh: TriMesh,
-    /// For each refined vertex, (welded vertex, weight) pairs whose blend is its target.
+    /// For each refined vertex, (welded vertex, weight) pairs whose blend is its target: the
+    /// subdivision operator S (rest shape and every blend shape's deltas go through it).
     pub target_of: Vec<Vec<(usize, f64)>>,
-    /// For each refined vertex, up to three loaded vertices and weights (for the export).
+    /// For each refined vertex, its barycentric place in a loaded triangle (for the export).
     pub origin: Vec<VertexOrigin>,
     /// Embedding rows of each refined vertex in the lattice: (node, weight), x = Σ w q_node.
     pub rows: Vec<Vec<(usize, f64)>>,
     /// Skin thickness per refined triangle (m), when the scene varies it.
     pub thickness: Option<Vec<f64>>,
-    /// Subdivision levels: refined triangle t lies in welded triangle t / 4^levels.
-    pub levels: usize,
     /// For each refined triangle, the welded triangle it lies in and its corners'
     /// barycentric coordinates there (UVs, thickness and other surface data follow these;
     /// `Welded::loaded_triangle` leads on to the loaded triangle).
-    pub ancestor: Vec<refine::Ancestor>,
+    pub ancestor: Vec<Ancestor>,
 }
 
-/// What the refinement works from: the loaded face, its weld, the lattice and the skin's scale.
+/// What the refinement works from: the loaded face, its weld, the lattice, the skin's scale
+/// and the welded triangles to refine.
 pub struct RefineInput<'a> {
     /// The loaded face (its triangles carry the per-triangle thickness).
     pub face: &'a MeshInstance,
@@ -47,10 +50,13 @@ pub struct RefineInput<'a> {
     pub scale: &'a SkinScale,
     /// The scale the rig is simulated at (named when the skin is too coarse).
     pub rig_scale: &'a crate::io::units::RigScale,
+    /// Per welded triangle: simulated (the `select` stage); `None`: all of it.
+    pub region: Option<&'a [bool]>,
 }
 
-/// The `refine` stage: subdivide for the thinnest skin's wavelength (`skin.vertices_per_wavelength`,
-/// at most `skin.refine_limit` levels), embed, and record; `path` names the rig in errors.
+/// The `refine` stage: subdivide the simulated skin for the thinnest skin's wavelength
+/// (`skin.vertices_per_wavelength`, at most `skin.refine_limit` levels), embed, and record;
+/// `path` names the rig in errors.
 pub fn refine_skin(
     input: &RefineInput,
     skin: &SkinSection,
@@ -58,14 +64,16 @@ pub fn refine_skin(
 ) -> anyhow::Result<(RefinedSkin, StagePlan)> {
     let t = Instant::now();
     let lambda = input.scale.lambda;
-    let refined = refine::refine_for_wavelength(
+    let refined = refine::refine_region(
         &input.welded.mesh,
+        input.region,
         lambda,
         &RefineSettings {
             vertices_per_wavelength: skin
                 .vertices_per_wavelength
                 .unwrap_or(refine::DEFAULT_VERTICES_PER_WAVELENGTH),
             max_levels: skin.refine_limit.unwrap_or(refine::DEFAULT_MAX_LEVELS),
+            ..RefineSettings::default()
         },
     )
     .with_context(|| {
@@ -80,47 +88,30 @@ pub fn refine_skin(
             crate::io::units::HUMAN_FACE_M.1,
         )
     })?;
-    let r = &refined.report;
-    let record = if r.levels > 0 {
-        StagePlan::ran(
-            "refine",
-            format!(
-                "{} level(s): {} → {} vertices, mean edge {:.2} → {:.2} mm for λ = {:.2} mm",
-                r.levels,
-                r.vertices_before,
-                r.vertices_after,
-                r.mean_edge_before * 1e3,
-                r.mean_edge_after * 1e3,
-                lambda * 1e3
-            ),
-            t.elapsed().as_secs_f64() * 1e3,
-        )
-    } else {
-        StagePlan::skipped(
-            "refine",
-            format!(
-                "the skin already holds {:.1} vertices per wavelength (λ = {:.2} mm)",
-                r.vertices_per_wavelength,
-                lambda * 1e3
-            ),
-        )
-    };
+    let record = refine_record(&refined.report, t);
     let thickness = match input.scale.face_thickness.as_deref() {
-        Some(h) => Some(refined_thickness(input.face, input.welded, &refined, h)?),
+        Some(h) => Some(refined_thickness(
+            input.welded,
+            &refined.subdivision.ancestor,
+            h,
+        )),
         None => None,
     };
-    let points = refine::embed_refined(input.lattice, &refined)?;
+    let points = refine::embed_refined(input.lattice, &input.welded.mesh, &refined)?;
     let mut rows: Vec<Vec<(usize, f64)>> = vec![Vec::new(); points.len()];
     for (v, n, w) in refine::embedding_triplets(input.lattice, &points) {
         rows[v].push((n, w));
     }
-    let origin = export_origins(&refined.origin, &input.welded.loaded_of);
-    let levels = refined.report.levels;
+    let origin = export_origins(
+        &refined.subdivision.mesh,
+        &refined.subdivision.ancestor,
+        input.face,
+        input.welded,
+    );
     let skin = RefinedSkin {
-        levels,
-        ancestor: refined.ancestor,
-        mesh: refined.mesh,
-        target_of: refined.origin,
+        ancestor: refined.subdivision.ancestor,
+        mesh: refined.subdivision.mesh,
+        target_of: refined.subdivision.weights,
         origin,
         rows,
         thickness,
@@ -128,45 +119,98 @@ pub fn refine_skin(
     Ok((skin, record))
 }
 
-/// Thickness per refined triangle (m): loaded triangles → welded ones (the weld keeps the
-/// loaded order and drops collapsed triangles) → their refined children.
-fn refined_thickness(
-    face: &MeshInstance,
-    welded: &Welded,
-    refined: &refine::Refined,
-    per_loaded: &[f64],
-) -> anyhow::Result<Vec<f64>> {
-    let w = &welded.of_loaded;
-    let per_welded: Vec<f64> = face
-        .triangles
-        .iter()
-        .zip(per_loaded)
-        .filter(|(t, _)| {
-            let [a, b, c] = t.map(|v| w[v]);
-            a != b && b != c && a != c
-        })
-        .map(|(_, &x)| x)
-        .collect();
-    refine::carry_face_values(refined, &per_welded)
+/// The `refine` stage's record: what was refined, how, and into how much.
+fn refine_record(r: &RefineReport, t: Instant) -> StagePlan {
+    let lambda_mm = r.wavelength * 1e3;
+    if r.region_triangles == 0 {
+        return StagePlan::skipped(
+            "refine",
+            "no skin is simulated (see select): the skin stays as it is",
+        );
+    }
+    if r.levels == 0 {
+        return StagePlan::skipped(
+            "refine",
+            format!(
+                "the simulated skin already holds {:.1} vertices per wavelength (λ = {lambda_mm:.2} mm)",
+                r.vertices_per_wavelength
+            ),
+        );
+    }
+    let whole = r.region_triangles == r.triangles_before;
+    let region = if whole {
+        "the whole skin".to_string()
+    } else {
+        format!(
+            "the {} simulated of {} triangles, with a transition band of {} triangles ({} green \
+             closures) fading the smoothing to plain midpoints; the skin left out stays coarse",
+            r.region_triangles, r.triangles_before, r.band_triangles, r.transition_triangles
+        )
+    };
+    StagePlan::ran(
+        "refine",
+        format!(
+            "{} level(s) of {} subdivision on {region}: {} → {} triangles, {} → {} vertices; mean \
+             edge {:.2} → {:.2} mm ({:.1} vertices per λ = {lambda_mm:.2} mm)",
+            r.levels,
+            r.smoothing.name(),
+            r.triangles_before,
+            r.triangles_after,
+            r.vertices_before,
+            r.vertices_after,
+            r.mean_edge_before * 1e3,
+            r.mean_edge_after * 1e3,
+            r.vertices_per_wavelength,
+        ),
+        t.elapsed().as_secs_f64() * 1e3,
+    )
 }
 
-/// Each refined vertex's origin in the loaded face for the export: its three heaviest welded
-/// vertices (ties by index), renormalised, as loaded vertices.
-fn export_origins(target_of: &[Vec<(usize, f64)>], loaded_of: &[usize]) -> Vec<VertexOrigin> {
-    target_of
+/// Thickness per refined triangle (m): its ancestor's welded triangle's loaded triangle's.
+fn refined_thickness(welded: &Welded, ancestor: &[Ancestor], per_loaded: &[f64]) -> Vec<f64> {
+    ancestor
         .iter()
-        .map(|o| {
-            let mut o = o.clone();
-            o.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
-            o.truncate(3);
-            let s: f64 = o.iter().map(|p| p.1).sum();
-            let mut vo = VertexOrigin::same(loaded_of[o[0].0]);
-            for (j, &(w, a)) in o.iter().enumerate() {
-                vo.vertices[j] = loaded_of[w];
-                vo.weights[j] = a / s;
+        .map(|a| per_loaded[welded.loaded_triangle[a.triangle]])
+        .collect()
+}
+
+/// Each refined vertex's place in the loaded face for the export: its barycentric
+/// coordinates in the loaded triangle of its ancestor (exactly three loaded vertices). Of
+/// the refined triangles at the vertex, the one whose loaded corners (those with weight) are
+/// most often their welded vertex's first loaded copy is taken (the first such), so a seam
+/// the weld joined reads one side's attributes consistently; a vertex at a corner is that
+/// loaded vertex alone.
+fn export_origins(
+    mesh: &TriMesh,
+    ancestor: &[Ancestor],
+    face: &MeshInstance,
+    welded: &Welded,
+) -> Vec<VertexOrigin> {
+    let mut best: Vec<Option<(usize, VertexOrigin)>> = vec![None; mesh.positions.len()];
+    for (tri, a) in mesh.triangles.iter().zip(ancestor) {
+        let wt = welded.mesh.triangles[a.triangle];
+        let lt = face.triangles[welded.loaded_triangle[a.triangle]];
+        for (k, &v) in tri.iter().enumerate() {
+            let bary = a.bary[k];
+            let score = (0..3)
+                .filter(|&i| bary[i] != 0.0 && lt[i] == welded.loaded_of[wt[i]])
+                .count();
+            if best[v].as_ref().is_none_or(|b| score > b.0) {
+                let corner = (0..3).filter(|&i| bary[i] != 0.0).collect::<Vec<_>>();
+                let o = match corner.as_slice() {
+                    [i] => VertexOrigin::same(lt[*i]),
+                    _ => VertexOrigin {
+                        vertices: lt,
+                        weights: bary,
+                    },
+                };
+                best[v] = Some((score, o));
             }
-            vo
-        })
+        }
+    }
+    best.into_iter()
+        .enumerate()
+        .map(|(v, b)| b.map_or_else(|| VertexOrigin::same(welded.loaded_of[v]), |b| b.1))
         .collect()
 }
 
@@ -198,6 +242,7 @@ mod tests {
             lattice: &lattice,
             scale: &scale,
             rig_scale: &Default::default(),
+            region: None,
         };
         let (skin, record) = refine_skin(&input, &SkinSection::default(), "sheet.glb").unwrap();
         assert!(record.is_ran(), "{}", record.why);
@@ -214,14 +259,51 @@ mod tests {
         }
     }
 
+    /// Two triangles joined along a seam (vertices 1, 2 and their copies 3, 5): every new
+    /// vertex is barycentric in one loaded triangle; on the seam it reads the side whose
+    /// corners are the first copies, and welded vertices are their first copy.
     #[test]
-    fn export_origin_keeps_the_three_heaviest_and_renormalises() {
-        let o = export_origins(
-            &[vec![(0, 0.1), (1, 0.4), (2, 0.2), (3, 0.3)]],
-            &[10, 11, 12, 13],
-        );
-        assert_eq!(o[0].vertices, [11, 13, 12]);
-        let w = o[0].weights;
-        assert!((w[0] - 0.4 / 0.9).abs() < 1e-15 && (w[2] - 0.2 / 0.9).abs() < 1e-15);
+    fn export_origins_are_barycentric_in_the_ancestors_loaded_triangle() {
+        use nalgebra::Vector3;
+        let p = [
+            [0.0, 0.0],
+            [1.0, 0.0],
+            [0.0, 1.0],
+            [1.0, 0.0],
+            [1.0, 1.0],
+            [0.0, 1.0],
+        ]
+        .map(|[x, y]| Vector3::new(x, y, 0.0));
+        let mesh = TriMesh::new(p.to_vec(), vec![[0, 1, 2], [3, 4, 5]]);
+        let face = face_of(mesh);
+        let welded = weld(&face.positions, &face.triangles, 1e-9);
+        assert_eq!(welded.loaded_of, vec![0, 1, 2, 4]);
+        let flat = RefineSettings {
+            smoothing: refine::Smoothing::Midpoint,
+            ..RefineSettings::default()
+        };
+        let r = refine::refine_for_wavelength(&welded.mesh, 1.0, &flat).unwrap();
+        assert_eq!(r.report.levels, 3);
+        let origin = export_origins(&r.subdivision.mesh, &r.subdivision.ancestor, &face, &welded);
+        for (v, o) in origin.iter().enumerate() {
+            assert!((o.weights.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+            assert!(o.weights.iter().all(|&w| w >= 0.0));
+            let at: Vector3<f64> = (0..3)
+                .map(|j| face.positions[o.vertices[j]] * o.weights[j])
+                .sum();
+            if v < 4 {
+                assert_eq!(*o, VertexOrigin::same(welded.loaded_of[v]));
+            } else if at.x + at.y == 1.0 {
+                // On the seam: the first triangle's corners.
+                assert!(o.vertices == [0, 1, 2], "vertex {v}: {o:?}");
+            } else if at.x + at.y > 1.0 {
+                assert!(o.vertices == [3, 4, 5], "vertex {v}: {o:?}");
+            }
+            // Refined by midpoints, the mesh is where the origin says.
+            assert!(
+                (at - r.subdivision.mesh.positions[v]).norm() < 1e-12,
+                "vertex {v}"
+            );
+        }
     }
 }

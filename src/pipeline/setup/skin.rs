@@ -83,6 +83,24 @@ pub fn select_triangles(
     (triangles, on_degenerate)
 }
 
+/// Per triangle of the welded skin `mesh`: whether its bounding box meets a box of
+/// `scene.skin.mask` (m), so that some of its refined skin may lie inside; `None` without a
+/// mask. The skin outside the mask follows the interior and is not refined.
+pub fn within_mask(mesh: &TriMesh, scene: &Scene) -> Option<Vec<bool>> {
+    let mask = &scene.skin.mask;
+    if mask.is_empty() {
+        return None;
+    }
+    let meets = |t: &[usize; 3]| {
+        let p = t.map(|v| mesh.positions[v]);
+        let lo = p[0].inf(&p[1]).inf(&p[2]);
+        let hi = p[0].sup(&p[1]).sup(&p[2]);
+        mask.iter()
+            .any(|b| (0..3).all(|k| lo[k] <= b.max[k] && hi[k] >= b.min[k]))
+    };
+    Some(mesh.triangles.iter().map(meets).collect())
+}
+
 /// Pin the shell's vertices that are corners of degenerate triangles (`on_degenerate`, per
 /// refined vertex) to the interior, beside those already pinned: the degenerate triangle is
 /// not simulated, and with its corners free the shell on its two sides would move apart (on
@@ -404,6 +422,19 @@ mod tests {
         assert!(skipped_shell(&scene, false)
             .why
             .starts_with("no frame compresses"));
+    }
+
+    #[test]
+    fn only_triangles_meeting_the_mask_may_be_refined() {
+        let mesh = two_triangles();
+        let mut scene = Scene::default();
+        assert!(within_mask(&mesh, &scene).is_none());
+        // A box inside the first triangle, touching no vertex, meets it and no other.
+        scene.skin.mask = vec![Aabb {
+            min: [0.1, 0.1, -0.1],
+            max: [0.2, 0.2, 0.1],
+        }];
+        assert_eq!(within_mask(&mesh, &scene), Some(vec![true, false, true]));
     }
 
     #[test]
