@@ -109,8 +109,9 @@ impl Document {
         self.push_accessor(json!({ "bufferView": view, "componentType": ct, "count": triangles.len() * 3, "type": "SCALAR" }))
     }
 
-    /// Drop accessors and buffer views that nothing references, renumbering the rest.
-    pub fn prune(&mut self) {
+    /// Drop accessors and buffer views that nothing references, renumbering the rest;
+    /// returns, for each view before pruning, whether it was kept.
+    pub fn prune(&mut self) -> Vec<bool> {
         let j = &mut self.json;
         let na = j["accessors"].as_array().map_or(0, |a| a.len());
         let mut used_acc = vec![false; na];
@@ -126,6 +127,7 @@ impl Document {
             *views = keep_used(std::mem::take(views), &used_view);
         }
         self.view_bytes = keep_used(std::mem::take(&mut self.view_bytes), &used_view);
+        used_view
     }
 
     /// Lay out the binary buffer (views 4-byte aligned), fill offsets, and write a GLB.
