@@ -156,7 +156,7 @@ pub fn run(c: BenchCommand, out: &Output) -> anyhow::Result<()> {
 /// `furrow bench select`: the selected skin against the whole skin on a rig.
 fn select(rig: &std::path::Path, frames: &str, fps: f64, out: &Output) -> anyhow::Result<()> {
     let loaded = crate::io::load::load(rig, &Default::default())?;
-    let count = loaded.frame_weights(fps).len();
+    let count = crate::pipeline::plan::clip_weights(&loaded, fps).0.len();
     let opts = crate::pipeline::RunOptions {
         scene: crate::scene::Scene::default(),
         scene_path: None,
