@@ -373,7 +373,12 @@ fn robot_expressive_head_is_animated_to_a_valid_file() {
     assert_eq!(anim.instances.len(), 19);
     assert!(anim.animations.len() >= 14);
     let k = j["export"]["wrinkle_targets"].as_u64().unwrap() as usize;
-    let names: Vec<&str> = anim.face().targets.iter().map(|t| t.name.as_str()).collect();
+    let names: Vec<&str> = anim
+        .face()
+        .targets
+        .iter()
+        .map(|t| t.name.as_str())
+        .collect();
     assert_eq!(names[..3], ["Angry", "Surprised", "Sad"]);
     assert_eq!(names.len(), 3 + k, "{names:?}");
     if let Some(v) = common::validate(&[out]) {

@@ -83,6 +83,22 @@ fn frames(
     (frames, weights, clip)
 }
 
+/// The rig at `path`, its unrefined map, its synthetic frames and their layer.
+fn synthetic_layer(path: &Path) -> (Rig, FaceMap, Vec<Vec<nalgebra::Vector3<f64>>>, layer::Built) {
+    let rig = load(path, &LoadOptions::default()).unwrap();
+    let map = unrefined_map(&rig);
+    let (frames, weights, clip) = frames(&rig, &map, 10.0);
+    let input = LayerInput {
+        rig: &rig,
+        map: &map,
+        frames: &frames,
+        weights: &weights,
+        clip,
+    };
+    let built = layer::build(&input).unwrap();
+    (rig, map, frames, built)
+}
+
 /// Warning and error codes of a validator report.
 fn codes(report: &serde_json::Value) -> BTreeSet<String> {
     report["messages"]
@@ -104,17 +120,7 @@ fn layer_files(inputs: Vec<PathBuf>) {
     let dir = tempfile::tempdir().unwrap();
     let mut pairs = Vec::new();
     for (i, path) in inputs.iter().enumerate() {
-        let rig = load(path, &LoadOptions::default()).unwrap();
-        let map = unrefined_map(&rig);
-        let (frames, weights, clip) = frames(&rig, &map, 10.0);
-        let input = LayerInput {
-            rig: &rig,
-            map: &map,
-            frames: &frames,
-            weights: &weights,
-            clip,
-        };
-        let mut built = layer::build(&input).unwrap();
+        let (rig, map, frames, mut built) = synthetic_layer(path);
         let name = path.file_stem().unwrap().to_string_lossy();
         let mut written = Vec::new();
         for compress in [false, true] {
@@ -128,6 +134,10 @@ fn layer_files(inputs: Vec<PathBuf>) {
             assert!(f.decoded_error_of_depth < 0.01, "{name}: {f:?}");
             let out = dir.path().join(format!("{i}_{name}_{compress}.glb"));
             std::fs::write(&out, &w.bytes).unwrap();
+            // `fuzz/seeds.sh` collects these as seeds for the loader's fuzz target.
+            if let Some(seeds) = std::env::var_os("FURROW_SEEDS_DIR") {
+                std::fs::copy(&out, Path::new(&seeds).join(out.file_name().unwrap())).unwrap();
+            }
             written.push(out);
         }
         eprintln!(
@@ -225,17 +235,7 @@ fn blender_imports_skinned_and_multi_primitive_layers() {
     };
     let dir = tempfile::tempdir().unwrap();
     for path in [robot, stress] {
-        let rig = load(&path, &LoadOptions::default()).unwrap();
-        let map = unrefined_map(&rig);
-        let (frames, weights, clip) = frames(&rig, &map, 10.0);
-        let input = LayerInput {
-            rig: &rig,
-            map: &map,
-            frames: &frames,
-            weights: &weights,
-            clip,
-        };
-        let built = layer::build(&input).unwrap();
+        let (rig, map, _, built) = synthetic_layer(&path);
         let opts = LayerOptions {
             precision: Precision::Quantized,
             compress: false,

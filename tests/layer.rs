@@ -193,6 +193,15 @@ fn write(
     layer_glb(rig, &out.face_map, &built.layer, opts).unwrap()
 }
 
+/// A frame-sequence export (`--export sequence`) read back: its face and its animation.
+fn load_sequence(path: &Path) -> Rig {
+    let opts = LoadOptions {
+        mesh: Some("face (furrow)".into()),
+        animation: Some("furrow_wrinkles".into()),
+    };
+    load_bytes(path, &std::fs::read(path).unwrap(), &opts).unwrap()
+}
+
 fn load(path: &Path, bytes: &[u8]) -> Rig {
     load_bytes(path, bytes, &LoadOptions::default()).unwrap()
 }
@@ -576,16 +585,7 @@ fn animate_writes_the_layer_and_reports_it() {
         .output()
         .unwrap();
     assert!(o.status.success());
-    let back = load_bytes(
-        &seq,
-        &std::fs::read(&seq).unwrap(),
-        &LoadOptions {
-            mesh: Some("face (furrow)".into()),
-            animation: Some("furrow_wrinkles".into()),
-        },
-    )
-    .unwrap();
-    assert_eq!(back.face().targets.len(), FRAMES);
+    assert_eq!(load_sequence(&seq).face().targets.len(), FRAMES);
 }
 
 /// The demo's rig over a short clip (frames 0–11, the brow raise: wrinkles from frame 8): the layer, read back, is the sequence export, read back,
@@ -617,15 +617,7 @@ fn the_layer_reproduces_the_sequence_export_on_the_demo_clip() {
     };
     furrow::io::export::write_animated(&rig, &set, &seq, furrow::io::atomic::Overwrite::Refuse)
         .unwrap();
-    let sb = load_bytes(
-        &seq,
-        &std::fs::read(&seq).unwrap(),
-        &LoadOptions {
-            mesh: Some("face (furrow)".into()),
-            animation: Some("furrow_wrinkles".into()),
-        },
-    )
-    .unwrap();
+    let sb = load_sequence(&seq);
     let sequence: Vec<Vec<Vector3<f64>>> = (0..12)
         .map(|k| sb.blend(&sb.track.as_ref().unwrap().sample(k as f64 / 30.0)))
         .collect();

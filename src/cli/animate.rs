@@ -158,15 +158,7 @@ pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
         map: &run.face_map,
         frames: &run.frames,
         weights: &run.weights,
-        clip: if run.animated {
-            Clip::Animated {
-                fps: a.fps,
-                first_frame: first,
-                clip_frames: count,
-            }
-        } else {
-            Clip::Still { first_shape: first }
-        },
+        clip: Clip::of(run.animated, a.fps, first, count),
         triangles: &run.triangles,
         origin: &run.origin,
         fps: a.fps,
@@ -468,17 +460,7 @@ pub fn merge(a: MergeArgs, out: &Output) -> anyhow::Result<()> {
         map: &h.face_map,
         frames: &joined.frames,
         weights: &weights[r.start..r.end],
-        clip: if animated {
-            Clip::Animated {
-                fps: h.fps,
-                first_frame: r.start,
-                clip_frames: h.clip_frames,
-            }
-        } else {
-            Clip::Still {
-                first_shape: r.start,
-            }
-        },
+        clip: Clip::of(animated, h.fps, r.start, h.clip_frames),
         triangles: &h.triangles,
         origin: &origin,
         fps: h.fps,

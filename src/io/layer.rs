@@ -88,6 +88,8 @@ pub struct LayerOptions {
 pub struct Written {
     /// The GLB.
     pub bytes: Vec<u8>,
+    /// Index of the face's mesh in it.
+    pub mesh: usize,
     /// Per wrinkle target, the factor its weights were multiplied by in the file (its
     /// deltas divided by it).
     pub weight_scale: Vec<f64>,
@@ -203,15 +205,22 @@ pub fn layer_glb(
     let k = layer.wrinkles.len();
     let mut mesh = mesh_json.clone();
     mesh["primitives"] = json!(prims);
-    let mut weights: Vec<f64> = face.default_weights.clone();
+    let mut weights: Vec<f64> = mesh_json["weights"]
+        .as_array()
+        .map(|a| a.iter().map(|v| v.as_f64().unwrap_or(0.0)).collect())
+        .unwrap_or_default();
     weights.resize(face.targets.len(), 0.0);
     weights.extend(std::iter::repeat_n(0.0, k));
     mesh["weights"] = json!(weights);
+    if !mesh["extras"].is_object() {
+        mesh["extras"] = json!({});
+    }
     mesh["extras"]["targetNames"] = json!(names);
     let node = export::install_face_mesh(&mut cd.doc.json, rig, mesh);
     if let Some(w) = node.get_mut("weights").and_then(|w| w.as_array_mut()) {
         w.extend(std::iter::repeat_n(json!(0.0), k));
     }
+    let mesh_index = node["mesh"].as_u64().unwrap_or(0) as usize;
     let weight_scale: Vec<f64> = locals[layer.shapes.len()..]
         .iter()
         .map(|l| l.scale)
@@ -236,6 +245,7 @@ pub fn layer_glb(
     let bytes = cd.to_glb(opts.compress)?;
     Ok(Written {
         bytes,
+        mesh: mesh_index,
         weight_scale,
         refined_of_vertex: split.refined,
         notes,

@@ -57,6 +57,22 @@ pub enum Clip {
     },
 }
 
+impl Clip {
+    /// The clip of written frames starting at `first` of `count` (frames of an animated rig
+    /// at `fps`, or a still rig's shapes).
+    pub fn of(animated: bool, fps: f64, first: usize, count: usize) -> Self {
+        if animated {
+            Self::Animated {
+                fps,
+                first_frame: first,
+                clip_frames: count,
+            }
+        } else {
+            Self::Still { first_shape: first }
+        }
+    }
+}
+
 /// What a run gives the layer: the rig, how its refined skin maps onto the face, and the
 /// written frames with their weights.
 pub struct LayerInput<'a> {
@@ -404,6 +420,9 @@ fn fit_normals(
 ) -> anyhow::Result<(Vec<Vec<Vector3<f64>>>, AngleError)> {
     let n = mesh.positions.len();
     let k_modes = weights.first().map_or(0, |w| w.len());
+    if k_modes == 0 {
+        return Ok((Vec::new(), AngleError::default()));
+    }
     let change = |k: usize| -> (Vec<Vector3<f64>>, Vec<Vector3<f64>>) {
         let wr = mesh.vertex_normals_of(&input.frames[k]);
         let sm = mesh.vertex_normals_of(&smooth[k]);
@@ -517,17 +536,18 @@ pub fn check_file(
     written: &crate::io::layer::Written,
     frames: &[Vec<Vector3<f64>>],
 ) -> anyhow::Result<()> {
-    let back = load_bytes(&rig.path, &written.bytes, &LoadOptions::default())
+    let face_mesh = LoadOptions {
+        mesh: Some(written.mesh.to_string()),
+        animation: None,
+    };
+    let back = load_bytes(&rig.path, &written.bytes, &face_mesh)
         .context("furrow cannot read back the file it wrote")?;
     let layer = &built.layer;
     let (nr, kw) = (layer.shapes.len(), layer.wrinkles.len());
-    let face = back
-        .instances
-        .iter()
-        .find(|m| {
-            m.targets.len() == nr + kw && m.positions.len() == written.refined_of_vertex.len()
-        })
-        .context("the written file has no face with the layer's targets")?;
+    let face = back.face();
+    if face.targets.len() != nr + kw || face.positions.len() != written.refined_of_vertex.len() {
+        bail!("the written file's face does not hold the layer's vertices and targets");
+    }
     let f = rig.scale.metres_per_unit;
     let (mut decoded, mut total) = (0.0f64, 0.0f64);
     for (j, x) in frames.iter().enumerate() {

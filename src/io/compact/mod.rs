@@ -362,24 +362,10 @@ fn unsafe_bound(count: usize, stride: usize) -> usize {
     unsafe { meshopt::ffi::meshopt_encodeVertexBufferBound(count, stride) }
 }
 
-/// A GLB container of `json` and the binary chunk `bin` (already 4-byte aligned).
+/// A GLB container of `json` (null members dropped) and the binary chunk `bin` (already
+/// 4-byte aligned).
 fn glb(json: &mut Value, bin: &[u8]) -> Vec<u8> {
     let obj = json.as_object_mut().expect("document is an object");
     obj.retain(|_, v| !v.is_null());
-    let mut js = serde_json::to_vec(&json).expect("JSON serialises");
-    while js.len() % 4 != 0 {
-        js.push(b' ');
-    }
-    let total = 12 + 8 + js.len() + 8 + bin.len();
-    let mut out = Vec::with_capacity(total);
-    out.extend_from_slice(b"glTF");
-    out.extend_from_slice(&2u32.to_le_bytes());
-    out.extend_from_slice(&(total as u32).to_le_bytes());
-    out.extend_from_slice(&(js.len() as u32).to_le_bytes());
-    out.extend_from_slice(b"JSON");
-    out.extend_from_slice(&js);
-    out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
-    out.extend_from_slice(b"BIN\0");
-    out.extend_from_slice(bin);
-    out
+    super::glb_write::glb_container(json, bin)
 }

@@ -164,6 +164,22 @@ impl Vec3Data {
         }
     }
 
+    /// A VEC3 accessor's JSON for these values: component type, `normalized`, and the
+    /// bounds when `bounds`.
+    fn accessor(&self, bounds: bool) -> Value {
+        let (ct, normalized) = self.component();
+        let mut acc = json!({ "componentType": ct, "count": self.len(), "type": "VEC3" });
+        if normalized {
+            acc["normalized"] = json!(true);
+        }
+        if bounds {
+            let (min, max) = self.bounds();
+            acc["min"] = min;
+            acc["max"] = max;
+        }
+        acc
+    }
+
     /// Whether this storage needs `KHR_mesh_quantization`.
     fn quantized(&self) -> bool {
         !matches!(self, Self::F32(_) | Self::F32Exp(..))
@@ -218,17 +234,8 @@ impl CompactDocument {
         let stride = d.dense_stride();
         let bytes = d.bytes(&mut (0..d.len()), true);
         let view = self.push_view(bytes, d.codec(stride), Some(stride), Some(ARRAY_BUFFER));
-        let (ct, normalized) = d.component();
-        let mut acc = json!({ "bufferView": view, "componentType": ct, "count": d.len(),
-            "type": "VEC3" });
-        if normalized {
-            acc["normalized"] = json!(true);
-        }
-        if bounds {
-            let (min, max) = d.bounds();
-            acc["min"] = min;
-            acc["max"] = max;
-        }
+        let mut acc = d.accessor(bounds);
+        acc["bufferView"] = json!(view);
         self.mark_quantized(d);
         self.push_accessor(acc)
     }
@@ -284,16 +291,7 @@ impl CompactDocument {
         index_view: Option<(usize, u32)>,
         bounds: bool,
     ) -> usize {
-        let (ct, normalized) = d.component();
-        let mut acc = json!({ "componentType": ct, "count": d.len(), "type": "VEC3" });
-        if normalized {
-            acc["normalized"] = json!(true);
-        }
-        if bounds {
-            let (min, max) = d.bounds();
-            acc["min"] = min;
-            acc["max"] = max;
-        }
+        let mut acc = d.accessor(bounds);
         if let Some((iv, ict)) = index_view {
             let values = d.bytes(&mut support.iter().copied(), false);
             let vv = self.push_view(values, d.codec(12), None, None);
