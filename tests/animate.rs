@@ -374,11 +374,20 @@ fn robot_expressive_head_is_animated_to_a_valid_file() {
         refine["status"], "ran",
         "the robot's coarse head needs refining: {refine}"
     );
-    // The other 18 meshes, the skins and the 14 animations pass through.
+    // The other 18 meshes, the skins and the 14 animations pass through; the head keeps its
+    // three shapes and gains the wrinkle layer's targets.
     let anim = furrow::io::load(&out, &Default::default()).unwrap();
     assert_eq!(anim.instances.len(), 19);
     assert!(anim.animations.len() >= 14);
-    assert_eq!(anim.face().targets.len(), 12);
+    let k = j["export"]["wrinkle_targets"].as_u64().unwrap() as usize;
+    let names: Vec<&str> = anim
+        .face()
+        .targets
+        .iter()
+        .map(|t| t.name.as_str())
+        .collect();
+    assert_eq!(names[..3], ["Angry", "Surprised", "Sad"]);
+    assert_eq!(names.len(), 3 + k, "{names:?}");
     if let Some(v) = common::validate(&[out]) {
         common::assert_valid(&v);
     }

@@ -55,6 +55,7 @@ fn demo_writes_valid_animated_and_per_frame_files() {
     let o = Command::new(env!("CARGO_BIN_EXE_furrow"))
         .arg("--json")
         .arg("demo")
+        .args(["--export", "sequence"])
         .args(args)
         .arg(&out)
         .output()
@@ -89,7 +90,8 @@ fn demo_writes_valid_animated_and_per_frame_files() {
         err < 1e-6,
         "frame {k}: animated and still differ by {err} m"
     );
-    // A second run replaces its own outputs and says so.
+    // A second run replaces its own outputs and says so (here with the default export, the
+    // wrinkle layer: the rig's 9 shapes and the wrinkle targets).
     let o2 = Command::new(env!("CARGO_BIN_EXE_furrow"))
         .arg("demo")
         .args(args)
@@ -98,6 +100,18 @@ fn demo_writes_valid_animated_and_per_frame_files() {
         .unwrap();
     assert!(o2.status.success());
     assert!(String::from_utf8_lossy(&o2.stdout).contains("replaced"));
+    let layer = furrow::io::load(&out.join("face_wrinkled.glb"), &Default::default()).unwrap();
+    let names: Vec<&str> = layer
+        .face()
+        .targets
+        .iter()
+        .map(|t| t.name.as_str())
+        .collect();
+    assert!(names.len() > 9 && names[0] == "brow_raise", "{names:?}");
+    assert!(
+        names[9..].iter().all(|n| n.starts_with("wrinkle_")),
+        "{names:?}"
+    );
     let mut check = vec![out.join("face_wrinkled.glb")];
     check.extend(files.into_iter().take(3));
     if let Some(r) = common::validate(&check) {

@@ -1,4 +1,6 @@
 //! Fuzz the glTF loader: any bytes must give a rig or a clean error, never a panic or abort.
+//! A rig that loads is also blended at its first frame and written back decoded (the path the
+//! export reads every view through, meshopt and sparse accessors included).
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
@@ -11,5 +13,6 @@ fuzz_target!(|data: &[u8]| {
         if let Some(first) = w.first() {
             let _ = rig.blend(first);
         }
+        let _ = furrow::io::export::decoded_glb(&rig);
     }
 });

@@ -1,12 +1,14 @@
 //! `furrow animate`, `furrow batch` and `furrow merge`: rig in, wrinkled glTF out.
 
+use super::export::{self as out_file, ExportArgs, Frames};
 use super::Output;
 use crate::io::atomic::{self, Overwrite};
-use crate::io::export::{self, FrameSet};
+use crate::io::export;
 use crate::io::units::ScaleSetting;
 use crate::io::{self as fio, LoadOptions};
 use crate::pipeline::chunk::{self, ChunkHeader};
 use crate::pipeline::frames::FrameRange;
+use crate::pipeline::layer::Clip;
 use crate::pipeline::{self, RunOptions, RunOutput};
 use crate::scene::Scene;
 use anyhow::{bail, Context};
@@ -21,6 +23,9 @@ pub struct AnimateArgs {
     /// The wrinkled animated glTF to write (.glb).
     #[arg(short, long)]
     pub output: PathBuf,
+    /// The output's form and storage.
+    #[command(flatten)]
+    pub export: ExportArgs,
     /// Scene file (TOML): materials, lattice, solver, export; default: the defaults.
     #[arg(long)]
     pub scene: Option<PathBuf>,
@@ -94,6 +99,7 @@ pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
         None => Scene::default(),
     };
     scene.validate()?;
+    a.export.check()?;
     if a.output.extension().and_then(|e| e.to_str()) != Some("glb") {
         bail!("{}: the output must be a .glb file", a.output.display());
     }
@@ -119,7 +125,7 @@ pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
     )?;
     out.note(&rig.face_reason);
     out.note(crate::io::units::apply(&mut rig, a.scale, scene.rig.scale));
-    let count = rig.frame_weights(a.fps).len();
+    let count = crate::pipeline::plan::clip_weights(&rig, a.fps).0.len();
     let frames = match &a.frames {
         Some(t) if a.clamp_frames => {
             let (start, end) = t.split_once(':').unwrap_or((t, ""));
@@ -146,14 +152,24 @@ pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
         out.note(format!("warning: {w}"));
     }
     let mut files = Vec::new();
-    let set = FrameSet {
-        triangles: &run.triangles,
+    let t = Instant::now();
+    let first = frames.map_or(0, |r| r.start);
+    let written = Frames {
+        map: &run.face_map,
         frames: &run.frames,
+        weights: &run.weights,
+        clip: Clip::of(run.animated, a.fps, first, count),
+        triangles: &run.triangles,
         origin: &run.origin,
         fps: a.fps,
     };
-    let t = Instant::now();
-    export::write_animated(&rig, &set, &a.output, Overwrite::from_force(a.force))?;
+    let layer_report = out_file::write(
+        &rig,
+        &written,
+        &a.export,
+        &a.output,
+        Overwrite::from_force(a.force),
+    )?;
     files.push(a.output.clone());
     if let Some(range) = frames.filter(|_| write_chunk) {
         let header = ChunkHeader {
@@ -166,6 +182,7 @@ pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
             triangles: run.triangles.clone(),
             origin: chunk::origin_to_plain(&run.origin),
             metres_per_unit: rig.scale.metres_per_unit,
+            face_map: run.face_map.clone(),
         };
         chunk::write(
             &chunk_file,
@@ -176,6 +193,12 @@ pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
         files.push(chunk_file.clone());
     }
     if let Some(dir) = &a.frames_dir {
+        let set = export::FrameSet {
+            triangles: &run.triangles,
+            frames: &run.frames,
+            origin: &run.origin,
+            fps: a.fps,
+        };
         let pb = out.progress(run.frames.len() as u64, "frames");
         files.extend(export::write_frames_dir(
             &rig,
@@ -188,6 +211,7 @@ pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
     }
     let export_ms = t.elapsed().as_secs_f64() * 1e3;
     let mut run = run;
+    run.report.export = layer_report;
     run.report.totals.export_ms = export_ms;
     run.report.totals.wall_s = t0.elapsed().as_secs_f64();
     if let Some(dir) = &a.preview {
@@ -232,6 +256,9 @@ pub fn say_summary(out: &Output, done: &Animated) {
     for s in &rep.stages {
         out.say(format!("  {:<10} {:<8} {}", s.stage, s.status, s.why));
     }
+    if let Some(e) = &rep.export {
+        out_file::say(out, e);
+    }
     for f in &done.files {
         out.say(format!("  wrote {}", f.display()));
     }
@@ -261,6 +288,9 @@ pub struct BatchArgs {
     /// Redo inputs whose outputs are finished.
     #[arg(long)]
     pub force: bool,
+    /// The outputs' form and storage.
+    #[command(flatten)]
+    pub export: ExportArgs,
 }
 
 /// Run `furrow batch`: every input in turn; a failure is reported and the rest go on; finished
@@ -294,6 +324,7 @@ pub fn batch(a: BatchArgs, out: &Output) -> anyhow::Result<()> {
         let args = AnimateArgs {
             rig: input.clone(),
             output: glb.clone(),
+            export: a.export.clone(),
             scene: a.scene.clone(),
             frames: a.frames.clone(),
             fps: a.fps,
@@ -354,11 +385,22 @@ pub struct MergeArgs {
     /// Replace an existing output.
     #[arg(long)]
     pub force: bool,
+    /// The output's form and storage (the layer's basis is built over the joined frames).
+    #[command(flatten)]
+    pub export: ExportArgs,
+    /// Write the export's report (JSON: wrinkle targets, errors, file size) here.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
 }
 
 /// Run `furrow merge`.
 pub fn merge(a: MergeArgs, out: &Output) -> anyhow::Result<()> {
-    preflight(&[&a.output], a.force)?;
+    a.export.check()?;
+    let mut outputs: Vec<&Path> = vec![&a.output];
+    if let Some(r) = &a.report {
+        outputs.push(r);
+    }
+    preflight(&outputs, a.force)?;
     let mut chunks = Vec::new();
     for p in &a.chunks {
         let cp = if p.extension().and_then(|e| e.to_str()) == Some("furrow-chunk") {
@@ -402,16 +444,40 @@ pub fn merge(a: MergeArgs, out: &Output) -> anyhow::Result<()> {
             a.rig.display()
         );
     }
-    let set = FrameSet {
-        triangles: &joined.header.triangles,
+    let h = &joined.header;
+    let r = h.range;
+    let (weights, animated) = crate::pipeline::plan::clip_weights(&rig, h.fps);
+    if weights.len() != h.clip_frames {
+        bail!(
+            "{}: the chunks' clip has {} frames at {} fps, this rig's {}",
+            a.rig.display(),
+            h.clip_frames,
+            h.fps,
+            weights.len()
+        );
+    }
+    let written = Frames {
+        map: &h.face_map,
         frames: &joined.frames,
+        weights: &weights[r.start..r.end],
+        clip: Clip::of(animated, h.fps, r.start, h.clip_frames),
+        triangles: &h.triangles,
         origin: &origin,
-        fps: joined.header.fps,
+        fps: h.fps,
     };
-    export::write_animated(&rig, &set, &a.output, Overwrite::from_force(a.force))?;
-    let r = joined.header.range;
+    let report = out_file::write(
+        &rig,
+        &written,
+        &a.export,
+        &a.output,
+        Overwrite::from_force(a.force),
+    )?;
+    if let (Some(path), Some(rep)) = (&a.report, &report) {
+        let json = serde_json::to_vec_pretty(rep)?;
+        atomic::write(path, &json, Overwrite::from_force(a.force))?;
+    }
     out.json_result(
-        &serde_json::json!({ "ok": true, "output": a.output, "frames": [r.start, r.end] }),
+        &serde_json::json!({ "ok": true, "output": a.output, "frames": [r.start, r.end], "export": report }),
     );
     out.say(format!(
         "merged frames {}:{} of {} chunks into {}",
@@ -420,6 +486,9 @@ pub fn merge(a: MergeArgs, out: &Output) -> anyhow::Result<()> {
         a.chunks.len(),
         a.output.display()
     ));
+    if let Some(rep) = &report {
+        out_file::say(out, rep);
+    }
     if r.start != 0 || r.end != joined.header.clip_frames {
         out.note(format!(
             "note: the chunks cover frames {}:{} of a {}-frame clip",

@@ -171,7 +171,6 @@ pub fn run(c: BenchCommand, out: &Output) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// `furrow bench select`: the selected skin against the whole skin on a rig.
 /// The rig at `rig` (units decided as `animate` does) and the run options for `frames`.
 fn bench_rig(
     rig: &std::path::Path,
@@ -180,7 +179,7 @@ fn bench_rig(
 ) -> anyhow::Result<(crate::io::load::Rig, crate::pipeline::RunOptions)> {
     let mut loaded = crate::io::load::load(rig, &Default::default())?;
     crate::io::units::apply(&mut loaded, None, None);
-    let count = loaded.frame_weights(fps).len();
+    let count = crate::pipeline::plan::clip_weights(&loaded, fps).0.len();
     let opts = crate::pipeline::RunOptions {
         scene: crate::scene::Scene::default(),
         scene_path: None,
@@ -190,6 +189,7 @@ fn bench_rig(
     Ok((loaded, opts))
 }
 
+/// `furrow bench select`: the selected skin against the whole skin on a rig.
 fn select(rig: &std::path::Path, frames: &str, fps: f64, out: &Output) -> anyhow::Result<()> {
     let (loaded, opts) = bench_rig(rig, frames, fps)?;
     let c = crate::studies::locality::compare_selection(&loaded, &opts)?;
@@ -197,6 +197,7 @@ fn select(rig: &std::path::Path, frames: &str, fps: f64, out: &Output) -> anyhow
     Ok(())
 }
 
+/// `furrow bench skin`: the local skin solver against the global one on a rig.
 fn skin(rig: &std::path::Path, frames: &str, fps: f64, out: &Output) -> anyhow::Result<()> {
     let (loaded, opts) = bench_rig(rig, frames, fps)?;
     let c = crate::studies::locality::compare_solvers(&loaded, &opts)?;

@@ -26,6 +26,9 @@ pub struct DemoArgs {
     /// Metres per unit of the rig file, or `auto` (default; see `animate --scale`).
     #[arg(long, value_parser = crate::io::units::scale_arg)]
     pub scale: Option<crate::io::units::ScaleSetting>,
+    /// The output's form and storage.
+    #[command(flatten)]
+    pub export: super::export::ExportArgs,
 }
 
 impl DemoArgs {
@@ -38,6 +41,7 @@ impl DemoArgs {
             rig: None,
             frames_dir: false,
             scale: None,
+            export: Default::default(),
         }
     }
 }
@@ -80,6 +84,7 @@ pub fn run_demo(a: DemoArgs, out: &Output) -> anyhow::Result<crate::pipeline::re
     let args = AnimateArgs {
         rig: rig.clone(),
         output: output.clone(),
+        export: a.export.clone(),
         scene: None,
         frames: Some(a.frames.clone()).filter(|f| f != ":"),
         fps: a.fps,

@@ -3,6 +3,7 @@
 mod animate;
 mod bench;
 mod demo;
+mod export;
 mod fit;
 mod inspect;
 mod output;

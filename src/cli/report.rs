@@ -122,7 +122,10 @@ fn run_tradeoff(a: TradeoffArgs, out: &Output) -> anyhow::Result<()> {
     };
     let (rig, rig_name) = tradeoff_rig(&a)?;
     let frames = match &a.frames {
-        Some(t) => Some(FrameRange::parse(t, rig.frame_weights(a.fps).len())?),
+        Some(t) => Some(FrameRange::parse(
+            t,
+            crate::pipeline::plan::clip_weights(&rig, a.fps).0.len(),
+        )?),
         None => None,
     };
     let pb = out.progress(1, "rig sweep");

@@ -174,11 +174,11 @@ impl<'a> AccessorReader<'a> {
         Ok(rc)
     }
 
-    /// The byte stride declared by buffer view `v` (meshopt views carry it in the extension).
+    /// The byte stride declared by buffer view `v`. An `EXT_meshopt_compression` view's own
+    /// `byteStride` is the codec's element size, not the accessors' stride: a view without
+    /// `byteStride` holds its accessors tightly packed, compressed or not.
     fn view_stride(&self, v: usize) -> Option<usize> {
-        let view = &self.json["bufferViews"][v];
-        usize_of(&view["byteStride"])
-            .or_else(|| usize_of(&view["extensions"]["EXT_meshopt_compression"]["byteStride"]))
+        usize_of(&self.json["bufferViews"][v]["byteStride"])
     }
 
     /// Read the elements `s` describes, tightly packed unless `s.use_stride` and the view

@@ -9,6 +9,7 @@
 
 use super::accessor::AccessorReader;
 use super::atomic::{self, Overwrite};
+use super::carry;
 use super::glb_write::{generator, Document, ARRAY_BUFFER};
 use super::load::Rig;
 use super::mesh::VertexTransform;
@@ -95,7 +96,7 @@ impl FrameSet<'_> {
 }
 
 /// The loaded file as a writable document: views decompressed, images embedded.
-fn base_document(rig: &Rig) -> anyhow::Result<Document> {
+pub(crate) fn base_document(rig: &Rig) -> anyhow::Result<Document> {
     let c = &rig.container;
     let reader = AccessorReader::new(&rig.path, c);
     let mut json = c.json.clone();
@@ -177,14 +178,17 @@ fn vertex_matrix(t: &VertexTransform, o: &VertexOrigin) -> Matrix4<f64> {
     }
 }
 
-/// Per exported vertex: world→local point map (inverse affine) and its linear part.
-struct LocalFrames {
+/// Per exported vertex: world→local point map (inverse affine) and its linear part, for
+/// writing world-space results (m, as simulated) back in the face's local coordinates (the
+/// file's units).
+pub(crate) struct LocalFrames {
     inv: Vec<Matrix4<f64>>,
     lin: Vec<Matrix3<f64>>,
 }
 
 impl LocalFrames {
-    fn new(rig: &Rig, origin: &[VertexOrigin]) -> anyhow::Result<Self> {
+    /// The frames of vertices with origins `origin` in `rig`'s face.
+    pub(crate) fn new(rig: &Rig, origin: &[VertexOrigin]) -> anyhow::Result<Self> {
         let t = &rig.face().to_world;
         let mut inv = Vec::with_capacity(origin.len());
         let mut lin = Vec::with_capacity(origin.len());
@@ -201,10 +205,34 @@ impl LocalFrames {
         }
         Ok(Self { inv, lin })
     }
-    fn point(&self, i: usize, p: &Vector3<f64>) -> Vector3<f64> {
+    /// Vertex `i`'s world point `p` in local coordinates.
+    pub(crate) fn point(&self, i: usize, p: &Vector3<f64>) -> Vector3<f64> {
         (self.inv[i] * p.push(1.0)).xyz()
     }
-    fn normal(&self, i: usize, n: &Vector3<f64>) -> Vector3<f64> {
+
+    /// A world displacement `d` at vertex `i` in local coordinates (morph position deltas).
+    pub(crate) fn vector(&self, i: usize, d: &Vector3<f64>) -> Vector3<f64> {
+        self.lin[i] * d
+    }
+
+    /// A world normal change `d` at vertex `i` in local coordinates (morph normal deltas): the
+    /// normal map's linear part over its mean scale, which is exact for rotations with uniform
+    /// scale and linear, so weighted sums of deltas map as the deltas do.
+    pub(crate) fn normal_delta(&self, i: usize, d: &Vector3<f64>) -> Vector3<f64> {
+        let m = self.lin[i]
+            .try_inverse()
+            .map(|m| m.transpose())
+            .unwrap_or(self.lin[i]);
+        let s = m.determinant().abs().cbrt();
+        if s > 0.0 {
+            m * d / s
+        } else {
+            *d
+        }
+    }
+
+    /// Vertex `i`'s world unit normal `n` in local coordinates (unit).
+    pub(crate) fn normal(&self, i: usize, n: &Vector3<f64>) -> Vector3<f64> {
         // Normals map by the inverse transpose of the (world→local) linear part.
         let r = self.lin[i]
             .try_inverse()
@@ -220,7 +248,8 @@ impl LocalFrames {
     }
 }
 
-/// Attributes of the original face primitives carried to the exported vertices.
+/// Attributes of the original face primitives carried to the exported vertices (all
+/// primitives merged: the frame-sequence form has one primitive).
 fn carried_attributes(
     rig: &Rig,
     doc: &mut Document,
@@ -248,88 +277,115 @@ fn carried_attributes(
             .flatten()
             .map(|(k, _)| k)
         {
-            let wanted = k.starts_with("TEXCOORD_")
-                || k == "COLOR_0"
-                || (skinned && (k.starts_with("JOINTS_") || k.starts_with("WEIGHTS_")));
-            if wanted && !names.contains(k) {
+            if carried(k, skinned) && !names.contains(k) {
                 names.push(k.clone());
             }
         }
     }
     names.sort();
+    let mut values = std::collections::BTreeMap::new();
+    for name in &names {
+        let (all, comps) = gather(rig, &reader, &prims, name)?;
+        if all.len() / comps.max(1) < f.positions.len() {
+            bail!(
+                "{}: attribute {name} has fewer entries than the face has vertices",
+                rig.path.display()
+            );
+        }
+        values.insert(name.clone(), (all, comps));
+    }
     let mut out = serde_json::Map::new();
-    for name in names {
-        let mut all = Vec::new();
-        let mut comps = 0;
-        let mut missing = Vec::new();
-        for (pi, p) in prims.iter().enumerate() {
-            match p["attributes"][&name].as_u64() {
-                Some(a) => {
-                    let d = reader.read(a as usize)?;
-                    comps = d.components;
-                    all.extend(d.data);
-                }
-                None => missing.push(pi),
-            }
+    let sets: Vec<String> = names
+        .iter()
+        .filter_map(|n| n.strip_prefix("JOINTS_"))
+        .filter(|s| values.contains_key(&format!("WEIGHTS_{s}")))
+        .map(String::from)
+        .collect();
+    let js: Vec<Vec<f64>> = sets
+        .iter()
+        .map(|s| values[&format!("JOINTS_{s}")].0.clone())
+        .collect();
+    let ws: Vec<Vec<f64>> = sets
+        .iter()
+        .map(|s| values[&format!("WEIGHTS_{s}")].0.clone())
+        .collect();
+    let (bj, bw) = carry::blend_influences(&js, &ws, origin);
+    for (i, s) in sets.iter().enumerate() {
+        out.insert(format!("JOINTS_{s}"), json!(push_joints(doc, &bj[i])));
+        out.insert(
+            format!("WEIGHTS_{s}"),
+            json!(doc.push_f32(&bw[i], 4, Some(ARRAY_BUFFER))),
+        );
+    }
+    for (name, (all, comps)) in &values {
+        if name.starts_with("JOINTS_") || name.starts_with("WEIGHTS_") {
+            continue;
         }
-        if !missing.is_empty() {
-            // Rebuild in primitive order with zeros for primitives that lack the attribute.
-            all.clear();
-            for (pi, p) in prims.iter().enumerate() {
-                let count = f.primitive_ranges.get(pi).map_or(0, |r| r.1);
-                match p["attributes"][&name].as_u64() {
-                    Some(a) => all.extend(reader.read(a as usize)?.data),
-                    None => all.extend(std::iter::repeat_n(0.0, count * comps)),
-                }
-            }
-        }
-        let total = all.len() / comps.max(1);
-        let mut vals = Vec::with_capacity(origin.len() * comps);
-        for o in origin {
-            if o.vertices.iter().any(|&v| v >= total) {
-                bail!(
-                    "{}: attribute {name} has fewer entries than the face has vertices",
-                    rig.path.display()
-                );
-            }
-            if name.starts_with("JOINTS_") || name.starts_with("WEIGHTS_") {
-                let v = o.dominant();
-                vals.extend_from_slice(&all[v * comps..(v + 1) * comps]);
-            } else {
-                for k in 0..comps {
-                    vals.push(
-                        (0..3)
-                            .map(|j| o.weights[j] * all[o.vertices[j] * comps + k])
-                            .sum(),
-                    );
-                }
-            }
-        }
-        let acc = if name.starts_with("JOINTS_") {
-            let bytes: Vec<u8> = vals
-                .iter()
-                .flat_map(|&v| (v as u16).to_le_bytes())
-                .collect();
-            let view = doc.push_view(bytes, Some(ARRAY_BUFFER));
-            let a = doc.json["accessors"]
-                .as_array_mut()
-                .expect("accessors exist");
-            a.push(json!({ "bufferView": view, "componentType": 5123, "count": origin.len(), "type": "VEC4" }));
-            a.len() - 1
-        } else {
-            if name.starts_with("WEIGHTS_") {
-                for w in vals.chunks_exact_mut(comps) {
-                    let s: f64 = w.iter().sum();
-                    if s > 0.0 {
-                        w.iter_mut().for_each(|x| *x /= s);
-                    }
-                }
-            }
-            doc.push_f32(&vals, comps, Some(ARRAY_BUFFER))
-        };
-        out.insert(name, json!(acc));
+        let vals = carry::interpolate(all, *comps, origin);
+        out.insert(
+            name.clone(),
+            json!(doc.push_f32(&vals, *comps, Some(ARRAY_BUFFER))),
+        );
     }
     Ok(out)
+}
+
+/// Whether a vertex attribute of the face is carried to the export: texture coordinates,
+/// colours, and skin influences of a skinned face (positions and normals are written anew;
+/// tangents would be stale on a wrinkled surface).
+pub(crate) fn carried(name: &str, skinned: bool) -> bool {
+    name.starts_with("TEXCOORD_")
+        || name.starts_with("COLOR_")
+        || (skinned && (name.starts_with("JOINTS_") || name.starts_with("WEIGHTS_")))
+}
+
+/// Attribute `name` of the face's triangle primitives `prims`, concatenated in the loaded
+/// face's vertex order (zeros for a primitive without it), and its component count.
+fn gather(
+    rig: &Rig,
+    reader: &AccessorReader,
+    prims: &[&Value],
+    name: &str,
+) -> anyhow::Result<(Vec<f64>, usize)> {
+    let f = rig.face();
+    let mut comps = 0;
+    for p in prims {
+        if let Some(a) = p["attributes"][name].as_u64() {
+            comps = reader.read(a as usize)?.components;
+        }
+    }
+    let mut all = Vec::new();
+    for (pi, p) in prims.iter().enumerate() {
+        let count = f.primitive_ranges.get(pi).map_or(0, |r| r.1);
+        match p["attributes"][name].as_u64() {
+            Some(a) => {
+                let d = reader.read(a as usize)?;
+                if d.count != count {
+                    bail!(
+                        "{}: attribute {name} of primitive {pi} has {} entries for {count} vertices",
+                        rig.path.display(),
+                        d.count
+                    );
+                }
+                all.extend(d.data);
+            }
+            None => all.extend(std::iter::repeat_n(0.0, count * comps)),
+        }
+    }
+    Ok((all, comps))
+}
+
+/// A JOINTS accessor (u16 VEC4) of joint indices `j` (4 per vertex); returns its index.
+pub(crate) fn push_joints(doc: &mut Document, j: &[f64]) -> usize {
+    let bytes: Vec<u8> = j.iter().flat_map(|&v| (v as u16).to_le_bytes()).collect();
+    let view = doc.push_view(bytes, Some(ARRAY_BUFFER));
+    let a = doc.json["accessors"]
+        .as_array_mut()
+        .expect("accessors exist");
+    a.push(
+        json!({ "bufferView": view, "componentType": 5123, "count": j.len() / 4, "type": "VEC4" }),
+    );
+    a.len() - 1
 }
 
 fn flat(v: &[Vector3<f64>]) -> Vec<f64> {
@@ -391,26 +447,10 @@ fn replace_face(rig: &Rig, set: &FrameSet, animated: bool) -> anyhow::Result<Doc
         mesh["extras"] = json!({ "targetNames": (0..frames).map(|k| format!("frame_{k:05}")).collect::<Vec<_>>() });
     }
     mesh["primitives"] = json!([prim]);
-    // The face node gets the new mesh; the old one stays only if another node uses it.
-    let shared = rig.container.json["nodes"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .enumerate()
-        .any(|(i, nd)| i != f.node && nd["mesh"].as_u64() == Some(f.mesh as u64));
-    let mesh_index = if shared {
-        let ms = doc.json["meshes"].as_array_mut().expect("meshes exist");
-        ms.push(mesh);
-        ms.len() - 1
-    } else {
-        doc.json["meshes"][f.mesh] = mesh;
-        f.mesh
-    };
-    let node = doc.json["nodes"][f.node]
+    install_face_mesh(&mut doc.json, rig, mesh)
         .as_object_mut()
-        .expect("node object");
-    node.insert("mesh".into(), json!(mesh_index));
-    node.remove("weights");
+        .expect("node object")
+        .remove("weights");
     // Animations: drop the face's old weight channels (and everything, for a still frame).
     if animated {
         strip_face_weight_channels(&mut doc.json, f.node);
@@ -445,11 +485,35 @@ fn replace_face(rig: &Rig, set: &FrameSet, animated: bool) -> anyhow::Result<Doc
     Ok(doc)
 }
 
+/// Give the face node `mesh` (JSON) in the document `json` of `rig`: it replaces the face's
+/// mesh, or is added when another node also uses that mesh (the others keep it). Returns the
+/// face node's JSON.
+pub(crate) fn install_face_mesh<'j>(json: &'j mut Value, rig: &Rig, mesh: Value) -> &'j mut Value {
+    let f = rig.face();
+    let shared = rig.container.json["nodes"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .enumerate()
+        .any(|(i, nd)| i != f.node && nd["mesh"].as_u64() == Some(f.mesh as u64));
+    let mesh_index = if shared {
+        let ms = json["meshes"].as_array_mut().expect("meshes exist");
+        ms.push(mesh);
+        ms.len() - 1
+    } else {
+        json["meshes"][f.mesh] = mesh;
+        f.mesh
+    };
+    let node = &mut json["nodes"][f.node];
+    node["mesh"] = json!(mesh_index);
+    node
+}
+
 /// A skinned mesh ignores its node's parents (glTF 2.0 §3.7.3), and the validator warns when
 /// such a node is not a root. Move each one's mesh and skin to a new root node in the same
 /// scenes (the original node keeps its place and children), retargeting its weight channels:
 /// the picture is unchanged.
-fn hoist_skinned_meshes(json: &mut Value) {
+pub(crate) fn hoist_skinned_meshes(json: &mut Value) {
     let nodes = json["nodes"].as_array().cloned().unwrap_or_default();
     let mut parent = vec![None; nodes.len()];
     for (i, n) in nodes.iter().enumerate() {
@@ -560,6 +624,16 @@ fn strip_face_weight_channels(json: &mut Value, node: usize) {
         a["samplers"] = json!(new_samplers);
     }
     anims.retain(|a| a["channels"].as_array().is_some_and(|c| !c.is_empty()));
+}
+
+/// The loaded file written back decoded: every `EXT_meshopt_compression` view decompressed
+/// (the extension dropped), external images embedded, unused data pruned, nothing else
+/// changed. This is what a viewer without meshopt support (Blender 3.4) or the Khronos
+/// validator, which does not check meshopt, is given for a compressed file.
+pub fn decoded_glb(rig: &Rig) -> anyhow::Result<Vec<u8>> {
+    let mut doc = base_document(rig)?;
+    doc.prune();
+    Ok(doc.to_glb())
 }
 
 /// The whole scene with the face replaced by the animated frame sequence, as GLB bytes.

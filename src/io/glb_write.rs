@@ -109,8 +109,9 @@ impl Document {
         self.push_accessor(json!({ "bufferView": view, "componentType": ct, "count": triangles.len() * 3, "type": "SCALAR" }))
     }
 
-    /// Drop accessors and buffer views that nothing references, renumbering the rest.
-    pub fn prune(&mut self) {
+    /// Drop accessors and buffer views that nothing references, renumbering the rest;
+    /// returns, for each view before pruning, whether it was kept.
+    pub fn prune(&mut self) -> Vec<bool> {
         let j = &mut self.json;
         let na = j["accessors"].as_array().map_or(0, |a| a.len());
         let mut used_acc = vec![false; na];
@@ -126,6 +127,7 @@ impl Document {
             *views = keep_used(std::mem::take(views), &used_view);
         }
         self.view_bytes = keep_used(std::mem::take(&mut self.view_bytes), &used_view);
+        used_view
     }
 
     /// Lay out the binary buffer (views 4-byte aligned), fill offsets, and write a GLB.
@@ -181,25 +183,31 @@ impl Document {
                 obj.remove(k);
             }
         }
-        let mut js = serde_json::to_vec(&self.json).expect("JSON serialises");
-        while js.len() % 4 != 0 {
-            js.push(b' ');
-        }
-        let total = 12 + 8 + js.len() + if bin.is_empty() { 0 } else { 8 + bin.len() };
-        let mut out = Vec::with_capacity(total);
-        out.extend_from_slice(b"glTF");
-        out.extend_from_slice(&2u32.to_le_bytes());
-        out.extend_from_slice(&(total as u32).to_le_bytes());
-        out.extend_from_slice(&(js.len() as u32).to_le_bytes());
-        out.extend_from_slice(b"JSON");
-        out.extend_from_slice(&js);
-        if !bin.is_empty() {
-            out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
-            out.extend_from_slice(b"BIN\0");
-            out.extend_from_slice(&bin);
-        }
-        out
+        glb_container(&self.json, &bin)
     }
+}
+
+/// A GLB container: the header, the JSON chunk (`json`, padded with spaces) and, when `bin`
+/// (4-byte aligned) is not empty, the binary chunk.
+pub fn glb_container(json: &Value, bin: &[u8]) -> Vec<u8> {
+    let mut js = serde_json::to_vec(json).expect("JSON serialises");
+    while js.len() % 4 != 0 {
+        js.push(b' ');
+    }
+    let total = 12 + 8 + js.len() + if bin.is_empty() { 0 } else { 8 + bin.len() };
+    let mut out = Vec::with_capacity(total);
+    out.extend_from_slice(b"glTF");
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&(total as u32).to_le_bytes());
+    out.extend_from_slice(&(js.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"JSON");
+    out.extend_from_slice(&js);
+    if !bin.is_empty() {
+        out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+        out.extend_from_slice(b"BIN\0");
+        out.extend_from_slice(bin);
+    }
+    out
 }
 
 impl Default for Document {

@@ -3,17 +3,21 @@
 pub mod accessor;
 pub mod animation;
 pub mod atomic;
+pub mod carry;
 pub mod compact;
 pub mod container;
 pub mod error;
 pub mod export;
+pub mod face_weights;
 pub mod glb_write;
 pub mod inspect;
+pub mod layer;
 pub mod load;
 pub mod mesh;
 pub mod meshopt_view;
 pub mod model;
 pub mod scene;
+pub mod split;
 pub mod units;
 
 pub use error::{GltfError, GltfResult};

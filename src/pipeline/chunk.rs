@@ -10,6 +10,7 @@
 use super::frames::FrameRange;
 use crate::io::atomic::{self, Overwrite};
 use crate::io::export::VertexOrigin;
+use crate::io::split::FaceMap;
 use anyhow::{bail, Context};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -40,6 +41,10 @@ pub struct ChunkHeader {
     /// metres; `merge` writes them back in the file's units).
     #[serde(default = "one")]
     pub metres_per_unit: f64,
+    /// How the refined skin maps onto the loaded face (the wrinkle layer needs it; empty in
+    /// chunks from before it existed).
+    #[serde(default)]
+    pub face_map: FaceMap,
 }
 
 /// Chunks written before the rig scale existed were simulated as in the file.
@@ -167,7 +172,11 @@ pub fn join(mut chunks: Vec<(String, Chunk)>) -> anyhow::Result<Chunk> {
         if h.settings_hash != h0.settings_hash || h.fps != h0.fps {
             bail!("{name}: made with other settings (scene, fps or mesh) than {first_name}");
         }
-        if h.vertices != h0.vertices || h.triangles != h0.triangles || h.origin != h0.origin {
+        if h.vertices != h0.vertices
+            || h.triangles != h0.triangles
+            || h.origin != h0.origin
+            || h.face_map != h0.face_map
+        {
             bail!("{name}: its skin topology differs from {first_name}'s");
         }
         if h.range.start != next {
@@ -211,6 +220,7 @@ mod tests {
                 triangles: vec![],
                 origin: vec![([0, 0, 0], [1.0, 0.0, 0.0])],
                 metres_per_unit: 1.0,
+                face_map: FaceMap::default(),
             },
             frames: (start..end)
                 .map(|k| vec![Vector3::new(k as f64, 0.5, -1.0)])

@@ -28,6 +28,7 @@
 
 pub mod chunk;
 pub mod frames;
+pub mod layer;
 pub mod plan;
 pub mod preview;
 pub mod record;
@@ -40,6 +41,7 @@ pub use setup::skin::DEGENERATE_QUALITY;
 
 use crate::io::export::VertexOrigin;
 use crate::io::load::Rig;
+use crate::io::split::FaceMap;
 use crate::scene::Scene;
 use frames::FrameRange;
 use nalgebra::Vector3;
@@ -66,6 +68,13 @@ pub struct RunOptions {
 /// The result of a run: the exported face frames and the report.
 #[derive(Debug, Clone)]
 pub struct RunOutput {
+    /// How the refined skin maps onto the loaded face (the wrinkle layer's seams,
+    /// primitives and subdivision S).
+    pub face_map: FaceMap,
+    /// The rig's weights of each written frame (for a still rig: shape k alone at 1).
+    pub weights: Vec<Vec<f64>>,
+    /// Whether the rig is animated (else each frame is one shape solved alone from rest).
+    pub animated: bool,
     /// Triangles of the exported face.
     pub triangles: Vec<[usize; 3]>,
     /// Origin of each exported vertex in the loaded face.
@@ -108,8 +117,15 @@ pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<R
     let mut out = Frames::default();
     let mut totals = Totals::default();
     let end = plan.range.end;
-    for k in 0..end {
+    // A clip's history leads to its first written frame; a still rig's shapes are each
+    // solved alone, from rest (a fresh state per shape).
+    let first = if plan.animated { 0 } else { plan.range.start };
+    for k in first..end {
         progress("frames", k, end);
+        if !plan.animated && k > first {
+            state = setup::set_up(rig, scene, &plan, &mut Log::default(), &|_, _, _| {})?.1;
+            scratch = Scratch::new(model.lattice.node_count());
+        }
         let w = &plan.weights[k];
         let (record, composed) =
             step::step_frame(rig, w, k, &model, &mut state, &mut scratch, options)?;
@@ -123,13 +139,17 @@ pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<R
     progress("frames", end, end);
     totals.frames_written = out.wrinkled.len();
     totals.wall_s = wall.elapsed().as_secs_f64();
+    let written = plan.range.start - first;
     let outcome = Outcome {
         log,
-        per_frame: per_frame.split_off(plan.range.start),
+        per_frame: per_frame.split_off(written),
         totals,
     };
     let report = finish_report(rig, opts, &plan, &model, &state, outcome);
     Ok(RunOutput {
+        face_map: model.face_map(),
+        weights: plan.weights[plan.range.start..plan.range.end].to_vec(),
+        animated: plan.animated,
         triangles: model.skin_mesh.triangles.clone(),
         origin: model.origin.clone(),
         frames: out.wrinkled,
@@ -201,7 +221,7 @@ fn finish_report(
             totals.frames_not_converged, totals.frames_simulated
         ));
     }
-    if plan.range.start > 0 {
+    if plan.range.start > 0 && plan.animated {
         log.warnings.push(format!(
             "frames 0..{} were simulated but not written (the clip's history leads to frame {})",
             plan.range.start, plan.range.start
@@ -242,5 +262,6 @@ fn finish_report(
         per_frame,
         totals,
         warnings: log.warnings,
+        export: None,
     }
 }

@@ -60,7 +60,8 @@ pub struct SkinScale {
 /// A checked run: what to simulate and with what.
 #[derive(Debug, Clone)]
 pub struct Plan {
-    /// Blend-shape weights per frame of the clip, sampled at the run's fps.
+    /// Blend-shape weights per frame of the clip, sampled at the run's fps; for a still rig,
+    /// each shape alone at weight 1 (see [`clip_weights`]).
     pub weights: Vec<Vec<f64>>,
     /// Frames to write; frames 0..`range.end` are simulated (the clip's history).
     pub range: FrameRange,
@@ -92,7 +93,7 @@ impl Plan {
                 "this scene describes synthetic geometry; run it with `furrow scene`, not on a rig"
             );
         }
-        let weights = rig.frame_weights(opts.fps);
+        let (weights, animated) = clip_weights(rig, opts.fps);
         let range = opts.frames.unwrap_or(FrameRange::all(weights.len()));
         if range.end > weights.len() || range.is_empty() {
             bail!(
@@ -103,7 +104,6 @@ impl Plan {
                 weights.len()
             );
         }
-        let animated = rig.track.is_some() && weights.len() > 1;
         let materials = scene.materials()?;
         let skin = skin_scale(rig, scene, &materials)?;
         check_skin_meshes(rig, scene)?;
@@ -143,6 +143,20 @@ impl Plan {
             0.0,
         )
     }
+}
+
+/// The poses a run simulates, and whether the rig is animated: every frame of the clip at
+/// `fps` (Hz) when it has an animation of more than one frame; otherwise (a still rig, such
+/// as a downloaded avatar) each blend shape alone at weight 1, one "frame" per shape, each
+/// solved from rest.
+pub fn clip_weights(rig: &Rig, fps: f64) -> (Vec<Vec<f64>>, bool) {
+    let weights = rig.frame_weights(fps);
+    if rig.track.is_some() && weights.len() > 1 {
+        return (weights, true);
+    }
+    let n = rig.face().targets.len();
+    let unit = |i: usize| (0..n).map(|j| if i == j { 1.0 } else { 0.0 }).collect();
+    ((0..n).map(unit).collect(), false)
 }
 
 /// Backward Euler sub-steps per frame at `fps` (Hz) so that none is longer than `dt` (s).

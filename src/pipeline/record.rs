@@ -181,4 +181,8 @@ pub struct RunReport {
     pub totals: Totals,
     /// Warnings said to the user.
     pub warnings: Vec<String>,
+    /// The written file's form, its wrinkle targets and how well they reproduce the frames
+    /// (filled by the export; absent for the frame-sequence form).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub export: Option<super::layer::LayerReport>,
 }

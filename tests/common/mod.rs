@@ -92,6 +92,44 @@ pub fn validate(files: &[PathBuf]) -> Option<Vec<serde_json::Value>> {
     )
 }
 
+/// Import `file` into Blender (Debian's `blender`, headless, `.ci/blender_import.py`) and
+/// return what came in: `{"error", "objects": [{"name", "shape_keys", "slider_min", ...}],
+/// "actions": [{"name", "fcurves"}]}`. None (skipped, with a note) when Blender is not
+/// installed outside CI; under CI a missing Blender fails the test.
+pub fn blender_import(file: &Path) -> Option<serde_json::Value> {
+    let found = Command::new("blender")
+        .arg("--version")
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !found {
+        assert!(
+            !tools_required(),
+            "blender is not installed: apt-get install -y blender python3-numpy (.ci/run does)"
+        );
+        note("blender not installed (apt-get install -y blender); import check skipped");
+        return None;
+    }
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join(".ci/blender_import.py");
+    let out = Command::new("blender")
+        .args(["-b", "--factory-startup", "--python"])
+        .arg(script)
+        .arg("--")
+        .arg(file)
+        .output()
+        .expect("blender runs");
+    let text = String::from_utf8_lossy(&out.stdout);
+    let line = text
+        .lines()
+        .find_map(|l| l.strip_prefix("FURROW_JSON "))
+        .unwrap_or_else(|| {
+            panic!(
+                "blender printed no result: {text}{}",
+                String::from_utf8_lossy(&out.stderr)
+            )
+        });
+    Some(serde_json::from_str(line).expect("the script prints JSON"))
+}
+
 /// Assert that every report has no errors and no warnings.
 pub fn assert_valid(reports: &[serde_json::Value]) {
     for r in reports {

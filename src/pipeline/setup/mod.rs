@@ -24,6 +24,7 @@ use crate::coupling::embedded::EmbeddedShell;
 use crate::fem::BackwardEuler;
 use crate::io::export::VertexOrigin;
 use crate::io::load::Rig;
+use crate::io::split::{FaceMap, LoadedCorners};
 use crate::lattice::Lattice;
 use crate::mesh::TriMesh;
 use crate::scene::Scene;
@@ -54,9 +55,25 @@ pub struct Model {
     pub sigma: f64,
     /// The tracking energy towards the blend-shape target.
     pub tracking: Tracking,
+    /// For each skin triangle, the loaded triangle it lies in and its corners' barycentric
+    /// coordinates there (the export's seams and primitives follow these).
+    pub corners: Vec<LoadedCorners>,
     /// The skin the `select` stage left out, riding on the interior (x = B q), and its
     /// stiffness Bᵀ K_x B at rest (N/m): the interior keeps that skin's elasticity.
     pub left_out: Option<(skin::SimulatedSkin, skin::Stiffness)>,
+}
+
+impl Model {
+    /// How the skin maps onto the loaded face, for the export.
+    pub fn face_map(&self) -> FaceMap {
+        FaceMap {
+            triangles: self.skin_mesh.triangles.clone(),
+            subdivision: self.target_of.clone(),
+            welded_of_loaded: self.welded_of_loaded.clone(),
+            welded_count: self.welded_count,
+            corners: self.corners.clone(),
+        }
+    }
 }
 
 /// What the frame step advances.
@@ -150,7 +167,16 @@ pub fn set_up(
         Some(s) => (Some(s.shell), s.vertices, s.sigma),
         None => (None, Vec::new(), f64::NAN),
     };
+    let corners = refined
+        .ancestor
+        .iter()
+        .map(|a| LoadedCorners {
+            triangle: welded.loaded_triangle[a.triangle],
+            bary: a.bary,
+        })
+        .collect();
     let model = Model {
+        corners,
         skin_mesh: refined.mesh,
         target_of: refined.target_of,
         origin: refined.origin,

@@ -197,7 +197,7 @@ pub fn first_fold(rest: &TriMesh, pose: &[Vector3<f64>]) -> Option<(usize, usize
 /// for a still rig, some shape at weight 1): the error names the frame or shape, the two
 /// triangles, the angle and the limit.
 pub fn check_folds(rig: &Rig, plan: &Plan, welded: &Welded, path: &str) -> anyhow::Result<()> {
-    let (weights, what) = pose_weights(rig, plan);
+    let (weights, what) = pose_weights(plan);
     let count = welded.mesh.positions.len();
     for (k, w) in weights.iter().enumerate() {
         let pose = weld_positions(&rig.blend(w), &welded.of_loaded, count);
@@ -229,16 +229,13 @@ enum PoseKind {
 
 /// The weights of the poses the skin is judged on: every frame at the run's fps, or for a
 /// still rig each shape at weight 1.
-fn pose_weights(rig: &Rig, plan: &Plan) -> (Vec<Vec<f64>>, PoseKind) {
-    if plan.animated {
-        (plan.weights.clone(), PoseKind::Frames)
+fn pose_weights(plan: &Plan) -> (Vec<Vec<f64>>, PoseKind) {
+    let kind = if plan.animated {
+        PoseKind::Frames
     } else {
-        let n = rig.face().targets.len();
-        let w = (0..n)
-            .map(|i| (0..n).map(|j| if i == j { 1.0 } else { 0.0 }).collect())
-            .collect();
-        (w, PoseKind::Shapes)
-    }
+        PoseKind::Shapes
+    };
+    (plan.weights.clone(), kind)
 }
 
 /// The `select` stage: with `skin.simulate = "compressed"` (the default), the welded triangles
@@ -258,7 +255,7 @@ pub fn select_skin(
     let t = Instant::now();
     let onset = onset_strain(&plan.materials);
     let threshold = scene.skin.compression_threshold.unwrap_or(0.5 * onset);
-    let (weights, _) = pose_weights(rig, plan);
+    let (weights, _) = pose_weights(plan);
     let count = welded.mesh.positions.len();
     let poses = weights
         .iter()

@@ -39,11 +39,7 @@ pub fn compose(
     k: usize,
 ) -> anyhow::Result<Composed> {
     let embedded = embed_rows(maps.rows, q);
-    let target: Vec<Vector3<f64>> = maps
-        .target_of
-        .iter()
-        .map(|o| o.iter().map(|&(w, a)| welded_target[w] * a).sum())
-        .collect();
+    let target = carry(maps.target_of, welded_target);
     let mut out = if simulated_surface {
         embedded.clone()
     } else {
@@ -70,6 +66,15 @@ pub fn compose(
         target,
         depth_max,
     })
+}
+
+/// Welded-skin values (positions or deltas, m) carried to the refined skin by the
+/// subdivision S (`target_of`: per refined vertex, (welded vertex, weight) pairs).
+pub fn carry(target_of: &[Vec<(usize, f64)>], welded: &[Vector3<f64>]) -> Vec<Vector3<f64>> {
+    target_of
+        .iter()
+        .map(|o| o.iter().map(|&(w, a)| welded[w] * a).sum())
+        .collect()
 }
 
 /// x = B q per export vertex (m), from embedding rows and node positions `q` (flat, m).
