@@ -521,7 +521,7 @@ fn a_still_rig_gets_one_corrective_per_wrinkling_shape() {
     for (i, &v) in w.refined_of_vertex.iter().enumerate() {
         assert!((p[i] - out.frames[0][v]).norm() < 0.01 * depth);
     }
-    if let Some(v) = common::validate(&[file.clone()]) {
+    if let Some(v) = common::validate(std::slice::from_ref(&file)) {
         common::assert_valid(&v);
     }
     if let Some(r) = common::blender_import(&file) {

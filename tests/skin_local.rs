@@ -44,7 +44,11 @@ fn local_and_global_skin_solves_agree_and_the_local_one_factorises_less() {
         local.factorizations,
         global.factorizations
     );
-    assert!(c.max_depth_m > 1e-4, "the sheet wrinkles: {}", c.max_depth_m);
+    assert!(
+        c.max_depth_m > 1e-4,
+        "the sheet wrinkles: {}",
+        c.max_depth_m
+    );
     assert!(
         c.max_difference_m < 0.01 * c.max_depth_m,
         "the runs differ by {} m of {} m",

@@ -126,15 +126,7 @@ pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
     out.note(&rig.face_reason);
     out.note(crate::io::units::apply(&mut rig, a.scale, scene.rig.scale));
     let count = crate::pipeline::plan::clip_weights(&rig, a.fps).0.len();
-    let frames = match &a.frames {
-        Some(t) if a.clamp_frames => {
-            let (start, end) = t.split_once(':').unwrap_or((t, ""));
-            let end = end.trim().parse::<usize>().map_or(count, |e| e.min(count));
-            Some(FrameRange::parse(&format!("{start}:{end}"), count)?)
-        }
-        Some(t) => Some(FrameRange::parse(t, count)?),
-        None => None,
-    };
+    let frames = frame_range(a, count)?;
     let opts = RunOptions {
         scene: scene.clone(),
         scene_path: a.scene.as_ref().map(|p| p.display().to_string()),
@@ -172,24 +164,7 @@ pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
     )?;
     files.push(a.output.clone());
     if let Some(range) = frames.filter(|_| write_chunk) {
-        let header = ChunkHeader {
-            rig_hash: chunk::fnv64(&bytes),
-            settings_hash: settings_hash(&scene, a.fps, &a.mesh, rig.scale.metres_per_unit),
-            fps: a.fps,
-            range,
-            clip_frames: count,
-            vertices: run.origin.len(),
-            triangles: run.triangles.clone(),
-            origin: chunk::origin_to_plain(&run.origin),
-            metres_per_unit: rig.scale.metres_per_unit,
-            face_map: run.face_map.clone(),
-        };
-        chunk::write(
-            &chunk_file,
-            &header,
-            &run.frames,
-            Overwrite::from_force(a.force),
-        )?;
+        write_chunk_file(a, &bytes, &scene, &rig, (range, count), &run, &chunk_file)?;
         files.push(chunk_file.clone());
     }
     if let Some(dir) = &a.frames_dir {
@@ -227,6 +202,52 @@ pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
         files.push(r.clone());
     }
     Ok(Animated { run, files })
+}
+
+/// The `--frames` range of a clip of `count` frames (clamped to the clip with
+/// `--clamp-frames`).
+fn frame_range(a: &AnimateArgs, count: usize) -> anyhow::Result<Option<FrameRange>> {
+    Ok(match &a.frames {
+        Some(t) if a.clamp_frames => {
+            let (start, end) = t.split_once(':').unwrap_or((t, ""));
+            let end = end.trim().parse::<usize>().map_or(count, |e| e.min(count));
+            Some(FrameRange::parse(&format!("{start}:{end}"), count)?)
+        }
+        Some(t) => Some(FrameRange::parse(t, count)?),
+        None => None,
+    })
+}
+
+/// Write the chunk file of a `--frames` run: the frames of `range` in a clip of `count`,
+/// with what `merge` needs to join chunks and check they belong together.
+fn write_chunk_file(
+    a: &AnimateArgs,
+    bytes: &[u8],
+    scene: &Scene,
+    rig: &fio::load::Rig,
+    (range, count): (FrameRange, usize),
+    run: &pipeline::RunOutput,
+    chunk_file: &Path,
+) -> anyhow::Result<()> {
+    let header = ChunkHeader {
+        rig_hash: chunk::fnv64(bytes),
+        settings_hash: settings_hash(scene, a.fps, &a.mesh, rig.scale.metres_per_unit),
+        fps: a.fps,
+        range,
+        clip_frames: count,
+        vertices: run.origin.len(),
+        triangles: run.triangles.clone(),
+        origin: chunk::origin_to_plain(&run.origin),
+        metres_per_unit: rig.scale.metres_per_unit,
+        face_map: run.face_map.clone(),
+    };
+    chunk::write(
+        chunk_file,
+        &header,
+        &run.frames,
+        Overwrite::from_force(a.force),
+    )?;
+    Ok(())
 }
 
 /// Run `furrow animate`.

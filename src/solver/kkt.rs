@@ -611,7 +611,10 @@ impl KktSolver {
         shifts: &[(usize, f64)],
         mut correct: impl FnMut(&SparseColMat<usize, f64>, &[f64], &mut [f64]),
     ) -> GmresReport {
-        assert!(self.factored, "solve_lagged_with before a successful factorize");
+        assert!(
+            self.factored,
+            "solve_lagged_with before a successful factorize"
+        );
         let b = rhs.to_vec();
         let (nf, nc, delta) = (self.n_free, self.n_cons, self.delta);
         let a = self.base.take().expect("assembled matrix");

@@ -223,9 +223,7 @@ impl PatchSet {
         let mut blocks = std::mem::take(&mut self.blocks);
         let mut next = BTreeMap::new();
         for g in groups {
-            let b = blocks
-                .remove(&g)
-                .unwrap_or_else(|| self.block(a, &g));
+            let b = blocks.remove(&g).unwrap_or_else(|| self.block(a, &g));
             next.insert(g, b);
         }
         let delta = kkt.delta();
@@ -243,10 +241,8 @@ impl PatchSet {
     /// The connected sets of the cells `active` (cells touch when their keys differ by at
     /// most one on every axis), each sorted, in the order of their first cell.
     fn components(&self, active: &[usize]) -> Vec<Vec<usize>> {
-        let at: BTreeMap<[i64; 3], usize> = active
-            .iter()
-            .map(|&c| (self.cells[c].key, c))
-            .collect();
+        let at: BTreeMap<[i64; 3], usize> =
+            active.iter().map(|&c| (self.cells[c].key, c)).collect();
         let mut seen = std::collections::BTreeSet::new();
         let mut groups = Vec::new();
         for &c in active {
@@ -445,7 +441,12 @@ fn constraint_rows(a: &SparseColMat<usize, f64>, n_free: usize, dofs: &[usize]) 
 impl Patch {
     /// The block of free dofs `dofs` (sorted; it writes those in `core`, sorted) and
     /// constraint `rows` (all its own) of the assembled matrix `a`.
-    fn new(a: &SparseColMat<usize, f64>, dofs: Vec<usize>, core: &[usize], rows: Vec<usize>) -> Self {
+    fn new(
+        a: &SparseColMat<usize, f64>,
+        dofs: Vec<usize>,
+        core: &[usize],
+        rows: Vec<usize>,
+    ) -> Self {
         let n_dofs = dofs.len();
         let index: Vec<usize> = dofs.into_iter().chain(rows).collect();
         let mut local: BTreeMap<usize, usize> = BTreeMap::new();
@@ -462,7 +463,9 @@ impl Patch {
         let (mut hess, mut slots, mut cons) = (Vec::new(), Vec::new(), Vec::new());
         for (lj, &j) in index[..n_dofs].iter().enumerate() {
             for q in cp[j]..cp[j + 1] {
-                let Some(&li) = local.get(&ri[q]) else { continue };
+                let Some(&li) = local.get(&ri[q]) else {
+                    continue;
+                };
                 if li < n_dofs {
                     hess.push((li, lj, 0.0));
                     slots.push(q);
@@ -551,9 +554,7 @@ mod tests {
 
     #[test]
     fn cells_cover_every_dof_once_as_core_and_overlap_reaches_neighbours() {
-        let positions: Vec<[f64; 3]> = (0..40)
-            .map(|i| [i as f64 * 0.1, 0.0, 0.0])
-            .collect();
+        let positions: Vec<[f64; 3]> = (0..40).map(|i| [i as f64 * 0.1, 0.0, 0.0]).collect();
         let s = PatchSettings {
             size: 1.0,
             overlap: 0.25,

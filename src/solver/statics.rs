@@ -624,15 +624,14 @@ impl StaticSolver {
         if current {
             return;
         }
-        let positions: Vec<[f64; 3]> = m
-            .s
-            .free
-            .iter()
-            .map(|&d| {
-                let v = 3 * (d / 3);
-                [x[v], x[v + 1], x[v + 2]]
-            })
-            .collect();
+        let positions: Vec<[f64; 3]> =
+            m.s.free
+                .iter()
+                .map(|&d| {
+                    let v = 3 * (d / 3);
+                    [x[v], x[v + 1], x[v + 2]]
+                })
+                .collect();
         self.patches = Some((PatchSet::build(nf, nc, &positions, settings), count));
     }
 

@@ -116,7 +116,11 @@ pub struct SolverComparison {
     pub region_m: f64,
 }
 
-fn run_solver(rig: &Rig, opts: &RunOptions, solver: &str) -> anyhow::Result<(SolverRun, RunOutput)> {
+fn run_solver(
+    rig: &Rig,
+    opts: &RunOptions,
+    solver: &str,
+) -> anyhow::Result<(SolverRun, RunOutput)> {
     let mut o = opts.clone();
     o.scene.solver.skin_solver = Some(solver.to_string());
     let out = pipeline::run(rig, &o, &|_, _, _| {})?;
@@ -191,7 +195,8 @@ pub fn check_with_global(rig: &Rig, opts: &RunOptions) -> anyhow::Result<Residua
     use crate::pipeline::step::{interior::InteriorSchedule, step_frame, Scratch, StepOptions};
     let plan = pipeline::plan::Plan::new(rig, opts)?;
     let mut log = pipeline::setup::Log::default();
-    let (model, mut state) = pipeline::setup::set_up(rig, &opts.scene, &plan, &mut log, &|_, _, _| {})?;
+    let (model, mut state) =
+        pipeline::setup::set_up(rig, &opts.scene, &plan, &mut log, &|_, _, _| {})?;
     let options = StepOptions {
         schedule: InteriorSchedule {
             substeps: plan.substeps,
@@ -208,9 +213,20 @@ pub fn check_with_global(rig: &Rig, opts: &RunOptions) -> anyhow::Result<Residua
         tolerance: 0.0,
     };
     for k in 0..plan.range.end {
-        step_frame(rig, &plan.weights[k], k, &model, &mut state, &mut scratch, options)?;
+        step_frame(
+            rig,
+            &plan.weights[k],
+            k,
+            &model,
+            &mut state,
+            &mut scratch,
+            options,
+        )?;
         let q = state.interior.q.clone();
-        let skin = state.skin.as_mut().ok_or_else(|| anyhow::anyhow!("no skin is simulated"))?;
+        let skin = state
+            .skin
+            .as_mut()
+            .ok_or_else(|| anyhow::anyhow!("no skin is simulated"))?;
         let (r, tol) = skin.residual(&q)?;
         check.frames += 1;
         check.tolerance = tol;

@@ -688,7 +688,7 @@ mod tests {
             ms: 0.0,
             halvings: 0,
             load_steps: 0,
-..Default::default()
+            ..Default::default()
         };
         let v = [
             rec("converged", 2, 1e-9),

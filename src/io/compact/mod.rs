@@ -163,11 +163,11 @@ impl CompactDocument {
             .collect();
     }
 
-    /// Write the GLB: with `compress`, see [`Self::to_compressed_glb`]; without, every view
+    /// Write the GLB: with `compress`, see [`Self::into_compressed_glb`]; without, every view
     /// as is in the binary chunk (the same document, decoded).
     pub fn to_glb(mut self, compress: bool) -> anyhow::Result<Vec<u8>> {
         if compress {
-            self.to_compressed_glb()
+            self.into_compressed_glb()
         } else {
             Ok(self.doc.to_glb())
         }
@@ -176,7 +176,7 @@ impl CompactDocument {
     /// Compress every view and write the GLB: compressed bytes in buffer 0 (the binary chunk),
     /// decoded layouts in buffer 1, a fallback buffer without data. A view that does not
     /// shrink is stored plainly in buffer 0. `EXT_meshopt_compression` is used and required.
-    fn to_compressed_glb(mut self) -> anyhow::Result<Vec<u8>> {
+    fn into_compressed_glb(mut self) -> anyhow::Result<Vec<u8>> {
         let mut bin: Vec<u8> = Vec::new();
         let mut fallback_len = 0usize;
         let views = std::mem::take(&mut self.doc.view_bytes);

@@ -29,7 +29,7 @@ pub fn fit_activations(
         ms: t.elapsed().as_secs_f64() * 1e3,
         halvings: 0,
         load_steps: 0,
-..Default::default()
+        ..Default::default()
     })
 }
 

@@ -45,7 +45,7 @@ pub fn advance(
         ms: 0.0,
         halvings: 0,
         load_steps: 0,
-..Default::default()
+        ..Default::default()
     };
     let q = &state.interior.q;
     let skin_force = coupling_terms(model, state.skin.as_ref(), q, scratch, schedule);
