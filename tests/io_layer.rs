@@ -46,11 +46,7 @@ type Synthetic = (Vec<Vec<nalgebra::Vector3<f64>>>, Vec<Vec<f64>>, Clip);
 
 /// Frames of the rig's blend shapes (at most 40) plus ripples along the normals, 1 % of the
 /// face's size deep, growing over the clip; the clip they make.
-fn frames(
-    rig: &Rig,
-    map: &FaceMap,
-    fps: f64,
-) -> Synthetic {
+fn frames(rig: &Rig, map: &FaceMap, fps: f64) -> Synthetic {
     let (all, animated) = clip_weights(rig, fps);
     let count = all.len().min(40);
     let weights = all[..count].to_vec();

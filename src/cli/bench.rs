@@ -60,15 +60,8 @@ pub enum BenchCommand {
         after_help = "Example:\n  furrow bench select --rig rigs/face.glb --frames 0:40\n  furrow bench select --rig rigs/head.glb --frames 0:10 --json"
     )]
     Select {
-        /// The rig.
-        #[arg(long, default_value = "rigs/face.glb")]
-        rig: std::path::PathBuf,
-        /// Frames to run, `A:B` (end exclusive).
-        #[arg(long, default_value = "0:40")]
-        frames: String,
-        /// Frames per second at which the clip is sampled.
-        #[arg(long, default_value_t = 30.0)]
-        fps: f64,
+        #[command(flatten)]
+        on: RigFrames,
     },
     /// The skin's local solver (fresh factors of only the patches whose Hessian changed, the
     /// default) against the global reference on the same skin, in one process: skin time,
@@ -77,15 +70,8 @@ pub enum BenchCommand {
         after_help = "Example:\n  furrow bench skin --rig rigs/face.glb --frames 0:40\n  furrow bench skin --rig rigs/head.glb --frames 0:10 --json"
     )]
     Skin {
-        /// The rig.
-        #[arg(long, default_value = "rigs/face.glb")]
-        rig: std::path::PathBuf,
-        /// Frames to run, `A:B` (end exclusive).
-        #[arg(long, default_value = "0:40")]
-        frames: String,
-        /// Frames per second at which the clip is sampled.
-        #[arg(long, default_value_t = 30.0)]
-        fps: f64,
+        #[command(flatten)]
+        on: RigFrames,
     },
     /// Activation fit: 52 muscles on a face lattice of about N cells, a 335-frame clip.
     #[command(after_help = "Example:\n  furrow bench fit\n  furrow bench fit --cells 2000 --json")]
@@ -150,8 +136,8 @@ pub fn run(c: BenchCommand, out: &Output) -> anyhow::Result<()> {
             no_demo,
             force,
         } => suite(&dir, faces, elements, cells, !no_demo, force, out)?,
-        BenchCommand::Select { rig, frames, fps } => select(&rig, &frames, fps, out)?,
-        BenchCommand::Skin { rig, frames, fps } => skin(&rig, &frames, fps, out)?,
+        BenchCommand::Select { on } => select(&on, out)?,
+        BenchCommand::Skin { on } => skin(&on, out)?,
         BenchCommand::Fit { cells, gn_frames } => {
             anyhow::ensure!(
                 (1..=1_000_000).contains(&cells),
@@ -171,12 +157,26 @@ pub fn run(c: BenchCommand, out: &Output) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The rig at `rig` (units decided as `animate` does) and the run options for `frames`.
-fn bench_rig(
-    rig: &std::path::Path,
-    frames: &str,
+/// The rig and frames a rig benchmark runs on.
+#[derive(clap::Args, Debug)]
+pub struct RigFrames {
+    /// The rig.
+    #[arg(long, default_value = "rigs/face.glb")]
+    rig: std::path::PathBuf,
+    /// Frames to run, `A:B` (end exclusive).
+    #[arg(long, default_value = "0:40")]
+    frames: String,
+    /// Frames per second at which the clip is sampled.
+    #[arg(long, default_value_t = 30.0)]
     fps: f64,
+}
+
+/// The rig of `on` (units decided as `animate` does) and the run options for its frames.
+fn bench_rig(
+    on: &RigFrames,
 ) -> anyhow::Result<(crate::io::load::Rig, crate::pipeline::RunOptions)> {
+    let RigFrames { rig, frames, fps } = on;
+    let fps = *fps;
     let mut loaded = crate::io::load::load(rig, &Default::default())?;
     crate::io::units::apply(&mut loaded, None, None);
     let count = crate::pipeline::plan::clip_weights(&loaded, fps).0.len();
@@ -190,16 +190,16 @@ fn bench_rig(
 }
 
 /// `furrow bench select`: the selected skin against the whole skin on a rig.
-fn select(rig: &std::path::Path, frames: &str, fps: f64, out: &Output) -> anyhow::Result<()> {
-    let (loaded, opts) = bench_rig(rig, frames, fps)?;
+fn select(on: &RigFrames, out: &Output) -> anyhow::Result<()> {
+    let (loaded, opts) = bench_rig(on)?;
     let c = crate::studies::locality::compare_selection(&loaded, &opts)?;
     print(out, "bench select", &serde_json::to_value(&c)?);
     Ok(())
 }
 
 /// `furrow bench skin`: the local skin solver against the global one on a rig.
-fn skin(rig: &std::path::Path, frames: &str, fps: f64, out: &Output) -> anyhow::Result<()> {
-    let (loaded, opts) = bench_rig(rig, frames, fps)?;
+fn skin(on: &RigFrames, out: &Output) -> anyhow::Result<()> {
+    let (loaded, opts) = bench_rig(on)?;
     let c = crate::studies::locality::compare_solvers(&loaded, &opts)?;
     print(out, "bench skin", &serde_json::to_value(&c)?);
     Ok(())

@@ -481,7 +481,7 @@ fn replace_face(rig: &Rig, set: &FrameSet, animated: bool) -> anyhow::Result<Doc
             .remove("animations");
     }
     hoist_skinned_meshes(&mut doc.json);
-    doc.prune();
+    doc.prune()?;
     Ok(doc)
 }
 
@@ -632,7 +632,7 @@ fn strip_face_weight_channels(json: &mut Value, node: usize) {
 /// validator, which does not check meshopt, is given for a compressed file.
 pub fn decoded_glb(rig: &Rig) -> anyhow::Result<Vec<u8>> {
     let mut doc = base_document(rig)?;
-    doc.prune();
+    doc.prune()?;
     Ok(doc.to_glb())
 }
 

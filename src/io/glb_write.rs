@@ -110,24 +110,39 @@ impl Document {
     }
 
     /// Drop accessors and buffer views that nothing references, renumbering the rest;
-    /// returns, for each view before pruning, whether it was kept.
-    pub fn prune(&mut self) -> Vec<bool> {
+    /// returns, for each view before pruning, whether it was kept. A reference to an
+    /// accessor or view the document does not have is refused (the rig it came from is
+    /// broken there).
+    pub fn prune(&mut self) -> anyhow::Result<Vec<bool>> {
         let j = &mut self.json;
         let na = j["accessors"].as_array().map_or(0, |a| a.len());
         let mut used_acc = vec![false; na];
-        mark_accessor_refs(j, &mut used_acc);
+        let mut dangling = None;
+        mark_accessor_refs(j, &mut |i| match used_acc.get_mut(i) {
+            Some(u) => *u = true,
+            None => dangling = Some(("accessor", i)),
+        });
+        let mut used_view = vec![false; self.view_bytes.len()];
+        if let Some((what, i)) = dangling {
+            anyhow::bail!("the glTF refers to {what} {i}, which it does not have");
+        }
         remap_accessor_refs(j, &renumber(&used_acc));
         if let Some(accs) = j.get_mut("accessors").and_then(|v| v.as_array_mut()) {
             *accs = keep_used(std::mem::take(accs), &used_acc);
         }
-        let mut used_view = vec![false; self.view_bytes.len()];
-        mark_view_refs(j, &mut used_view);
+        mark_view_refs(j, &mut |i| match used_view.get_mut(i) {
+            Some(u) => *u = true,
+            None => dangling = Some(("bufferView", i)),
+        });
+        if let Some((what, i)) = dangling {
+            anyhow::bail!("the glTF refers to {what} {i}, which it does not have");
+        }
         remap_view_refs(j, &renumber(&used_view));
         if let Some(views) = j.get_mut("bufferViews").and_then(|v| v.as_array_mut()) {
             *views = keep_used(std::mem::take(views), &used_view);
         }
         self.view_bytes = keep_used(std::mem::take(&mut self.view_bytes), &used_view);
-        used_view
+        Ok(used_view)
     }
 
     /// Lay out the binary buffer (views 4-byte aligned), fill offsets, and write a GLB.
@@ -242,12 +257,10 @@ fn values_mut<'a>(v: &'a mut Value, key: &str) -> impl Iterator<Item = &'a mut V
         .flat_map(|o| o.values_mut())
 }
 
-/// Mark index `v` (when it is one and in range) as used.
-fn mark(v: &Value, used: &mut [bool]) {
+/// Hand index `v` (when it is one) to `used`.
+fn mark(v: &Value, used: &mut impl FnMut(usize)) {
     if let Some(i) = v.as_u64() {
-        if let Some(u) = used.get_mut(i as usize) {
-            *u = true;
-        }
+        used(usize::try_from(i).unwrap_or(usize::MAX));
     }
 }
 
@@ -260,7 +273,7 @@ fn remap(v: &mut Value, map: &[Option<usize>]) {
 
 /// Mark the accessors referenced by meshes (attributes, indices, morph targets), skins
 /// (inverse bind matrices) and animation samplers (input and output).
-fn mark_accessor_refs(j: &Value, used: &mut [bool]) {
+fn mark_accessor_refs(j: &Value, used: &mut impl FnMut(usize)) {
     for m in items(j, "meshes") {
         for p in items(m, "primitives") {
             for a in p["attributes"].as_object().into_iter().flatten() {
@@ -316,7 +329,7 @@ fn remap_accessor_refs(j: &mut Value, map: &[Option<usize>]) {
 }
 
 /// Mark the buffer views referenced by accessors (including sparse ones) and images.
-fn mark_view_refs(j: &Value, used: &mut [bool]) {
+fn mark_view_refs(j: &Value, used: &mut impl FnMut(usize)) {
     for a in items(j, "accessors") {
         mark(&a["bufferView"], used);
         mark(&a["sparse"]["indices"]["bufferView"], used);
@@ -368,4 +381,28 @@ fn renumber(used: &[bool]) -> Vec<Option<usize>> {
             }
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A view referenced by an image that the document does not have (a loader fuzz find:
+    /// pruning indexed past the views and panicked) is refused with its number; references
+    /// in range are pruned and renumbered.
+    #[test]
+    fn prune_refuses_a_reference_past_the_end_and_renumbers_the_rest() {
+        let mut doc = Document::new();
+        let unused = doc.push_view(vec![0; 4], None);
+        let used = doc.push_view(vec![1; 4], None);
+        assert_eq!((unused, used), (0, 1));
+        doc.json["images"] = json!([{ "bufferView": used, "mimeType": "image/png" }]);
+        let kept = doc.prune().unwrap();
+        assert_eq!(kept, vec![false, true]);
+        assert_eq!(doc.json["images"][0]["bufferView"], json!(0));
+        assert_eq!(doc.view_bytes, vec![vec![1; 4]]);
+        doc.json["images"] = json!([{ "bufferView": 6, "mimeType": "image/png" }]);
+        let err = doc.prune().unwrap_err().to_string();
+        assert!(err.contains("bufferView 6"), "{err}");
+    }
 }

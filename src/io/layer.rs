@@ -241,7 +241,7 @@ pub fn layer_glb(
         notes.extend(face_weights::install(&mut cd, rig, keys.as_ref(), k)?);
     }
     export::hoist_skinned_meshes(&mut cd.doc.json);
-    cd.prune();
+    cd.prune()?;
     let bytes = cd.to_glb(opts.compress)?;
     Ok(Written {
         bytes,

@@ -61,6 +61,22 @@ impl TriMesh {
             .sum()
     }
 
+    /// Each vertex's share of the surface area at `positions` (m², same topology as
+    /// `self`): a third of the areas of its triangles (the lumped mass of linear elements).
+    pub fn vertex_areas_of(&self, positions: &[Vector3<f64>]) -> Vec<f64> {
+        let mut area = vec![0.0; positions.len()];
+        for &[a, b, c] in &self.triangles {
+            let t = (positions[b] - positions[a])
+                .cross(&(positions[c] - positions[a]))
+                .norm()
+                / 6.0;
+            for v in [a, b, c] {
+                area[v] += t;
+            }
+        }
+        area
+    }
+
     /// Area-weighted unit vertex normals for the given positions (same topology as `self`).
     /// Vertices with no non-degenerate incident triangle get +Z.
     pub fn vertex_normals_of(&self, positions: &[Vector3<f64>]) -> Vec<Vector3<f64>> {

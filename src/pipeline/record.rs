@@ -71,6 +71,36 @@ pub struct StageRecord {
     /// Skin: solves with a factor (GMRES iterations).
     #[serde(skip_serializing_if = "is_zero")]
     pub linear_solves: usize,
+    /// Skin: where the wall time went (ms), when the stage solved anything.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub time: Option<SolveTime>,
+}
+
+/// Where a skin solve's wall time went (ms): the rest of `ms` is the solve's own bookkeeping
+/// and the self-intersection check.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct SolveTime {
+    /// Hessian and KKT assembly.
+    pub assembly_ms: f64,
+    /// Symbolic analysis (ordering) of the KKT pattern.
+    pub symbolic_ms: f64,
+    /// Numeric factorisations, the whole skin's and the patches'.
+    pub factor_ms: f64,
+    /// Solves with the factors (GMRES).
+    pub solve_ms: f64,
+    /// Energy and gradient evaluations of the line search.
+    pub line_search_ms: f64,
+}
+
+impl SolveTime {
+    /// Add another solve's times.
+    pub fn add(&mut self, o: &SolveTime) {
+        self.assembly_ms += o.assembly_ms;
+        self.symbolic_ms += o.symbolic_ms;
+        self.factor_ms += o.factor_ms;
+        self.solve_ms += o.solve_ms;
+        self.line_search_ms += o.line_search_ms;
+    }
 }
 
 fn is_zero(n: &usize) -> bool {
@@ -120,6 +150,8 @@ pub struct Totals {
     pub skin_patch_factorizations: usize,
     /// Skin Newton iterations, summed over frames.
     pub skin_iterations: usize,
+    /// Where the skin's time went, summed over frames (ms).
+    pub skin_time: SolveTime,
     /// Wall time of the whole run (s).
     pub wall_s: f64,
 }
@@ -142,6 +174,9 @@ impl Totals {
             self.skin_factorizations += s.factorizations;
             self.skin_patch_factorizations += s.patch_factorizations;
             self.skin_iterations += s.iterations;
+            if let Some(t) = &s.time {
+                self.skin_time.add(t);
+            }
         }
     }
 }

@@ -152,8 +152,8 @@ impl CompactDocument {
 
     /// Drop accessors and views that nothing references (see [`Document::prune`]), with
     /// their codecs.
-    pub fn prune(&mut self) {
-        let used = self.doc.prune();
+    pub fn prune(&mut self) -> anyhow::Result<()> {
+        let used = self.doc.prune()?;
         let codecs = std::mem::take(&mut self.codecs);
         self.codecs = codecs
             .into_iter()
@@ -161,6 +161,7 @@ impl CompactDocument {
             .filter(|(_, u)| *u)
             .map(|(c, _)| c)
             .collect();
+        Ok(())
     }
 
     /// Write the GLB: with `compress`, see [`Self::into_compressed_glb`]; without, every view

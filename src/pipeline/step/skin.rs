@@ -5,7 +5,7 @@
 
 use crate::coupling::embedded::EmbeddedShell;
 use crate::mesh::intersect::first_self_intersection;
-use crate::pipeline::record::StageRecord;
+use crate::pipeline::record::{SolveTime, StageRecord};
 use std::time::Instant;
 
 /// Solve the skin for node positions `q` (flat, m) and record the statics' outcome.
@@ -33,5 +33,12 @@ pub fn solve_skin(skin: &mut EmbeddedShell, q: &[f64]) -> anyhow::Result<StageRe
         factorizations: rep.factorizations,
         patch_factorizations: rep.patch_factorizations,
         linear_solves: rep.linear_solves,
+        time: (rep.iterations > 0).then_some(SolveTime {
+            assembly_ms: rep.assembly_s * 1e3,
+            symbolic_ms: rep.symbolic_s * 1e3,
+            factor_ms: rep.factor_s * 1e3,
+            solve_ms: rep.solve_s * 1e3,
+            line_search_ms: rep.line_search_s * 1e3,
+        }),
     })
 }
