@@ -49,7 +49,6 @@ use plan::Plan;
 use record::{FrameRecord, RunReport, StagePlan, Totals};
 use setup::{Log, Model, State};
 use std::time::Instant;
-use step::interior::InteriorSchedule;
 use step::{Scratch, StepOptions};
 
 /// What to run.
@@ -104,14 +103,7 @@ pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<R
     if state.skin.is_some() {
         log.stages.push(shell_stage(&plan, &model));
     }
-    let options = StepOptions {
-        schedule: InteriorSchedule {
-            substeps: plan.substeps,
-            every_frame_stiffness: scene.solver.skin_stiffness.as_deref() == Some("every_frame"),
-        },
-        simulated_surface: scene.export.surface.as_deref() == Some("simulated"),
-        fps: plan.fps,
-    };
+    let options = StepOptions::of(scene, plan.substeps, plan.fps);
     let mut scratch = Scratch::new(model.lattice.node_count());
     let mut per_frame = Vec::new();
     let mut out = Frames::default();

@@ -524,12 +524,7 @@ impl KktSolver {
         let rep = {
             let this = &mut *self;
             fgmres(
-                |v, out| {
-                    mul_sym_vec_into(&a, v, out);
-                    for i in nf..nf + nc {
-                        out[i] += delta * v[i];
-                    }
-                },
+                |v, out| kkt_mul(&a, (nf, nc), delta, &[], v, out),
                 |v| this.raw_solve(v),
                 &b,
                 rhs,
@@ -622,15 +617,7 @@ impl KktSolver {
         let rep = {
             let this = &mut *self;
             fgmres(
-                |v, out| {
-                    mul_sym_vec_into(&a, v, out);
-                    for i in nf..nf + nc {
-                        out[i] += delta * v[i];
-                    }
-                    for &(i, t) in shifts {
-                        out[i] += t * v[i];
-                    }
-                },
+                |v, out| kkt_mul(&a, (nf, nc), delta, shifts, v, out),
                 |v| {
                     r.copy_from_slice(v);
                     this.raw_solve(v);
@@ -823,6 +810,27 @@ fn factorize_free(
         positions: None,
     };
     s.factorize(&blocks, shift).unwrap()
+}
+
+/// out = (A + δ I on the constraint block + `shifts` on the diagonal) v: the KKT operator
+/// GMRES solves, from the assembled lower-triangular KKT matrix `a` of `sizes` = (free dofs,
+/// constraint rows), with δ (the regularisation the factor carries) removed again and the
+/// diagonal `shifts` (KKT index, N/m) added.
+fn kkt_mul(
+    a: &SparseColMat<usize, f64>,
+    (nf, nc): (usize, usize),
+    delta: f64,
+    shifts: &[(usize, f64)],
+    v: &[f64],
+    out: &mut [f64],
+) {
+    mul_sym_vec_into(a, v, out);
+    for i in nf..nf + nc {
+        out[i] += delta * v[i];
+    }
+    for &(i, t) in shifts {
+        out[i] += t * v[i];
+    }
 }
 
 #[cfg(test)]

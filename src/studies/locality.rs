@@ -192,19 +192,12 @@ pub struct ResidualCheck {
 /// Step every frame of `opts` on `rig` and, after each, evaluate the skin's residual at its
 /// final state the way the global reference tests convergence.
 pub fn check_with_global(rig: &Rig, opts: &RunOptions) -> anyhow::Result<ResidualCheck> {
-    use crate::pipeline::step::{interior::InteriorSchedule, step_frame, Scratch, StepOptions};
+    use crate::pipeline::step::{step_frame, Scratch, StepOptions};
     let plan = pipeline::plan::Plan::new(rig, opts)?;
     let mut log = pipeline::setup::Log::default();
     let (model, mut state) =
         pipeline::setup::set_up(rig, &opts.scene, &plan, &mut log, &|_, _, _| {})?;
-    let options = StepOptions {
-        schedule: InteriorSchedule {
-            substeps: plan.substeps,
-            every_frame_stiffness: false,
-        },
-        simulated_surface: false,
-        fps: plan.fps,
-    };
+    let options = StepOptions::of(&opts.scene, plan.substeps, plan.fps);
     let mut scratch = Scratch::new(model.lattice.node_count());
     let mut check = ResidualCheck {
         frames: 0,

@@ -48,6 +48,22 @@ pub struct StepOptions {
     pub fps: f64,
 }
 
+impl StepOptions {
+    /// The stepping `scene` asks for, with `substeps` interior sub-steps per frame at `fps`
+    /// frames per second (Hz).
+    pub fn of(scene: &crate::scene::Scene, substeps: usize, fps: f64) -> Self {
+        Self {
+            schedule: InteriorSchedule {
+                substeps,
+                every_frame_stiffness: scene.solver.skin_stiffness.as_deref()
+                    == Some("every_frame"),
+            },
+            simulated_surface: scene.export.surface.as_deref() == Some("simulated"),
+            fps,
+        }
+    }
+}
+
 impl Model {
     /// How the export vertices follow the lattice, the target and the skin.
     pub fn surface_maps(&self) -> SurfaceMaps<'_> {
