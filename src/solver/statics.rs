@@ -19,6 +19,7 @@
 //! compressed boundary elements (the shell bench at 20k faces: 9 → 4 iterations,
 //! 22 → 4 factorisations).
 
+use super::gmres::GmresReport;
 use super::kkt::{KktBlocks, KktFactorInfo, KktSolver};
 use super::linesearch::{judge, EnergyMerit, Trial};
 use super::newton::{self, Check, NewtonLimits, NewtonProblem, Rejection, Verdict};
@@ -228,6 +229,13 @@ pub struct StaticSolver {
     /// The patches of the current KKT layout (with `settings.patches`), and the count of
     /// symbolic analyses when they were built (a new analysis is a new layout).
     patches: Option<(PatchSet, usize)>,
+}
+
+/// Whether a Newton direction `d` that GMRES left as `g` may be taken: GMRES converged, `d`
+/// is finite and has positive curvature dᵀK d on the `nf` free dofs (a descent direction of
+/// the energy on the constraints).
+fn accepted(kkt: &KktSolver, g: &GmresReport, d: &[f64], nf: usize) -> bool {
+    g.converged && d.iter().all(|v| v.is_finite()) && kkt.curvature(&d[..nf]) > 0.0
 }
 
 /// What a factorisation was built for besides the Hessian: the free constraint entries, the
@@ -599,9 +607,7 @@ impl StaticSolver {
         rep.linear_solves += g.iterations;
         rep.solve_s += t.elapsed().as_secs_f64();
         self.lag_last_iterations = g.iterations;
-        let nf = m.free();
-        let ok =
-            g.converged && d.iter().all(|v| v.is_finite()) && self.kkt.curvature(&d[..nf]) > 0.0;
+        let ok = accepted(&self.kkt, &g, &d, m.free());
         if ok {
             rhs.copy_from_slice(&d);
             rep.lagged_directions += 1;
@@ -678,7 +684,7 @@ impl StaticSolver {
         });
         rep.linear_solves += g.iterations;
         rep.solve_s += t.elapsed().as_secs_f64();
-        let ok = g.converged && d.iter().all(|v| v.is_finite()) && kkt.curvature(&d[..nf]) > 0.0;
+        let ok = accepted(kkt, &g, &d, nf);
         if ok {
             rhs.copy_from_slice(&d);
             rep.lagged_directions += 1;
