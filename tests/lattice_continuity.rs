@@ -6,16 +6,10 @@
 mod lattice_support;
 
 use furrow::lattice::{ElementOrder, Lattice, LatticeSettings, MaterialPoint};
-use lattice_support::box_mesh;
+use lattice_support::{box_mesh, noise};
 use nalgebra::Vector3;
 
 type V = Vector3<f64>;
-
-/// Deterministic pseudo-random numbers in [−1, 1].
-fn noise(i: usize) -> f64 {
-    let x = ((i as f64 + 1.0) * 12.9898).sin() * 43758.5453;
-    2.0 * (x - x.floor()) - 1.0
-}
 
 /// Largest value and slope jumps across the face x = 0.1 between the two elements, for
 /// a random control-point perturbation of 20 % of a cell, at one-sided step `d` (local units).

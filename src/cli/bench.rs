@@ -73,6 +73,16 @@ pub enum BenchCommand {
         #[command(flatten)]
         on: RigFrames,
     },
+    /// Muscles against tracking: the rig run driven by its generated muscles (activations
+    /// fitted per frame) and by tracking, in one process: fit residuals and times, and the
+    /// phase-free wrinkle amplitude difference per 2λ.
+    #[command(
+        after_help = "Example:\n  furrow bench muscles --rig rigs/face.glb --frames 0:40\n  furrow bench muscles --rig rigs/head.glb --frames 0:10 --json"
+    )]
+    Muscles {
+        #[command(flatten)]
+        on: RigFrames,
+    },
     /// Activation fit: 52 muscles on a face lattice of about N cells, a 335-frame clip.
     #[command(after_help = "Example:\n  furrow bench fit\n  furrow bench fit --cells 2000 --json")]
     Fit {
@@ -138,6 +148,11 @@ pub fn run(c: BenchCommand, out: &Output) -> anyhow::Result<()> {
         } => suite(&dir, faces, elements, cells, !no_demo, force, out)?,
         BenchCommand::Select { on } => select(&on, out)?,
         BenchCommand::Skin { on } => skin(&on, out)?,
+        BenchCommand::Muscles { on } => {
+            let (loaded, opts) = bench_rig(&on)?;
+            let c = crate::studies::muscles::compare_drivers(&loaded, &opts)?;
+            print(out, "bench muscles", &serde_json::to_value(&c)?);
+        }
         BenchCommand::Fit { cells, gn_frames } => {
             anyhow::ensure!(
                 (1..=1_000_000).contains(&cells),
@@ -169,20 +184,31 @@ pub struct RigFrames {
     /// Frames per second at which the clip is sampled.
     #[arg(long, default_value_t = 30.0)]
     fps: f64,
+    /// Scene file (TOML) both runs start from; default: the defaults.
+    #[arg(long)]
+    scene: Option<std::path::PathBuf>,
 }
 
 /// The rig of `on` (units decided as `animate` does) and the run options for its frames.
 fn bench_rig(
     on: &RigFrames,
 ) -> anyhow::Result<(crate::io::load::Rig, crate::pipeline::RunOptions)> {
-    let RigFrames { rig, frames, fps } = on;
+    let RigFrames {
+        rig,
+        frames,
+        fps,
+        scene,
+    } = on;
     let fps = *fps;
     let mut loaded = crate::io::load::load(rig, &Default::default())?;
     crate::io::units::apply(&mut loaded, None, None);
     let count = crate::pipeline::plan::clip_weights(&loaded, fps).0.len();
     let opts = crate::pipeline::RunOptions {
-        scene: crate::scene::Scene::default(),
-        scene_path: None,
+        scene: match scene {
+            Some(p) => crate::scene::Scene::load(p)?,
+            None => crate::scene::Scene::default(),
+        },
+        scene_path: scene.as_ref().map(|p| p.display().to_string()),
         fps,
         frames: Some(crate::pipeline::frames::FrameRange::parse(frames, count)?),
     };

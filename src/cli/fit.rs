@@ -215,6 +215,7 @@ fn muscle_rig(
                 lattice,
                 &interior,
                 &face.targets,
+                None,
                 &GenerateSettings::default(),
             )?;
             for (name, why) in &g.skipped {
@@ -257,7 +258,7 @@ fn fit_frames(
         csv.push(',');
         csv.push_str(&csv_field(n));
     }
-    csv.push_str(",rms_residual_m,status,clarabel_status\n");
+    csv.push_str(",rms_residual_m,rms_displacement_m,status,clarabel_status\n");
     let mut done = FittedFrames {
         csv,
         curves: vec![Vec::new(); names.len()],
@@ -276,8 +277,8 @@ fn fit_frames(
         }
         let _ = writeln!(
             done.csv,
-            ",{:.9e},{:?},{}",
-            f.rms_residual, f.status, f.clarabel_status
+            ",{:.9e},{:.9e},{:?},{}",
+            f.rms_residual, f.rms_displacement, f.status, f.clarabel_status
         );
         if f.status != FrameStatus::Fitted {
             done.not_fitted.push((k, f.status));
@@ -292,7 +293,48 @@ fn fit_frames(
     Ok(done)
 }
 
-/// Write the PNG of the activation `curves` of muscles `names` over time to `png`.
+/// Muscles named in the activation plot at most; the others are drawn as one envelope.
+const PLOT_NAMED: usize = 8;
+
+/// An activation curve: (time in s, activation) per frame.
+type Curve = Vec<(f64, f64)>;
+
+/// The muscles a plot names, (name, curve) each, and the envelope of the others: their count
+/// and pointwise largest activation.
+type Strongest = (Vec<(String, Curve)>, Option<(usize, Curve)>);
+
+/// The `k` muscles of largest peak activation, in their order, and when there are more, the
+/// envelope of the others.
+fn strongest(names: &[String], curves: Vec<Curve>, k: usize) -> Strongest {
+    let peak = |c: &Curve| c.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max);
+    let mut order: Vec<usize> = (0..curves.len()).collect();
+    order.sort_by(|&a, &b| {
+        peak(&curves[b])
+            .total_cmp(&peak(&curves[a]))
+            .then(a.cmp(&b))
+    });
+    let keep: Vec<bool> = (0..curves.len())
+        .map(|i| order[..k.min(order.len())].contains(&i))
+        .collect();
+    let mut named = Vec::new();
+    let mut envelope: Option<Curve> = None;
+    let mut others = 0;
+    for ((name, c), kept) in names.iter().zip(curves).zip(keep) {
+        if kept {
+            named.push((name.clone(), c));
+        } else {
+            others += 1;
+            envelope = Some(match envelope {
+                None => c,
+                Some(e) => e.iter().zip(&c).map(|(a, b)| (a.0, a.1.max(b.1))).collect(),
+            });
+        }
+    }
+    (named, envelope.map(|e| (others, e)))
+}
+
+/// Write the PNG of the activation `curves` of muscles `names` over time to `png`: the
+/// strongest few by name, the others as one envelope, so the legend stays readable.
 fn plot_activations(
     png: &Path,
     rig: &Path,
@@ -300,15 +342,31 @@ fn plot_activations(
     curves: Vec<Vec<(f64, f64)>>,
 ) -> anyhow::Result<()> {
     use crate::render::plot::{line_chart, Chart, Series, Style};
+    let (named, rest) = strongest(names, curves, PLOT_NAMED);
+    let mut series: Vec<Series> = named
+        .into_iter()
+        .map(|(n, pts)| Series::new(n, pts, Style::Line))
+        .collect();
+    let title = if let Some((n, envelope)) = rest {
+        series.push(Series::new(
+            format!("largest of the other {n}"),
+            envelope,
+            Style::Line,
+        ));
+        format!(
+            "muscle activations of {} ({} strongest of {} named)",
+            rig.display(),
+            PLOT_NAMED,
+            names.len()
+        )
+    } else {
+        format!("muscle activations of {}", rig.display())
+    };
     let chart = Chart {
-        title: format!("muscle activations of {}", rig.display()),
+        title,
         x_label: "time (s)".into(),
         y_label: "activation (0 = relaxed, 1 = fully contracted)".into(),
-        series: names
-            .iter()
-            .zip(curves)
-            .map(|(n, pts)| Series::new(n.clone(), pts, Style::Line))
-            .collect(),
+        series,
         ..Default::default()
     };
     line_chart(png, &chart)?;

@@ -70,6 +70,10 @@ pub struct Interior {
     center_g: Vec<[f64; 3]>,
     /// Linear-elastic stiffness of one undeformed element, (3K × 3K) row-major, N/m.
     pub(crate) k0: Vec<f64>,
+    /// Actuated rest state: per element, the offset d_e of its rest node positions in its own
+    /// rotated frame (3K per element, m; empty when the rest state is the lattice's own). See
+    /// [`Interior::set_actuation`].
+    actuation: Vec<f64>,
     /// Consistent mass of one element, (K × K) row-major, kg.
     pub(crate) m0: Vec<f64>,
     /// Rest positions of the element's nodes relative to its first node (local, 3K, m).
@@ -153,6 +157,7 @@ impl Interior {
             center_g,
             k0,
             m0,
+            actuation: Vec::new(),
             x_ref,
             k0_blocks,
         })
@@ -161,6 +166,85 @@ impl Interior {
     /// Nodes per element.
     pub fn nodes_per_element(&self) -> usize {
         self.order.nodes_per_element()
+    }
+
+    /// Actuate the rest state (a muscle's active shape change, Phace-style): element e's
+    /// energy becomes ½ (u_e − d_e)ᵀ K₀ (u_e − d_e), u_e = R_eᵀ x_e − X_e, with `offsets`
+    /// holding d_e (3K per element, m, in the element's rotated frame, node order of
+    /// [`Self::elements`]); empty restores the lattice's own rest state. Positions whose
+    /// local displacements are the offsets ([`Self::local_displacements`]) have zero energy
+    /// whatever the stiffness: a compatible actuation makes its shape exactly, and the energy
+    /// stays invariant under rigid motions.
+    pub fn set_actuation(&mut self, offsets: Vec<f64>) -> Result<(), FemError> {
+        let want = 3 * self.nodes_per_element() * self.elements.len();
+        if !offsets.is_empty() && offsets.len() != want {
+            return Err(FemError::Input(format!(
+                "actuation has {} offsets, the interior needs {want} (3 per node of each element)",
+                offsets.len()
+            )));
+        }
+        if offsets.iter().any(|v| !v.is_finite()) {
+            return Err(FemError::Input("an actuation offset is not finite".into()));
+        }
+        self.actuation = offsets;
+        Ok(())
+    }
+
+    /// The actuation offsets (m, 3K per element; empty when not actuated).
+    pub fn actuation(&self) -> &[f64] {
+        &self.actuation
+    }
+
+    /// Local displacements u_e = R_e(x)ᵀ (x_a − x_0) − (X_a − X_0) of every element at
+    /// positions `x` (flat, m), 3K per element: the actuation whose rest state `x` is.
+    pub fn local_displacements(&self, x: &[f64]) -> Vec<f64> {
+        let n3 = 3 * self.nodes_per_element();
+        let mut out = vec![0.0; n3 * self.elements.len()];
+        out.par_chunks_mut(n3).enumerate().for_each(|(e, u)| {
+            let mut y = [0.0; 81];
+            self.element_prepare(x, e, None, &mut y[..n3], u);
+            if !self.actuation.is_empty() {
+                for (ui, di) in u.iter_mut().zip(&self.actuation[e * n3..(e + 1) * n3]) {
+                    *ui += di;
+                }
+            }
+        });
+        out
+    }
+
+    /// The node force (N, flat over node dofs, added into `force`) of a unit rate of
+    /// actuation: −∂/∂s ∇E at `x` when the offsets of elements `elements` grow by s times
+    /// `offsets` (3K per listed element, m). Exact, with the derivative of the rotations;
+    /// at rest it is Σ_e K₀ d_e.
+    pub fn actuation_force(
+        &self,
+        x: &[f64],
+        elements: &[usize],
+        offsets: &[f64],
+        force: &mut [f64],
+    ) {
+        let n3 = 3 * self.nodes_per_element();
+        for (j, &e) in elements.iter().enumerate() {
+            let mut y = [0.0; 81];
+            let mut u = [0.0; 81];
+            let (r, fc) = self.element_prepare(x, e, None, &mut y[..n3], &mut u[..n3]);
+            let mut f = [0.0; 81];
+            self.k0_times(&offsets[j * n3..(j + 1) * n3], &mut f[..n3]);
+            let mut g = [0.0; 81];
+            self.element_finish(
+                &r,
+                fc.as_ref(),
+                &y[..n3],
+                &u[..n3],
+                &f[..n3],
+                Some(&mut g[..n3]),
+            );
+            for (a, &n) in self.elements[e].iter().enumerate() {
+                for i in 0..3 {
+                    force[3 * n + i] += g[3 * a + i];
+                }
+            }
+        }
     }
 
     /// Deformation gradient at the element centre, F_c = Σ_a x_a ∇N_a(centre)ᵀ (no
@@ -265,6 +349,10 @@ impl Interior {
                 y[3 * a + i] = ya[i];
                 u[3 * a + i] = ya[i] - self.x_ref[3 * a + i];
             }
+        }
+        if !self.actuation.is_empty() {
+            let d = &self.actuation[e * u.len()..(e + 1) * u.len()];
+            u.iter_mut().zip(d).for_each(|(ui, di)| *ui -= di);
         }
         (r, fc)
     }

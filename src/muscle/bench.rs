@@ -60,7 +60,13 @@ pub fn bench_fit(target_cells: usize, gn_frames: usize) -> anyhow::Result<serde_
     let interior = Interior::new(&lattice, &material)?;
     let targets = synthetic_arkit_targets(&rig.mesh, 0.002, 0.02, 7);
     let t = Instant::now();
-    let generated = generate_muscles(&lattice, &interior, &targets, &GenerateSettings::default())?;
+    let generated = generate_muscles(
+        &lattice,
+        &interior,
+        &targets,
+        None,
+        &GenerateSettings::default(),
+    )?;
     let generate_s = t.elapsed().as_secs_f64();
     let source = generated.source.clone();
     let t = Instant::now();

@@ -16,7 +16,7 @@
 //! (dimensionless `size_weight`, `time_weight`), so they do not depend on the mesh size or
 //! units. A frame whose QP fails keeps the last good activations and says so.
 
-use super::forward::{Forward, ForwardReport};
+use super::forward::{Coupling, Forward, ForwardReport};
 use super::model::Muscle;
 use super::qp::{solve_qp, QpProblem, QpSolution, QpStatus};
 use super::MuscleError;
@@ -77,6 +77,15 @@ impl FitSettings {
     }
 }
 
+/// What the actuation fit measured of each muscle in the pipeline's interior, for the
+/// activation fit to use (one entry per muscle, or none).
+#[derive(Debug, Clone, Default)]
+pub struct Calibration {
+    /// Each muscle's response at activation 1 (node displacements, flat, m): the rest J's
+    /// columns in place of the linearised response.
+    pub responses: Vec<Vec<f64>>,
+}
+
 /// What happened to a frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum FrameStatus {
@@ -97,6 +106,9 @@ pub struct FrameFit {
     pub activations: Vec<f64>,
     /// RMS distance (m) between the fitted surface and the target over the vertices.
     pub rms_residual: f64,
+    /// RMS displacement (m) of the target from the neutral face over the vertices: the scale
+    /// `rms_residual` is judged against.
+    pub rms_displacement: f64,
     /// Outcome.
     pub status: FrameStatus,
     /// Clarabel's status of the last QP of the frame.
@@ -147,10 +159,37 @@ impl Fitter {
         muscles: Vec<Muscle>,
         settings: FitSettings,
     ) -> Result<Self, MuscleError> {
+        Self::coupled(lattice, material, muscles, settings, None, None)
+    }
+
+    /// [`Self::new`] in the interior the pipeline runs: with the tracking's `coupling`,
+    /// J = B K_p⁻¹ F includes its stiffness (or J's columns are the `calibration`'s measured
+    /// responses), and each frame's target is first relieved of what the tracking's pull
+    /// alone makes, B K_p⁻¹ Bᵀ k d (one solve with the rest factorisation), so that
+    /// activations fit the rest.
+    pub fn coupled(
+        lattice: &Lattice,
+        material: &Material,
+        muscles: Vec<Muscle>,
+        settings: FitSettings,
+        coupling: Option<Coupling>,
+        calibration: Option<Calibration>,
+    ) -> Result<Self, MuscleError> {
+        let responses = calibration.map(|c| c.responses).unwrap_or_default();
         settings.validate()?;
         let interior = Interior::new(lattice, material)?;
         let rest = lattice.rest_flat();
-        let forward = Forward::new(interior, muscles, rest.clone(), lattice.pinned.clone())?;
+        let mut forward = Forward::new(interior, muscles, rest.clone(), lattice.pinned.clone())?;
+        if let Some(c) = coupling {
+            forward = forward.with_coupling(c);
+        }
+        let m = forward.muscles.len();
+        if !responses.is_empty() && responses.len() != m {
+            return Err(MuscleError::Input(format!(
+                "{} responses for {m} muscles",
+                responses.len()
+            )));
+        }
         let embed = lattice.embedding_triplets();
         let vertices = lattice.vertex_points.len();
         let mut f = Self {
@@ -171,7 +210,11 @@ impl Fitter {
         let t = Instant::now();
         let m = f.forward.muscles.len();
         let a0 = vec![0.0; m];
-        let cols = f.forward.response(&rest, &a0)?;
+        let cols = if responses.is_empty() {
+            f.forward.response(&rest, &a0)?
+        } else {
+            responses
+        };
         f.j0 = f.surface_columns(&cols);
         f.jtj0 = f.gram(&f.j0);
         f.jacobian_s = t.elapsed().as_secs_f64();
@@ -285,6 +328,16 @@ impl Fitter {
             .collect()
     }
 
+    /// The tracking's pull Bᵀ k d (N, flat over node dofs) towards surface displacements `d`
+    /// (flat, m), when the fitter stands for a pipeline with tracking.
+    fn tracking_load(&self, d: &[f64]) -> Option<Vec<f64>> {
+        let c = self.forward.coupling.as_ref()?;
+        if c.tracking.is_empty() {
+            return None;
+        }
+        Some(c.tracking_load(&self.embed, d, self.forward.interior.nodes))
+    }
+
     /// Surface (m) of the nonlinear equilibrium at activations `a` (solved from rest).
     pub fn predict(&mut self, a: &[f64]) -> Result<(Vec<V3>, ForwardReport), MuscleError> {
         let rest = self.forward.rest.clone();
@@ -325,6 +378,7 @@ impl Fitter {
         let mut fit = FrameFit {
             activations: self.prev_a.clone(),
             rms_residual: f64::NAN,
+            rms_displacement: f64::NAN,
             status: FrameStatus::Fitted,
             clarabel_status: String::new(),
             gauss_newton: 0,
@@ -344,6 +398,17 @@ impl Fitter {
             fit.total_s = t0.elapsed().as_secs_f64();
             return Ok(fit);
         }
+        fit.rms_displacement = self.rms(&d);
+        let load = self.tracking_load(&d);
+        let d_full = d.clone();
+        let tracked = match &load {
+            Some(f) => {
+                let y = self.forward.solve_at_rest(f)?;
+                self.surface(&y)
+            }
+            None => vec![0.0; d.len()],
+        };
+        let d: Vec<f64> = d.iter().zip(&tracked).map(|(a, b)| a - b).collect();
         let tq = Instant::now();
         let jtd = self.jt_times(&self.j0, &d);
         let sol = self.qp(&self.jtj0, &jtd, &bounds);
@@ -364,10 +429,12 @@ impl Fitter {
         if self.settings.gauss_newton > 0 && fit.status == FrameStatus::Fitted {
             let mut q_start = self.prev_q.clone();
             for _ in 0..self.settings.gauss_newton {
-                let (q, rep) = self.forward.equilibrium(&a, &q_start)?;
+                let (q, rep) = self
+                    .forward
+                    .equilibrium_loaded(&a, &q_start, load.as_deref())?;
                 fit.forward = Some(rep);
                 let x = self.surface(&q);
-                let r: Vec<f64> = d
+                let r: Vec<f64> = d_full
                     .iter()
                     .zip(x.iter().zip(&self.rest_surface))
                     .map(|(di, (xi, ri))| di - (xi - ri))
@@ -392,10 +459,12 @@ impl Fitter {
                     }
                 }
             }
-            let (q, rep) = self.forward.equilibrium(&a, &q_start)?;
+            let (q, rep) = self
+                .forward
+                .equilibrium_loaded(&a, &q_start, load.as_deref())?;
             fit.forward = Some(rep);
             let x = self.surface(&q);
-            let r: Vec<f64> = d
+            let r: Vec<f64> = d_full
                 .iter()
                 .zip(x.iter().zip(&self.rest_surface))
                 .map(|(di, (xi, ri))| di - (xi - ri))

@@ -3,7 +3,11 @@
 //! displacements from the neutral face, which is the rest state), and its linearised
 //! response to activations.
 //!
-//! Equilibrium q(a) minimises E_int(q) + Σ_m E_m(q, a_m) over the free nodes (modified
+//! With a [`Coupling`] the model is the interior the pipeline runs: the skin's stiffness
+//! Bᵀ K_x B and the tracking's Bᵀ k B are added as ½ (q − q₀)ᵀ K_c (q − q₀), and an
+//! equilibrium may carry the tracking's pull Bᵀ k (t − B q₀) towards a target t as a load.
+//!
+//! Equilibrium q(a) minimises E_int(q; d(a)) + Σ_m E_m(q, a_m) + E_c(q) over the free nodes (modified
 //! Newton with a sparse Cholesky on the free DOFs, refactorised when the force residual falls
 //! by less than half in an iteration; backtracking on the energy). The linear response is
 //! ∂q/∂a_m = K⁻¹ f_m with K the Hessian at (q, a) (interior: frozen-rotation stiffness, exact
@@ -15,9 +19,44 @@ use super::MuscleError;
 use crate::fem::Interior;
 use crate::math::sparse::{Pattern, SpdSolver};
 use crate::math::Energy;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 const NONE: usize = usize::MAX;
+
+/// What the pipeline's interior carries besides its own elasticity and the muscles, for the
+/// muscles' fit to see the same interior: a constant stiffness and the tracking.
+#[derive(Debug, Clone, Default)]
+pub struct Coupling {
+    /// K_c: the skin's Bᵀ K_x B at rest plus the tracking's Bᵀ k B (N/m, triplets over node
+    /// dofs, both triangles).
+    pub stiffness: Vec<(usize, usize, f64)>,
+    /// Tracking stiffness k_v of each embedded surface vertex (N/m, the lattice's vertex
+    /// order; empty: no tracking).
+    pub tracking: Vec<f64>,
+}
+
+impl Coupling {
+    /// The tracking's load Bᵀ k d (N, flat over node dofs) for surface displacements `d`
+    /// (flat, 3 per vertex, m) through the `embed` triplets (vertex, node, weight).
+    pub fn tracking_load(
+        &self,
+        embed: &[(usize, usize, f64)],
+        d: &[f64],
+        nodes: usize,
+    ) -> Vec<f64> {
+        let mut f = vec![0.0; 3 * nodes];
+        if self.tracking.is_empty() {
+            return f;
+        }
+        for &(v, n, w) in embed {
+            for i in 0..3 {
+                f[3 * n + i] += w * self.tracking[v] * d[3 * v + i];
+            }
+        }
+        f
+    }
+}
 
 /// The numerical outcome of an equilibrium solve.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -61,10 +100,14 @@ pub struct Forward {
     /// interior's Hessian omits the derivative of its element rotations, so Newton converges
     /// linearly there (about 0.6 per iteration at 18 % strain).
     pub tolerance: f64,
+    /// The pipeline's skin and tracking stiffness, when the model stands for that interior.
+    pub coupling: Option<Coupling>,
     free: Vec<usize>,
     nfree: usize,
     pattern: Option<Pattern>,
     solver: SpdSolver,
+    /// The factorisation at rest with no activation (for [`Self::solve_at_rest`]).
+    rest_factor: Option<SpdSolver>,
 }
 
 impl Forward {
@@ -111,11 +154,49 @@ impl Forward {
             rest,
             max_newton: 40,
             tolerance: 1e-7,
+            coupling: None,
             free,
             nfree,
             pattern: None,
             solver: SpdSolver::new(),
+            rest_factor: None,
         })
+    }
+
+    /// The same model with the pipeline's `coupling` (skin and tracking) added.
+    pub fn with_coupling(mut self, coupling: Coupling) -> Self {
+        self.coupling = Some(coupling);
+        self.pattern = None;
+        self.rest_factor = None;
+        self
+    }
+
+    /// Set the interior's rest state to the actuation at activations `a`.
+    fn actuate(&mut self, a: &[f64]) -> Result<(), MuscleError> {
+        let d = super::model::actuation_field(&self.interior, &self.muscles, a);
+        self.interior.set_actuation(d)?;
+        Ok(())
+    }
+
+    /// Coupling energy ½ (q − q₀)ᵀ K_c (q − q₀) − (q − q₀)ᵀ f (J), adding its gradient (N)
+    /// into `grad` when given; zero without a coupling.
+    fn coupling_energy(&self, q: &[f64], load: Option<&[f64]>, grad: Option<&mut [f64]>) -> f64 {
+        let du: Vec<f64> = q.iter().zip(&self.rest).map(|(a, b)| a - b).collect();
+        let mut kd = vec![0.0; q.len()];
+        if let Some(c) = &self.coupling {
+            for &(r, col, v) in &c.stiffness {
+                kd[r] += v * du[col];
+            }
+        }
+        let mut e = 0.5 * du.iter().zip(&kd).map(|(a, b)| a * b).sum::<f64>();
+        if let Some(f) = load {
+            e -= du.iter().zip(f).map(|(a, b)| a * b).sum::<f64>();
+            kd.iter_mut().zip(f).for_each(|(k, fi)| *k -= fi);
+        }
+        if let Some(g) = grad {
+            g.iter_mut().zip(&kd).for_each(|(gi, k)| *gi += k);
+        }
+        e
     }
 
     /// Number of free DOFs.
@@ -137,15 +218,22 @@ impl Forward {
         Ok(())
     }
 
-    /// Total energy (J) and, when asked, its gradient (N) at node positions `q` (flat, m).
-    fn energy(&self, q: &[f64], a: &[f64], grad: Option<&mut [f64]>) -> f64 {
+    /// Total energy (J) and, when asked, its gradient (N) at node positions `q` (flat, m),
+    /// with the interior actuated for `a` and the coupling's `load` (N).
+    fn energy(&self, q: &[f64], a: &[f64], load: Option<&[f64]>, grad: Option<&mut [f64]>) -> f64 {
         let act = ActiveEnergy::new(&self.interior, &self.muscles, a);
         match grad {
             Some(g) => {
                 g.iter_mut().for_each(|v| *v = 0.0);
-                self.interior.eval(q, Some(g), None, false) + act.eval(q, Some(g), None, false)
+                self.interior.eval(q, Some(g), None, false)
+                    + act.eval(q, Some(g), None, false)
+                    + self.coupling_energy(q, load, Some(g))
             }
-            None => self.interior.eval(q, None, None, false) + act.eval(q, None, None, false),
+            None => {
+                self.interior.eval(q, None, None, false)
+                    + act.eval(q, None, None, false)
+                    + self.coupling_energy(q, load, None)
+            }
         }
     }
 
@@ -161,8 +249,12 @@ impl Forward {
     /// Assemble and factorise the free-DOF Hessian at (q, a); `project` projects the active
     /// Hessian to positive semi-definite (used when the plain one is not positive definite).
     fn factorise(&mut self, q: &[f64], a: &[f64], project: bool) -> Result<(), MuscleError> {
+        self.actuate(a)?;
         let mut trip = Vec::new();
-        self.interior.eval(q, None, Some(&mut trip), false);
+        self.interior.eval(q, None, Some(&mut trip), project);
+        if let Some(c) = &self.coupling {
+            trip.extend_from_slice(&c.stiffness);
+        }
         ActiveEnergy::new(&self.interior, &self.muscles, a).eval(q, None, Some(&mut trip), project);
         let free = &self.free;
         let mut reduced: Vec<(usize, usize, f64)> = trip
@@ -199,13 +291,18 @@ impl Forward {
     /// Solve K x = b on the free DOFs for a full-length `b` (pinned entries ignored; the
     /// result is zero there). Needs a factorisation.
     fn solve_full(&self, b: &[f64]) -> Vec<f64> {
+        self.solve_with(&self.solver, b)
+    }
+
+    /// Solve on the free DOFs with `solver`'s factorisation (see [`Self::solve_full`]).
+    fn solve_with(&self, solver: &SpdSolver, b: &[f64]) -> Vec<f64> {
         let mut r = vec![0.0; self.nfree];
         for (i, &f) in self.free.iter().enumerate() {
             if f != NONE {
                 r[f] = b[i];
             }
         }
-        self.solver.solve_in_place(&mut r);
+        solver.solve_in_place(&mut r);
         let mut out = vec![0.0; b.len()];
         for (i, &f) in self.free.iter().enumerate() {
             if f != NONE {
@@ -222,7 +319,22 @@ impl Forward {
         a: &[f64],
         q0: &[f64],
     ) -> Result<(Vec<f64>, ForwardReport), MuscleError> {
+        self.equilibrium_loaded(a, q0, None)
+    }
+
+    /// [`Self::equilibrium`] under a constant `load` (N, flat over node dofs): with a
+    /// [`Coupling`], the tracking's pull towards the frame's target.
+    pub fn equilibrium_loaded(
+        &mut self,
+        a: &[f64],
+        q0: &[f64],
+        load: Option<&[f64]>,
+    ) -> Result<(Vec<f64>, ForwardReport), MuscleError> {
         self.check_activations(a)?;
+        if load.is_some_and(|f| f.len() != self.rest.len()) {
+            return Err(MuscleError::Input("the load has the wrong length".into()));
+        }
+        self.actuate(a)?;
         if q0.len() != self.rest.len() || q0.iter().any(|v| !v.is_finite()) {
             return Err(MuscleError::Input(
                 "start positions have the wrong length or a non-finite value".into(),
@@ -235,14 +347,14 @@ impl Forward {
             }
         }
         let forces = unit_forces(&self.interior, &self.muscles, &q);
-        let mut applied = vec![0.0; q.len()];
+        let mut applied = load.map_or_else(|| vec![0.0; q.len()], <[f64]>::to_vec);
         for (f, &am) in forces.iter().zip(a) {
             applied.iter_mut().zip(f).for_each(|(s, v)| *s += am * v);
         }
         let cell_force = 1e-6 * self.interior.mu * self.interior.cell_size.powi(2);
         let reference = self.free_norm(&applied).max(cell_force);
         let mut g = vec![0.0; q.len()];
-        let mut e = self.energy(&q, a, Some(&mut g));
+        let mut e = self.energy(&q, a, load, Some(&mut g));
         let mut res = self.free_norm(&g);
         let mut report = ForwardReport {
             status: ForwardStatus::IterationLimit,
@@ -275,7 +387,7 @@ impl Forward {
                 for i in 0..q.len() {
                     trial[i] = q[i] + alpha * dir[i];
                 }
-                let et = self.energy(&trial, a, Some(&mut gt));
+                let et = self.energy(&trial, a, load, Some(&mut gt));
                 let ok = et.is_finite()
                     && (et <= e + 1e-4 * alpha * slope.min(0.0)
                         || (et - e <= 1e-12 * e.abs().max(1e-300) && self.free_norm(&gt) < res));
@@ -316,6 +428,29 @@ impl Forward {
         self.check_activations(a)?;
         self.factorise_robust(q, a)?;
         let forces = unit_forces(&self.interior, &self.muscles, q);
-        Ok(forces.iter().map(|f| self.solve_full(f)).collect())
+        Ok(forces.par_iter().map(|f| self.solve_full(f)).collect())
+    }
+
+    /// K⁻¹ b with K the Hessian at rest with no activation (coupling included), for a
+    /// full-length `b` (N; pinned entries ignored, the result is zero there; m). The
+    /// factorisation is made on the first call and kept.
+    pub fn solve_at_rest(&mut self, b: &[f64]) -> Result<Vec<f64>, MuscleError> {
+        if self.rest_factor.is_none() {
+            let rest = self.rest.clone();
+            let zero = vec![0.0; self.muscles.len()];
+            self.factorise_robust(&rest, &zero)?;
+            self.rest_factor = Some(std::mem::take(&mut self.solver));
+        }
+        Ok(self.solve_at_rest_factored(b))
+    }
+
+    /// [`Self::solve_at_rest`] once the rest factorisation exists (shared, read-only).
+    /// Panics before the first [`Self::solve_at_rest`].
+    pub fn solve_at_rest_factored(&self, b: &[f64]) -> Vec<f64> {
+        let solver = self
+            .rest_factor
+            .as_ref()
+            .expect("solve_at_rest_factored before solve_at_rest");
+        self.solve_with(solver, b)
     }
 }

@@ -1,6 +1,10 @@
 //! Muscles generated from the blend-shape basis (the procedure is in the [`super`] module
 //! notes), and a synthetic 52-shape ARKit-named basis for tests and benchmarks.
 
+use super::actuation::{
+    actuation_muscle, moved_vertices, ActuationSettings, FittedActuation, Plant,
+};
+use super::forward::Coupling;
 use super::model::Muscle;
 use super::MuscleError;
 use crate::fem::Interior;
@@ -10,7 +14,7 @@ use crate::math::rng::Lcg;
 use crate::math::sparse::{Pattern, SpdSolver};
 use crate::math::Energy;
 use crate::mesh::TriMesh;
-use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+use nalgebra::Vector3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -21,19 +25,19 @@ type V3 = Vector3<f64>;
 pub struct GenerateSettings {
     /// β: weight of the elastic regulariser relative to the data term (dimensionless, > 0).
     pub regulariser: f64,
-    /// Fraction of a shape's largest element compression an element needs to join its
-    /// muscle (dimensionless, in (0, 1]).
-    pub threshold: f64,
-    /// Smallest principal compression (strain, dimensionless) that makes a muscle at all.
-    pub min_compression: f64,
+    /// Smallest element strain (largest offset over the cell size, dimensionless) that makes
+    /// a muscle at all.
+    pub min_strain: f64,
+    /// Nonlinear corrections of each actuation at most.
+    pub corrections: usize,
 }
 
 impl Default for GenerateSettings {
     fn default() -> Self {
         Self {
             regulariser: 1e-3,
-            threshold: 0.25,
-            min_compression: 1e-5,
+            min_strain: 1e-5,
+            corrections: ActuationSettings::default().corrections,
         }
     }
 }
@@ -48,16 +52,16 @@ impl GenerateSettings {
                 format!("must be > 0, got {}", self.regulariser),
             );
         }
-        if !(self.threshold > 0.0 && self.threshold <= 1.0) {
+        if !(self.min_strain.is_finite() && self.min_strain >= 0.0) {
             return bad(
-                "threshold",
-                format!("must be in (0, 1], got {}", self.threshold),
+                "min_strain",
+                format!("must be ≥ 0, got {}", self.min_strain),
             );
         }
-        if !(self.min_compression.is_finite() && self.min_compression >= 0.0) {
+        if self.corrections > 20 {
             return bad(
-                "min_compression",
-                format!("must be ≥ 0, got {}", self.min_compression),
+                "corrections",
+                format!("at most 20, got {}", self.corrections),
             );
         }
         Ok(())
@@ -73,6 +77,8 @@ pub struct Generated {
     pub source: Vec<usize>,
     /// (shape name, reason) of shapes that made no muscle.
     pub skipped: Vec<(String, String)>,
+    /// For each muscle, how well its actuation makes its shape (and the skin's pull there).
+    pub fits: Vec<FittedActuation>,
 }
 
 /// Lattice node displacements (flat, m) fitted to each target (see the module notes, step
@@ -180,99 +186,83 @@ pub fn fit_node_displacements(
         .collect())
 }
 
-/// Principal compression (positive strain, dimensionless) and its unit direction of each
-/// element for node displacements `u`: the most negative eigenvalue (negated) and its
-/// eigenvector of the deviatoric part of the Gauss-point average of ε = sym(F) − I.
-pub fn element_compression(interior: &Interior, rest: &[f64], u: &[f64]) -> Vec<(f64, V3)> {
-    let x: Vec<f64> = rest.iter().zip(u).map(|(a, b)| a + b).collect();
-    (0..interior.elements.len())
-        .into_par_iter()
-        .map(|e| {
-            let fs = interior.deformation_gradients(&x, e);
-            let mut eps = Matrix3::zeros();
-            let mut wsum = 0.0;
-            for (q, f) in interior.qp.iter().zip(&fs) {
-                eps += ((f + f.transpose()) * 0.5 - Matrix3::identity()) * q.w;
-                wsum += q.w;
-            }
-            let eps = eps / wsum;
-            // Deviatoric part: the active stress is deviatoric, so it can only produce the
-            // shape-changing part of the strain.
-            let eps = eps - Matrix3::identity() * (eps.trace() / 3.0);
-            let eig = SymmetricEigen::new(eps);
-            let (i, &l) = eig
-                .eigenvalues
-                .iter()
-                .enumerate()
-                .min_by(|a, b| a.1.total_cmp(b.1))
-                .expect("three eigenvalues");
-            let dir = eig.eigenvectors.column(i).into_owned();
-            (-l, dir)
-        })
-        .collect()
-}
-
-/// Generate one muscle per blend shape (see the module notes of [`super`]).
+/// Generate one actuation muscle per blend shape (see the module notes of [`super`]), fitted
+/// in the interior with the pipeline's `coupling` (skin and tracking) when given.
 pub fn generate_muscles(
     lattice: &Lattice,
     interior: &Interior,
     targets: &[MorphTarget],
+    coupling: Option<&Coupling>,
     settings: &GenerateSettings,
 ) -> Result<Generated, MuscleError> {
     settings.validate()?;
     let u = fit_node_displacements(lattice, interior, targets, settings.regulariser)?;
-    let rest = lattice.rest_flat();
+    let plant = Plant::new(lattice, interior, coupling)?;
+    let fit_settings = ActuationSettings {
+        corrections: settings.corrections,
+        ..Default::default()
+    };
     let mut out = Generated {
         muscles: Vec::new(),
         source: Vec::new(),
         skipped: Vec::new(),
+        fits: Vec::new(),
     };
+    // Shapes are fitted in parallel, each with its own equilibrium solver; the results are
+    // taken in shape order, so the muscles do not depend on the thread count.
+    let fits: Vec<Result<Option<FittedActuation>, MuscleError>> = targets
+        .par_iter()
+        .zip(&u)
+        .map(|(t, ut)| {
+            let strain = ut.iter().fold(0.0f64, |m, v| m.max(v.abs())) / lattice.cell_size;
+            if strain.is_nan() || strain <= settings.min_strain {
+                return Ok(None);
+            }
+            let delta: Vec<f64> = t.positions.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
+            let moved = moved_vertices(&delta, 0.1);
+            plant.fit(ut, &delta, &moved, &fit_settings).map(Some)
+        })
+        .collect();
     let mut used: Vec<String> = Vec::new();
-    for (ti, (t, ut)) in targets.iter().zip(&u).enumerate() {
-        let comp = element_compression(interior, &rest, ut);
-        let max = comp.iter().map(|c| c.0).fold(0.0f64, f64::max);
-        if max.is_nan() || max <= settings.min_compression {
-            out.skipped.push((
+    for (ti, (t, fit)) in targets.iter().zip(fits).enumerate() {
+        match fit? {
+            None => out.skipped.push((
                 t.name.clone(),
                 format!(
-                    "largest element compression {max:.2e} is below {:.0e}",
-                    settings.min_compression
+                    "its largest lattice displacement is below {:.0e} cells",
+                    settings.min_strain
                 ),
-            ));
-            continue;
+            )),
+            Some(f) if f.elements.is_empty() => out
+                .skipped
+                .push((t.name.clone(), "no element deforms".into())),
+            Some(f) => {
+                let name = unique_name(&t.name, out.source.len(), &mut used);
+                out.muscles
+                    .push(actuation_muscle(&name, &f.elements, &f.offsets));
+                out.source.push(ti);
+                out.fits.push(f);
+            }
         }
-        let chosen: Vec<usize> = (0..comp.len())
-            .filter(|&e| comp[e].0 >= settings.threshold * max)
-            .collect();
-        let mean = chosen.iter().map(|&e| comp[e].0).sum::<f64>() / chosen.len() as f64;
-        let base = if t.name.trim().is_empty() {
-            format!("shape{}", out.source.len())
-        } else {
-            t.name.clone()
-        };
-        let mut name = base.clone();
-        let mut k = 2;
-        while used.contains(&name) {
-            name = format!("{base}#{k}");
-            k += 1;
-        }
-        used.push(name.clone());
-        out.muscles.push(Muscle {
-            name,
-            fibres: chosen
-                .iter()
-                .map(|&e| {
-                    let d = comp[e].1;
-                    [d.x, d.y, d.z]
-                })
-                .collect(),
-            elements: chosen,
-            max_contraction: (2.0 * mean).clamp(0.02, 0.6),
-            bounds: [0.0, 1.0],
-        });
-        out.source.push(ti);
     }
     Ok(out)
+}
+
+/// The shape's name (or `shape<i>` when blank), with a `#2`, `#3` suffix when already `used`.
+fn unique_name(name: &str, i: usize, used: &mut Vec<String>) -> String {
+    let base = if name.trim().is_empty() {
+        format!("shape{i}")
+    } else {
+        name.to_string()
+    };
+    let mut out = base.clone();
+    let mut k = 2;
+    while used.contains(&out) {
+        out = format!("{base}#{k}");
+        k += 1;
+    }
+    used.push(out.clone());
+    out
 }
 
 /// The 52 ARKit blend-shape names (one list, kept with the head rig that uses them).

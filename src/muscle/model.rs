@@ -1,5 +1,22 @@
-//! The muscle model: named sets of lattice elements with a fibre direction per element, and
-//! the active energy an activation adds.
+//! The muscle model: named sets of lattice elements that either change the interior's rest
+//! state (an *actuation*, the default for muscles generated from blend shapes) or pull along
+//! a fibre direction per element (muscle files), and the active energy an activation adds.
+//!
+//! # Actuation muscles
+//!
+//! An actuation muscle holds, for each of its elements, an offset d_m,e of the element's rest
+//! node positions in its own rotated frame (3K numbers, m). At activations a the interior's
+//! rest state is actuated by d(a) = Σ_m a_m d_m ([`actuation_field`],
+//! [`crate::fem::Interior::set_actuation`]): element e stores ½ (u_e − d_e(a))ᵀ K₀ (u_e −
+//! d_e(a)). This is Phace's rest-state actuation (Ichim et al. 2017, ψ = min_R ‖F − R A(a)‖²
+//! with A(a) = I + Σ a_m (A_m − I)) written per element of the corotational interior: the
+//! offsets carry a symmetric stretch that varies across the 27-node element. A compatible
+//! actuation makes its shape at zero energy whatever the stiffness, so a muscle does not have
+//! to out-pull passive flesh; where the skin and the tracking resist, its offsets are fitted
+//! with them in the loop ([`super::actuation`]). Its unit force −∂∇E/∂a_m at rest is
+//! Σ_e K₀ d_m,e.
+//!
+//! # Fibre muscles
 //!
 //! Active energy of muscle m at activation a (J), summed over its elements e and the 27 Gauss
 //! points of each (weight w, m³):
@@ -53,6 +70,11 @@ pub struct Muscle {
     pub max_contraction: f64,
     /// Activation bounds [lower, upper] (dimensionless; default [0, 1]).
     pub bounds: [f64; 2],
+    /// Rest-state offsets at activation 1 of an actuation muscle: 3K numbers per element of
+    /// `elements` (m, element frame, see [`crate::fem::Interior::set_actuation`]); empty for a
+    /// fibre muscle (then `fibres` acts).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub actuation: Vec<f64>,
 }
 
 impl Muscle {
@@ -69,7 +91,13 @@ impl Muscle {
             elements,
             max_contraction: DEFAULT_MAX_CONTRACTION,
             bounds: [0.0, 1.0],
+            actuation: Vec::new(),
         }
+    }
+
+    /// Whether the muscle acts by changing the rest state (else along its fibres).
+    pub fn is_actuation(&self) -> bool {
+        !self.actuation.is_empty()
     }
 
     /// Check the muscle against a lattice of `element_count` elements; the message names the
@@ -79,7 +107,19 @@ impl Muscle {
         if self.elements.is_empty() {
             return Err(format!("muscle '{n}': no elements"));
         }
-        if self.fibres.len() != self.elements.len() {
+        if self.is_actuation() {
+            let per = self.actuation.len() / self.elements.len();
+            if self.actuation.len() % self.elements.len() != 0 || !(per == 24 || per == 81) {
+                return Err(format!(
+                    "muscle '{n}': {} actuation offsets for {} elements (3 per node of each)",
+                    self.actuation.len(),
+                    self.elements.len()
+                ));
+            }
+            if self.actuation.iter().any(|v| !v.is_finite()) {
+                return Err(format!("muscle '{n}': an actuation offset is not finite"));
+            }
+        } else if self.fibres.len() != self.elements.len() {
             return Err(format!(
                 "muscle '{n}': {} fibres for {} elements",
                 self.fibres.len(),
@@ -435,12 +475,41 @@ impl Energy for ActiveEnergy<'_> {
     }
 }
 
-/// The generalised force of each muscle at unit activation, −∂E_m/∂q at `x` (flat over node
-/// DOFs, N): since E_m is linear in a, the force of muscle m at activation a is a times this.
+/// The interior's actuation at activations `a` (one per muscle): d(a) = Σ_m a_m d_m over the
+/// actuation muscles, 3K per element of `interior` (m); empty when no actuation muscle acts.
+pub fn actuation_field(interior: &Interior, muscles: &[Muscle], a: &[f64]) -> Vec<f64> {
+    if !muscles.iter().any(Muscle::is_actuation) {
+        return Vec::new();
+    }
+    let n3 = 3 * interior.nodes_per_element();
+    let mut d = vec![0.0; n3 * interior.elements.len()];
+    for (m, &am) in muscles.iter().zip(a) {
+        if !m.is_actuation() || am == 0.0 {
+            continue;
+        }
+        for (j, &e) in m.elements.iter().enumerate() {
+            let src = &m.actuation[j * n3..(j + 1) * n3];
+            for (o, v) in d[e * n3..(e + 1) * n3].iter_mut().zip(src) {
+                *o += am * v;
+            }
+        }
+    }
+    d
+}
+
+/// The generalised force of each muscle at unit activation at `x` (flat over node DOFs, N):
+/// −∂E_m/∂q for a fibre muscle (E_m is linear in a, so its force at activation a is a times
+/// this), −∂∇E/∂a_m of the actuated interior for an actuation muscle (exact at rest, where it
+/// is Σ_e K₀ d_m,e; elsewhere the derivative at the interior's current actuation).
 pub fn unit_forces(interior: &Interior, muscles: &[Muscle], x: &[f64]) -> Vec<Vec<f64>> {
     muscles
         .par_iter()
         .map(|m| {
+            if m.is_actuation() {
+                let mut f = vec![0.0; x.len()];
+                interior.actuation_force(x, &m.elements, &m.actuation, &mut f);
+                return f;
+            }
             let one = std::slice::from_ref(m);
             let e = ActiveEnergy::new(interior, one, &[1.0]);
             let mut g = vec![0.0; x.len()];

@@ -254,6 +254,11 @@ fn finish_report(
         per_frame,
         totals,
         warnings: log.warnings,
+        muscles: state
+            .muscles
+            .as_ref()
+            .map(|m| m.made.clone())
+            .unwrap_or_default(),
         export: None,
     }
 }

@@ -216,6 +216,9 @@ pub struct RunReport {
     pub totals: Totals,
     /// Warnings said to the user.
     pub warnings: Vec<String>,
+    /// How well each generated muscle makes its shape (absent without generated muscles).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub muscles: Vec<super::setup::muscles::MuscleMade>,
     /// The written file's form, its wrinkle targets and how well they reproduce the frames
     /// (filled by the export; absent for the frame-sequence form).
     #[serde(skip_serializing_if = "Option::is_none")]

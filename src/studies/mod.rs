@@ -1,7 +1,7 @@
 //! Studies: runs of furrow's own stages and pipeline that measure it, with their charts and
 //! tables: error against run time over the settings ([`tradeoff`]), numerical stability on
 //! stiff and extreme cases ([`stability`]), the skin's spatial locality against the whole-skin
-//! reference ([`locality`]), and the solver benchmarks ([`benchmarks`], with
+//! reference ([`locality`]), muscles against tracking ([`muscles`]), and the solver benchmarks ([`benchmarks`], with
 //! the scaling fits of [`fit`]). This layer sits above the pipeline; it draws with
 //! [`crate::render`].
 
@@ -10,5 +10,6 @@
 pub mod benchmarks;
 pub mod fit;
 pub mod locality;
+pub mod muscles;
 pub mod stability;
 pub mod tradeoff;

@@ -2,8 +2,10 @@
 #![allow(clippy::needless_range_loop)]
 #![allow(dead_code)]
 
+use furrow::fem::{Interior, Material};
+use furrow::lattice::{ElementOrder, Lattice, LatticeSettings};
 use furrow::mesh::TriMesh;
-use nalgebra::Vector3;
+use nalgebra::{Matrix3, Vector3};
 use std::collections::HashMap;
 
 type V = Vector3<f64>;
@@ -102,4 +104,42 @@ pub fn slit_sheet(w: f64, s: f64, half_slit: f64) -> (TriMesh, Vec<usize>, Vec<u
         }
     }
     (TriMesh::new(pos, tris), upper, lower)
+}
+
+/// Deterministic pseudo-random numbers in [−1, 1].
+pub fn noise(i: usize) -> f64 {
+    let x = ((i as f64 + 1.0) * 12.9898).sin() * 43758.5453;
+    2.0 * (x - x.floor()) - 1.0
+}
+
+/// Two 10 cm cells side by side along x (a 20 × 10 × 10 cm box) of `order`, and their
+/// interior of Young's modulus `young` (Pa), ν = 0.3, ρ = 1000 kg/m³.
+pub fn two_cells(order: ElementOrder, young: f64) -> (Lattice, Interior) {
+    let mesh = box_mesh(V::zeros(), V::new(0.2, 0.1, 0.1), 2);
+    let lat = Lattice::build(
+        &mesh,
+        &LatticeSettings {
+            cell_size: Some(0.1),
+            order,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let mat = Material {
+        young,
+        poisson: 0.3,
+        density: 1000.0,
+    };
+    let int = Interior::new(&lat, &mat).unwrap();
+    (lat, int)
+}
+
+/// Flat positions `q` (m) mapped by x ↦ m x + t.
+pub fn transform(q: &[f64], m: &Matrix3<f64>, t: V) -> Vec<f64> {
+    q.chunks(3)
+        .flat_map(|c| {
+            let p = m * V::new(c[0], c[1], c[2]) + t;
+            [p.x, p.y, p.z]
+        })
+        .collect()
 }

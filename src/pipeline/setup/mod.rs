@@ -61,6 +61,9 @@ pub struct Model {
     /// The skin the `select` stage left out, riding on the interior (x = B q), and its
     /// stiffness Bᵀ K_x B at rest (N/m): the interior keeps that skin's elasticity.
     pub left_out: Option<(skin::SimulatedSkin, skin::Stiffness)>,
+    /// The simulated skin's stiffness Bᵀ K_x B at rest (N/m, triplets over node dofs; empty
+    /// when no skin is simulated): the interior's coupling to it, and what the muscles' fit sees.
+    pub skin_stiffness: skin::Stiffness,
 }
 
 impl Model {
@@ -151,14 +154,26 @@ pub fn set_up(
     );
     progress("setup", 4, 4);
     log.stages.push(interior::record(plan, &stepper));
+    let skin_stiffness = simulated
+        .as_ref()
+        .map(|s| s.shell.coupling_terms().0)
+        .unwrap_or_default();
     let muscles = match &plan.driver {
         Driver::Tracking => {
             log.stages.extend(muscles::skipped());
             None
         }
         Driver::Muscles { source } => {
-            let (m, records) =
-                muscles::build_muscles(face, &path, scene, &lattice, &welded.loaded_of, source)?;
+            let coupling = muscle_coupling(&tracking);
+            let (m, records) = muscles::build_muscles(
+                face,
+                &path,
+                scene,
+                &lattice,
+                &welded.loaded_of,
+                source,
+                coupling,
+            )?;
             log.stages.extend(records);
             Some(m)
         }
@@ -189,6 +204,7 @@ pub fn set_up(
         sigma,
         tracking,
         left_out,
+        skin_stiffness,
     };
     let state = State {
         interior: stepper,
@@ -197,6 +213,15 @@ pub fn set_up(
         last_target: None,
     };
     Ok((model, state))
+}
+
+/// What the interior carries besides its elasticity, as the muscles' fit sees it: the
+/// tracking (the skin is left out of the fit, see [`crate::muscle::actuation`]).
+fn muscle_coupling(tracking: &Tracking) -> crate::muscle::Coupling {
+    crate::muscle::Coupling {
+        stiffness: tracking.stiffness.clone(),
+        tracking: tracking.k.clone(),
+    }
 }
 
 /// The left-out skin and its rest stiffness, when the selection leaves some out.

@@ -7,7 +7,8 @@ use crate::io::mesh::MeshInstance;
 use crate::io::model::MorphTarget;
 use crate::lattice::Lattice;
 use crate::mesh::TriMesh;
-use crate::muscle::{generate_muscles, FitSettings, Fitter, GenerateSettings};
+use crate::muscle::fit::Calibration;
+use crate::muscle::{generate_muscles, Coupling, FitSettings, Fitter, GenerateSettings, Generated};
 use crate::pipeline::record::StagePlan;
 use crate::scene::Scene;
 use anyhow::bail;
@@ -24,12 +25,34 @@ pub struct MuscleDrive {
     pub activations: Vec<f64>,
     /// Where the muscles came from (for the report).
     pub origin: String,
+    /// How well each generated muscle makes its shape (empty for a muscle file).
+    pub made: Vec<MuscleMade>,
+}
+
+/// How well a generated muscle makes its blend shape at activation 1, in the interior the
+/// pipeline runs (tracking included), over the vertices the shape moves by more than a tenth
+/// of its largest displacement.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct MuscleMade {
+    /// The muscle (and blend shape) name.
+    pub name: String,
+    /// RMS error of the muscle's surface against the shape, over the shape's RMS
+    /// displacement (dimensionless).
+    pub shape_error: f64,
+    /// The lattice's own projection residual of the shape, relative as `shape_error`: what no
+    /// muscle on this lattice can beat.
+    pub projection: f64,
+    /// Lattice elements the actuation covers.
+    pub elements: usize,
+    /// Nonlinear corrections of the actuation.
+    pub corrections: usize,
 }
 
 /// The muscles from `source` (`auto`: generated from the blend shapes of `face` (from the rig
 /// at `path`) on the welded skin,
 /// whose vertex `i` is loaded vertex `welded_loaded[i]`; otherwise a muscle TOML file), with
-/// their fitter and the `muscles` and `fit` records.
+/// their fitter and the `muscles` and `fit` records. Actuations and the fitter's J see the
+/// interior the pipeline runs: its elasticity with the skin's and the tracking's `coupling`.
 pub fn build_muscles(
     face: &MeshInstance,
     path: &str,
@@ -37,9 +60,13 @@ pub fn build_muscles(
     lattice: &Lattice,
     welded_loaded: &[usize],
     source: &str,
+    coupling: Coupling,
 ) -> anyhow::Result<(MuscleDrive, [StagePlan; 2])> {
     let t = Instant::now();
     let material = scene.interior.material()?;
+    let mut made = String::new();
+    let mut calibration = None;
+    let mut made_by = Vec::new();
     let (muscles, origin) = if source == "auto" {
         let targets: Vec<MorphTarget> = face
             .targets
@@ -51,7 +78,29 @@ pub fn build_muscles(
             })
             .collect();
         let interior = Interior::new(lattice, &material)?;
-        let g = generate_muscles(lattice, &interior, &targets, &GenerateSettings::default())?;
+        let g = generate_muscles(
+            lattice,
+            &interior,
+            &targets,
+            Some(&coupling),
+            &GenerateSettings::default(),
+        )?;
+        made = shape_errors(&g);
+        made_by = g
+            .muscles
+            .iter()
+            .zip(&g.fits)
+            .map(|(m, f)| MuscleMade {
+                name: m.name.clone(),
+                shape_error: f.shape_error,
+                projection: f.projection,
+                elements: f.elements.len(),
+                corrections: f.corrections,
+            })
+            .collect();
+        calibration = Some(Calibration {
+            responses: g.fits.iter().map(|f| f.response.clone()).collect(),
+        });
         (g.muscles, "generated from the blend shapes".to_string())
     } else {
         let welded_mesh = TriMesh::new(
@@ -69,17 +118,25 @@ pub fn build_muscles(
         );
     }
     let n = muscles.len();
-    let fitter = Fitter::new(lattice, &material, muscles, FitSettings::default())?;
+    let fitter = Fitter::coupled(
+        lattice,
+        &material,
+        muscles,
+        FitSettings::default(),
+        Some(coupling),
+        calibration,
+    )?;
     let drive = MuscleDrive {
         fitter,
         activations: vec![0.0; n],
         origin,
+        made: made_by,
     };
     let records = [
         StagePlan::ran(
             "muscles",
             format!(
-                "{n} muscles {}; a weak tracking (κ = {MUSCLE_TRACKING}) carries what they cannot make (bone motion)",
+                "{n} muscles {}{made}; a weak tracking (κ = {MUSCLE_TRACKING}) carries what they cannot make (bone motion)",
                 drive.origin
             ),
             t.elapsed().as_secs_f64() * 1e3,
@@ -91,6 +148,35 @@ pub fn build_muscles(
         ),
     ];
     Ok((drive, records))
+}
+
+/// How well the generated actuations make their shapes at activation 1 in the pipeline's
+/// interior: the mean and worst relative RMS error and the worst against the lattice's own
+/// projection residual (for the `muscles` record).
+fn shape_errors(g: &Generated) -> String {
+    if g.fits.is_empty() {
+        return String::new();
+    }
+    let n = g.fits.len() as f64;
+    let mean = g.fits.iter().map(|f| f.shape_error).sum::<f64>() / n;
+    let (worst, w) = g
+        .fits
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.shape_error.total_cmp(&b.1.shape_error))
+        .map(|(i, f)| (i, f.shape_error))
+        .expect("not empty");
+    let ratio = g
+        .fits
+        .iter()
+        .map(|f| f.shape_error / f.projection.max(1e-12))
+        .fold(0.0f64, f64::max);
+    format!(
+        " (actuations fitted in the pipeline's interior with its tracking: each makes its shape within {:.1} % RMS on average, {:.1} % at worst ({}), at most {ratio:.2}× the lattice's own projection residual)",
+        100.0 * mean,
+        100.0 * w,
+        g.muscles[worst].name
+    )
 }
 
 /// The `muscles` and `fit` records of a run without muscles.

@@ -33,6 +33,18 @@ pub fn fit_activations(
     })
 }
 
+/// Actuate the interior's rest state for the fitted activations (the actuation muscles'
+/// Σ a_m d_m; fibre muscles act through [`add_muscle_terms`]).
+pub fn actuate(muscles: &MuscleDrive, stepper: &mut BackwardEuler) -> anyhow::Result<()> {
+    let d = crate::muscle::actuation_field(
+        &stepper.interior,
+        muscles.fitter.muscles(),
+        &muscles.activations,
+    );
+    stepper.interior.set_actuation(d)?;
+    Ok(())
+}
+
 /// The tracking energy's force Bᵀ k (t − B q) at node positions `q` (flat over node dofs, N);
 /// welded vertex v has embedding `rows[v]` and target `target[v]` (m).
 pub fn tracking_force(
@@ -58,7 +70,7 @@ pub fn tracking_force(
     force
 }
 
-/// Add the muscles' active energy, linearised at the stepper's state (PSD stiffness, like the
+/// Add the fibre muscles' active energy, linearised at the stepper's state (PSD stiffness, like the
 /// skin's terms), to `force` (N) and to `stiffness` after its first `base_len` triplets (N/m;
 /// the triplet layout is the same every step).
 pub fn add_muscle_terms(

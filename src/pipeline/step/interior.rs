@@ -184,7 +184,7 @@ fn note(record: &mut StageRecord, rep: &SolveReport) {
 
 /// The skin's pull on the interior: its force Bᵀ F_x now (returned; the left-out skin's at
 /// x = B q), and the combined stiffness of tracking and skin in `scratch`. The skin's stiffness Bᵀ K_x B (element
-/// projected, the expensive part) is taken at the rest state once, or every frame when asked.
+/// projected, the expensive part) is the model's, taken at the rest state, or re-taken every frame when asked.
 fn coupling_terms(
     model: &Model,
     skin: Option<&EmbeddedShell>,
@@ -194,8 +194,10 @@ fn coupling_terms(
 ) -> Option<Vec<f64>> {
     let every = schedule.every_frame_stiffness;
     if let Some(skin) = skin {
-        if scratch.skin_stiffness.is_none() || every {
+        if every {
             scratch.skin_stiffness = Some(skin.coupling_terms().0);
+        } else if scratch.skin_stiffness.is_none() {
+            scratch.skin_stiffness = Some(model.skin_stiffness.clone());
         }
     }
     if scratch.combined.is_none() || every {

@@ -101,7 +101,11 @@ pub fn step_to_target(
     options: StepOptions,
 ) -> anyhow::Result<(FrameRecord, Composed)> {
     let fit = match state.muscles.as_mut() {
-        Some(m) => Some(drive::fit_activations(m, target)?),
+        Some(m) => {
+            let record = drive::fit_activations(m, target)?;
+            drive::actuate(m, &mut state.interior)?;
+            Some(record)
+        }
         None => None,
     };
     let interior = interior::advance(model, state, scratch, options.schedule, target, k)?;

@@ -1,0 +1,138 @@
+//! Muscles against tracking: the same rig and frames driven by fitted muscle activations
+//! (`muscles.source = "auto"`) and by tracking the blended surface (`"none"`), in one
+//! process: how well each generated muscle makes its shape, how well the activations fit the
+//! frames, and how far apart the wrinkles are (phase-free amplitude per 2λ region,
+//! [`super::tradeoff`]).
+
+use super::tradeoff::{amplitude_error, amplitude_map, region_size, AmplitudeMap};
+use crate::io::load::Rig;
+use crate::pipeline::{self, RunOptions, RunOutput};
+use serde::Serialize;
+
+/// One run of the comparison.
+#[derive(Debug, Clone, Serialize)]
+pub struct DriverRun {
+    /// `muscles` or `tracking`.
+    pub driver: String,
+    /// Wall time of the run (s).
+    pub wall_s: f64,
+    /// Milliseconds in the `muscles` set-up stage (0 for tracking).
+    pub muscles_setup_ms: f64,
+    /// Mean and largest milliseconds of the per-frame activation fit (QP and tracking relief).
+    pub fit_ms_mean: f64,
+    /// Largest per-frame fit time (ms).
+    pub fit_ms_max: f64,
+    /// Mean RMS fit residual over the frames (m; NaN for tracking).
+    pub fit_residual_mean_m: f64,
+    /// Frames not converged in some stage.
+    pub frames_not_converged: usize,
+    /// Largest wrinkle depth over the frames (m).
+    pub depth_max_m: f64,
+}
+
+/// The comparison: both runs and the wrinkles' agreement.
+#[derive(Debug, Clone, Serialize)]
+pub struct DriverComparison {
+    /// Tracking (the reference) and muscles.
+    pub runs: Vec<DriverRun>,
+    /// Phase-free relative difference of the muscle-driven wrinkle amplitude per region from
+    /// the tracking-driven one (dimensionless).
+    pub amplitude_error: f64,
+    /// Of the regions where tracking wrinkles (amplitude above a tenth of its largest), the
+    /// share where the muscles wrinkle too, and the reverse.
+    pub shared_regions: [f64; 2],
+    /// Region side (m), 2λ.
+    pub region_m: f64,
+}
+
+fn run_with(rig: &Rig, opts: &RunOptions, source: &str) -> anyhow::Result<(DriverRun, RunOutput)> {
+    let mut o = opts.clone();
+    o.scene.muscles.source = Some(source.to_string());
+    let out = pipeline::run(rig, &o, &|_, _, _| {})?;
+    let r = &out.report;
+    let fits: Vec<(f64, f64)> = r
+        .per_frame
+        .iter()
+        .filter_map(|f| f.fit.as_ref().map(|s| (s.ms, s.residual)))
+        .collect();
+    let n = fits.len().max(1) as f64;
+    let muscles_setup_ms = r
+        .stages
+        .iter()
+        .find(|s| s.stage == "muscles" && s.is_ran())
+        .map_or(0.0, |s| s.ms);
+    let run = DriverRun {
+        driver: if source == "none" {
+            "tracking"
+        } else {
+            "muscles"
+        }
+        .into(),
+        wall_s: r.totals.wall_s,
+        muscles_setup_ms,
+        fit_ms_mean: fits.iter().map(|f| f.0).sum::<f64>() / n,
+        fit_ms_max: fits.iter().map(|f| f.0).fold(0.0, f64::max),
+        fit_residual_mean_m: if fits.is_empty() {
+            f64::NAN
+        } else {
+            fits.iter().map(|f| f.1).sum::<f64>() / n
+        },
+        frames_not_converged: r.totals.frames_not_converged,
+        depth_max_m: r
+            .per_frame
+            .iter()
+            .map(|f| f.wrinkle_depth_max_m)
+            .fold(0.0, f64::max),
+    };
+    Ok((run, out))
+}
+
+/// Run `opts` on `rig` driven by tracking and by the generated muscles.
+pub fn compare_drivers(rig: &Rig, opts: &RunOptions) -> anyhow::Result<DriverComparison> {
+    let (tracking, reference) = run_with(rig, opts, "none")?;
+    let (muscles, driven) = run_with(rig, opts, "auto")?;
+    let region = region_size(&reference);
+    let (a_ref, a_run) = (
+        amplitude_map(&reference, region),
+        amplitude_map(&driven, region),
+    );
+    Ok(DriverComparison {
+        runs: vec![tracking, muscles],
+        amplitude_error: amplitude_error(&a_run, &a_ref),
+        shared_regions: [shared(&a_ref, &a_run), shared(&a_run, &a_ref)],
+        region_m: region,
+    })
+}
+
+/// Of the (frame, region) pairs where `a` wrinkles (RMS amplitude above a tenth of its
+/// largest), the share where `b` also does (above a tenth of its own largest); 1 when `a`
+/// has none.
+pub fn shared(a: &AmplitudeMap, b: &AmplitudeMap) -> f64 {
+    let amp = |(s, area): (f64, f64)| if area > 0.0 { (s / area).sqrt() } else { 0.0 };
+    let largest = |m: &AmplitudeMap| {
+        m.frames
+            .iter()
+            .flat_map(|f| f.values().map(|&v| amp(v)))
+            .fold(0.0f64, f64::max)
+    };
+    let (la, lb) = (largest(a), largest(b));
+    let (mut hits, mut total) = (0usize, 0usize);
+    for (k, fa) in a.frames.iter().enumerate() {
+        for (key, &v) in fa {
+            if amp(v) > 0.1 * la {
+                total += 1;
+                let other = b
+                    .frames
+                    .get(k)
+                    .and_then(|fb| fb.get(key))
+                    .map_or(0.0, |&w| amp(w));
+                hits += usize::from(other > 0.1 * lb);
+            }
+        }
+    }
+    if total == 0 {
+        1.0
+    } else {
+        hits as f64 / total as f64
+    }
+}
