@@ -2,7 +2,10 @@
 //!
 //! Per frame, with d the target displacement of the surface vertices from the neutral face
 //! (m) and J the linearised map from activations to surface displacement (J = B ∂q/∂a, B the
-//! embedding, computed once at rest by one factorisation and one solve per muscle):
+//! embedding, computed once at rest by one factorisation and one solve per muscle, or the
+//! muscles' measured responses at activation 1 when their actuation fit gives them,
+//! [`Calibration`]); in the pipeline's interior, d first loses what the tracking's own pull
+//! makes, B K_p⁻¹ Bᵀ k d ([`Fitter::coupled`]):
 //!
 //! 1. solve the QP min ½‖J a − d‖² + λ_s‖a‖² + λ_t‖a − a_prev‖², bounds ([`super::qp`]);
 //! 2. Gauss–Newton, `gauss_newton` times: solve the nonlinear equilibrium q(a_k) (Newton,

@@ -1,6 +1,7 @@
 //! The `muscles` and `fit` stages of the set-up: the muscles of the lattice (generated from the
 //! rig's blend shapes, or read from a muscle file) and the fitter that turns each frame's
-//! target into their activations (a clarabel QP on the linearised response).
+//! target into their activations (a clarabel QP on the muscles' responses in the pipeline's
+//! interior).
 
 use crate::fem::Interior;
 use crate::io::mesh::MeshInstance;
@@ -143,7 +144,7 @@ pub fn build_muscles(
         ),
         StagePlan::ran(
             "fit",
-            "activations per frame: clarabel QP on the linearised response (warm-started)",
+            "activations per frame: clarabel QP on the muscles' responses in this interior, the tracking's own pull removed (warm-started)",
             0.0,
         ),
     ];
