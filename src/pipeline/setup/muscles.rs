@@ -28,6 +28,9 @@ pub struct MuscleDrive {
     pub origin: String,
     /// How well each generated muscle makes its shape (empty for a muscle file).
     pub made: Vec<MuscleMade>,
+    /// Whether the current frame's fit failed, so that tracking at full stiffness drives the
+    /// interior for this frame instead of the kept activations.
+    pub fallback: bool,
 }
 
 /// How well a generated muscle makes its blend shape at activation 1, in the interior the
@@ -132,6 +135,7 @@ pub fn build_muscles(
         activations: vec![0.0; n],
         origin,
         made: made_by,
+        fallback: false,
     };
     let records = [
         StagePlan::ran(

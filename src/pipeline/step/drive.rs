@@ -18,11 +18,16 @@ pub fn fit_activations(
     let t = Instant::now();
     let f = muscles.fitter.fit_frame(target)?;
     muscles.activations = f.activations.clone();
+    muscles.fallback = f.status != crate::muscle::FrameStatus::Fitted;
     Ok(StageRecord {
-        status: if f.status == crate::muscle::FrameStatus::Fitted {
-            "converged".into()
+        status: if muscles.fallback {
+            format!(
+                "{} ({}); tracking drives this frame",
+                format!("{:?}", f.status).to_lowercase(),
+                f.clarabel_status
+            )
         } else {
-            format!("{:?} ({})", f.status, f.clarabel_status).to_lowercase()
+            "converged".into()
         },
         iterations: f.gauss_newton + 1,
         residual: f.rms_residual,
@@ -31,6 +36,25 @@ pub fn fit_activations(
         load_steps: 0,
         ..Default::default()
     })
+}
+
+/// Tracking at full stiffness for a frame whose fit failed: the tracking `force` (N) scaled
+/// from the muscles' weak κ to the tracking driver's, and the stiffness that makes up the
+/// difference appended to `stiffness` (N/m).
+pub fn fallback_tracking(
+    tracking: &Tracking,
+    stiffness: &mut Vec<(usize, usize, f64)>,
+    force: &mut [f64],
+) {
+    use crate::pipeline::setup::interior::{MUSCLE_TRACKING, TRACKING_STIFFNESS};
+    let ratio = TRACKING_STIFFNESS / MUSCLE_TRACKING;
+    force.iter_mut().for_each(|f| *f *= ratio);
+    stiffness.extend(
+        tracking
+            .stiffness
+            .iter()
+            .map(|&(r, c, k)| (r, c, k * (ratio - 1.0))),
+    );
 }
 
 /// Actuate the interior's rest state for the fitted activations (the actuation muscles'

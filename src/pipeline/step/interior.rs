@@ -115,6 +115,9 @@ fn solve_once(
     let mut force = drive::tracking_force(&model.tracking, &model.rows, &be.q, &target);
     if let Some(m) = state.muscles.as_ref() {
         drive::add_muscle_terms(m, be, &mut load.stiffness, load.base_len, &mut force);
+        if m.fallback {
+            drive::fallback_tracking(&model.tracking, &mut load.stiffness, &mut force);
+        }
     }
     if let Some(fs) = &load.skin_force {
         for (f, g) in force.iter_mut().zip(fs) {

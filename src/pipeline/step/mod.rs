@@ -235,4 +235,39 @@ mod tests {
         assert!(a.iter().any(|&x| x > 0.05), "activations {a:?}");
         assert!(middle_rise(&model, &state) > 0.5e-3);
     }
+
+    /// A frame whose activation fit failed is driven by the tracking at the tracking driver's
+    /// full stiffness: with the muscles relaxed, the interior then rises as a tracking-driven
+    /// run does, and clearly more than under the muscles' weak tracking alone.
+    #[test]
+    fn a_frame_whose_fit_failed_is_driven_by_full_tracking() {
+        let muscles = || Driver::Muscles {
+            source: "auto".into(),
+        };
+        let rise_after = |driver: Driver, fallback: bool| {
+            let (model, mut state, face) = small_model(driver, 0);
+            if let Some(m) = state.muscles.as_mut() {
+                m.fallback = fallback;
+            }
+            let mut scratch = Scratch::new(model.lattice.node_count());
+            let target = lifted_target(&face, &model, 1.0);
+            let rec = interior::advance(
+                &model,
+                &mut state,
+                &mut scratch,
+                options(0).schedule,
+                &target,
+                0,
+            )
+            .unwrap();
+            assert_eq!(rec.status, "converged");
+            middle_rise(&model, &state)
+        };
+        let tracking = rise_after(Driver::Tracking, false);
+        let fallback = rise_after(muscles(), true);
+        let weak = rise_after(muscles(), false);
+        println!("rise: tracking {tracking:.3e}, fallback {fallback:.3e}, weak {weak:.3e} m");
+        assert!((fallback - tracking).abs() < 1e-3 * tracking);
+        assert!(weak < 0.7 * tracking);
+    }
 }
