@@ -147,6 +147,13 @@ impl SpdSolver {
     }
 }
 
+/// y += A x for A given by triplets `(row, column, value)` (duplicates summed).
+pub fn triplets_mul_add(a: &[(usize, usize, f64)], x: &[f64], y: &mut [f64]) {
+    for &(r, c, v) in a {
+        y[r] += v * x[c];
+    }
+}
+
 /// Dense row-major copy of an `n × n` matrix given by triplets (for tests and small checks).
 pub fn dense_from_triplets(n: usize, triplets: &[(usize, usize, f64)]) -> Vec<f64> {
     let mut d = vec![0.0; n * n];

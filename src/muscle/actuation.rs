@@ -19,11 +19,12 @@
 //! corrected by K_int⁻¹ (K_int + K_t) (u_m − (q* − q₀)) until the surface misses the fit by
 //! little against the lattice's own projection residual ([`ActuationSettings::tolerance`]).
 
-use super::forward::{Coupling, Forward, ForwardStatus};
+use super::forward::{embed_flat, Coupling, Forward, ForwardStatus};
 use super::model::{Muscle, DEFAULT_MAX_CONTRACTION};
 use super::MuscleError;
 use crate::fem::Interior;
 use crate::lattice::Lattice;
+use crate::math::sparse::triplets_mul_add;
 use crate::math::Energy;
 
 /// Relative force tolerance of the equilibria an actuation is checked with: far below the
@@ -123,26 +124,16 @@ impl<'a> Plant<'a> {
     /// K y for the rest stiffness K_int (+ K_c when `coupled`) (N; y in m, flat).
     fn stiffness_times(&self, y: &[f64], coupled: bool) -> Vec<f64> {
         let mut out = vec![0.0; y.len()];
-        for &(r, c, v) in &self.k_int {
-            out[r] += v * y[c];
-        }
+        triplets_mul_add(&self.k_int, y, &mut out);
         if coupled {
-            for &(r, c, v) in &self.coupling.stiffness {
-                out[r] += v * y[c];
-            }
+            triplets_mul_add(&self.coupling.stiffness, y, &mut out);
         }
         out
     }
 
     /// Surface displacement B y (flat, 3 per vertex, m) of node displacements `y`.
     fn surface(&self, y: &[f64]) -> Vec<f64> {
-        let mut x = vec![0.0; 3 * self.lattice.vertex_points.len()];
-        for &(v, n, w) in &self.embed {
-            for i in 0..3 {
-                x[3 * v + i] += w * y[3 * n + i];
-            }
-        }
-        x
+        embed_flat(&self.embed, y, self.lattice.vertex_points.len())
     }
 
     /// Fit the actuation that makes node displacements `u` (the shape's lattice fit, flat, m)

@@ -19,7 +19,7 @@
 //! (dimensionless `size_weight`, `time_weight`), so they do not depend on the mesh size or
 //! units. A frame whose QP fails keeps the last good activations and says so.
 
-use super::forward::{Coupling, Forward, ForwardReport};
+use super::forward::{embed_flat, Coupling, Forward, ForwardReport};
 use super::model::Muscle;
 use super::qp::{solve_qp, QpProblem, QpSolution, QpStatus};
 use super::MuscleError;
@@ -260,13 +260,7 @@ impl Fitter {
 
     /// Embedded surface B q (flat, 3V, m).
     fn surface(&self, q: &[f64]) -> Vec<f64> {
-        let mut x = vec![0.0; 3 * self.vertices];
-        for &(v, n, w) in &self.embed {
-            for i in 0..3 {
-                x[3 * v + i] += w * q[3 * n + i];
-            }
-        }
-        x
+        embed_flat(&self.embed, q, self.vertices)
     }
 
     /// B applied to each node-space column, concatenated column-major (3V × m).

@@ -17,7 +17,7 @@
 use super::model::{unit_forces, ActiveEnergy, Muscle};
 use super::MuscleError;
 use crate::fem::Interior;
-use crate::math::sparse::{Pattern, SpdSolver};
+use crate::math::sparse::{triplets_mul_add, Pattern, SpdSolver};
 use crate::math::Energy;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -56,6 +56,19 @@ impl Coupling {
         }
         f
     }
+}
+
+/// B y: the surface displacement (flat, 3 per vertex, m) of `vertices` embedded vertices for
+/// node displacements or positions `y` (flat, m), through the `embed` triplets (vertex, node,
+/// weight).
+pub fn embed_flat(embed: &[(usize, usize, f64)], y: &[f64], vertices: usize) -> Vec<f64> {
+    let mut x = vec![0.0; 3 * vertices];
+    for &(v, n, w) in embed {
+        for i in 0..3 {
+            x[3 * v + i] += w * y[3 * n + i];
+        }
+    }
+    x
 }
 
 /// The numerical outcome of an equilibrium solve.
@@ -184,9 +197,7 @@ impl Forward {
         let du: Vec<f64> = q.iter().zip(&self.rest).map(|(a, b)| a - b).collect();
         let mut kd = vec![0.0; q.len()];
         if let Some(c) = &self.coupling {
-            for &(r, col, v) in &c.stiffness {
-                kd[r] += v * du[col];
-            }
+            triplets_mul_add(&c.stiffness, &du, &mut kd);
         }
         let mut e = 0.5 * du.iter().zip(&kd).map(|(a, b)| a * b).sum::<f64>();
         if let Some(f) = load {
