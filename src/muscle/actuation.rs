@@ -2,22 +2,21 @@
 //!
 //! For blend shape m with surface displacements Δ_m and lattice fit u_m (node displacements,
 //! [`super::generate::fit_node_displacements`]), the muscle's actuation must make u_m the
-//! equilibrium of the interior the pipeline runs: elasticity K_int, the tracking's stiffness
-//! K_t = Bᵀ k B and pull Bᵀ k Δ_m towards the shape ([`Coupling`]), and the skin's pull p_m.
-//! The skin is taken at the coarse surface's scale, relaxed for wrinkling
-//! ([`crate::shell::relaxed`]): it resists stretch in full, compression only up to the
-//! wrinkling onset, because past it the skin buckles (the rest-state stiffness K_x would make
-//! the muscles fight compressions the wrinkles relieve, and overdrive them: measured on the
-//! demo's frames 0–23, wrinkles 126 % off the tracking-driven ones against 28 % with no skin
-//! at all). p_m = Bᵀ f_skin(x₀ + Δ_m) is its force at the shape.
+//! equilibrium of the interior the pipeline runs: elasticity K_int, and the tracking's
+//! stiffness K_t = Bᵀ k B and pull Bᵀ k Δ_m towards the shape ([`Coupling`]). Linearised at
+//! rest that asks for the active force f_m = (K_int + K_t) u_m − Bᵀ k Δ_m, which the rest
+//! change δ_m = K_int⁻¹ f_m releases: the actuation is the local displacements of δ_m
+//! ([`crate::fem::Interior::local_displacements`]). Without tracking δ_m = u_m: a compatible
+//! actuation makes the shape whatever the stiffness. The corotational interior is not linear,
+//! so the nonlinear equilibrium q* at activation 1 is solved and δ_m corrected by
+//! K_int⁻¹ (K_int + K_t) (u_m − (q* − q₀)) until the surface misses the fit by little against
+//! the lattice's own projection residual ([`ActuationSettings::tolerance`]).
 //!
-//! Linearised at rest this asks for the active force f_m = (K_int + K_t) u_m − Bᵀ k Δ_m − p_m,
-//! which the rest change δ_m = K_int⁻¹ f_m releases: the actuation is the local displacements
-//! of δ_m ([`crate::fem::Interior::local_displacements`]). Without skin and tracking
-//! δ_m = u_m: a compatible actuation makes the shape whatever the stiffness. The corotational
-//! interior is not linear, so the nonlinear equilibrium q* at activation 1 is solved and δ_m
-//! corrected by K_int⁻¹ (K_int + K_t) (u_m − (q* − q₀)) until the surface misses the fit by
-//! little against the lattice's own projection residual ([`ActuationSettings::tolerance`]).
+//! The skin is left out of this fit. Measured on the demo's frames 0–23 (`furrow bench
+//! muscles`): with the skin's rest stiffness Bᵀ K_x B in the fit the muscle-driven wrinkles are
+//! 126 % off the tracking-driven ones (the muscles fight compressions the skin relieves by
+//! wrinkling), with a relaxed (tension-field) skin force the corrections diverge on the brow
+//! raise and the jaw, and without the skin they are 27.5 % off.
 
 use super::forward::{embed_flat, Coupling, Forward, ForwardStatus};
 use super::model::{Muscle, DEFAULT_MAX_CONTRACTION};
@@ -57,7 +56,7 @@ impl Default for ActuationSettings {
 }
 
 /// The interior a shape's actuation is fitted in: the passive lattice (for K_int⁻¹), the
-/// pipeline's tracking, the skin's relaxed pull and the embedding.
+/// pipeline's tracking and the embedding.
 pub struct Plant<'a> {
     lattice: &'a Lattice,
     interior: &'a Interior,
@@ -161,7 +160,7 @@ impl<'a> Plant<'a> {
             shape_error: f64::INFINITY,
             projection: rms_over(&bu, Some(delta), moved) / norm,
             response: Vec::new(),
-            corrections: 4,
+            corrections: 0,
             converged: false,
         };
         let mut one = Forward::new(

@@ -3,9 +3,10 @@
 //! displacements from the neutral face, which is the rest state), and its linearised
 //! response to activations.
 //!
-//! With a [`Coupling`] the model is the interior the pipeline runs: the skin's stiffness
-//! Bᵀ K_x B and the tracking's Bᵀ k B are added as ½ (q − q₀)ᵀ K_c (q − q₀), and an
-//! equilibrium may carry the tracking's pull Bᵀ k (t − B q₀) towards a target t as a load.
+//! With a [`Coupling`] the model is the interior the pipeline runs, as the muscles' fit sees
+//! it: the tracking's stiffness Bᵀ k B (any constant stiffness K_c) is added as
+//! ½ (q − q₀)ᵀ K_c (q − q₀), and an equilibrium may carry the tracking's pull Bᵀ k (t − B q₀)
+//! towards a target t as a load.
 //!
 //! Equilibrium q(a) minimises E_int(q; d(a)) + Σ_m E_m(q, a_m) + E_c(q) over the free nodes (modified
 //! Newton with a sparse Cholesky on the free DOFs, refactorised when the force residual falls
@@ -28,8 +29,7 @@ const NONE: usize = usize::MAX;
 /// muscles' fit to see the same interior: a constant stiffness and the tracking.
 #[derive(Debug, Clone, Default)]
 pub struct Coupling {
-    /// K_c: the skin's Bᵀ K_x B at rest plus the tracking's Bᵀ k B (N/m, triplets over node
-    /// dofs, both triangles).
+    /// K_c: the tracking's Bᵀ k B (N/m, triplets over node dofs, both triangles).
     pub stiffness: Vec<(usize, usize, f64)>,
     /// Tracking stiffness k_v of each embedded surface vertex (N/m, the lattice's vertex
     /// order; empty: no tracking).
@@ -113,7 +113,7 @@ pub struct Forward {
     /// interior's Hessian omits the derivative of its element rotations, so Newton converges
     /// linearly there (about 0.6 per iteration at 18 % strain).
     pub tolerance: f64,
-    /// The pipeline's skin and tracking stiffness, when the model stands for that interior.
+    /// The pipeline's tracking, when the model stands for that interior.
     pub coupling: Option<Coupling>,
     free: Vec<usize>,
     nfree: usize,
@@ -176,7 +176,7 @@ impl Forward {
         })
     }
 
-    /// The same model with the pipeline's `coupling` (skin and tracking) added.
+    /// The same model with the pipeline's `coupling` (its tracking) added.
     pub fn with_coupling(mut self, coupling: Coupling) -> Self {
         self.coupling = Some(coupling);
         self.pattern = None;

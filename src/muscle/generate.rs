@@ -77,7 +77,7 @@ pub struct Generated {
     pub source: Vec<usize>,
     /// (shape name, reason) of shapes that made no muscle.
     pub skipped: Vec<(String, String)>,
-    /// For each muscle, how well its actuation makes its shape (and the skin's pull there).
+    /// For each muscle, how well its actuation makes its shape, and its measured response.
     pub fits: Vec<FittedActuation>,
 }
 
@@ -187,7 +187,7 @@ pub fn fit_node_displacements(
 }
 
 /// Generate one actuation muscle per blend shape (see the module notes of [`super`]), fitted
-/// in the interior with the pipeline's `coupling` (skin and tracking) when given.
+/// in the interior with the pipeline's `coupling` (its tracking) when given.
 pub fn generate_muscles(
     lattice: &Lattice,
     interior: &Interior,

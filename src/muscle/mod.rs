@@ -8,8 +8,7 @@
 //!   adds the active energy a σ Σ w [(‖F f‖ − 1) − (det F − 1)/3], σ = 3 μ c (Pa): a fibre
 //!   tension made deviatoric so the tissue shortens along the fibre with its volume kept.
 //! * [`forward`]: quasi-static equilibrium of interior + muscles (bone pinned), with the
-//!   pipeline's skin and tracking stiffness when given ([`Coupling`]), and its linear response
-//!   to activations.
+//!   pipeline's tracking when given ([`Coupling`]), and its linear response to activations.
 //! * [`actuation`]: a shape's actuation fitted with that interior in the loop.
 //! * [`rigfile`]: muscles from a TOML rig file.
 //! * [`generate`]: muscles from the blend-shape basis when there is no file.
@@ -27,10 +26,11 @@
 //!    default 10⁻³) makes the elastic term a light smoothness regulariser. One sparse
 //!    Cholesky factorisation serves all shapes (one solve per shape). ‖B u − Δ‖ is the
 //!    lattice's own projection residual: no muscle on this lattice can do better.
-//! 2. Fit the actuation that makes u the equilibrium of the interior the pipeline runs
-//!    (skin and tracking included, [`actuation`]): the muscle out-pulls the skin by the
-//!    overshoot K_int⁻¹ (K_c u − Bᵀ k Δ), and nonlinear corrections remove the corotational
-//!    interior's departure from the linearisation.
+//! 2. Fit the actuation that makes u the equilibrium of the interior the pipeline runs with
+//!    its tracking ([`actuation`]; the skin is left out, as measured there): the rest change
+//!    is u plus K_int⁻¹ (K_t u − Bᵀ k Δ), what the tracking's pull leaves to the muscle, and
+//!    nonlinear corrections remove the corotational interior's departure from the
+//!    linearisation.
 //! 3. The muscle covers every element whose offset reaches 10⁻⁴ of the shape's largest.
 //!    Shapes whose lattice displacement stays below [`generate::GenerateSettings::min_strain`]
 //!    cells (for example an all-zero shape) make no muscle and are listed as skipped.

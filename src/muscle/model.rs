@@ -12,8 +12,8 @@
 //! with A(a) = I + Σ a_m (A_m − I)) written per element of the corotational interior: the
 //! offsets carry a symmetric stretch that varies across the 27-node element. A compatible
 //! actuation makes its shape at zero energy whatever the stiffness, so a muscle does not have
-//! to out-pull passive flesh; where the skin and the tracking resist, its offsets are fitted
-//! with them in the loop ([`super::actuation`]). Its unit force −∂∇E/∂a_m at rest is
+//! to out-pull passive flesh; where the tracking resists, its offsets are fitted
+//! with it in the loop ([`super::actuation`]). Its unit force −∂∇E/∂a_m at rest is
 //! Σ_e K₀ d_m,e.
 //!
 //! # Fibre muscles

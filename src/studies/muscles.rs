@@ -18,7 +18,7 @@ pub struct DriverRun {
     pub wall_s: f64,
     /// Milliseconds in the `muscles` set-up stage (0 for tracking).
     pub muscles_setup_ms: f64,
-    /// Mean and largest milliseconds of the per-frame activation fit (QP and tracking relief).
+    /// Mean milliseconds of the per-frame activation fit (QP and tracking relief).
     pub fit_ms_mean: f64,
     /// Largest per-frame fit time (ms).
     pub fit_ms_max: f64,

@@ -56,7 +56,7 @@ pub struct MuscleMade {
 /// at `path`) on the welded skin,
 /// whose vertex `i` is loaded vertex `welded_loaded[i]`; otherwise a muscle TOML file), with
 /// their fitter and the `muscles` and `fit` records. Actuations and the fitter's J see the
-/// interior the pipeline runs: its elasticity with the skin's and the tracking's `coupling`.
+/// interior the pipeline runs: its elasticity with the tracking's `coupling`.
 pub fn build_muscles(
     face: &MeshInstance,
     path: &str,
