@@ -4,6 +4,7 @@
 //! `FURROW_BENCH_FACES=2000,20000` to choose sizes).
 
 use furrow::shell::bench::{bench_shell, bench_shell_with};
+use furrow::solver::LinearAlgebra;
 use std::process::Command;
 
 #[test]
@@ -12,6 +13,8 @@ fn small_bench_converges() {
     println!("{v}");
     assert_eq!(v["prep_status"], "converged", "{v}");
     assert_eq!(v["status"], "converged", "{v}");
+    assert_eq!(v["reference_status"], "converged", "{v}");
+    assert!(v["speedup"].as_f64().unwrap() > 0.0, "{v}");
     // A 5 % boundary change from an equilibrium: the pinned-motion predictor plus a few
     // Newton steps (5 measured; 11 before the predictor at 2k faces).
     assert!(
@@ -30,7 +33,14 @@ fn small_bench_converges() {
 /// both solve to 1e-9 of the membrane force scale).
 #[test]
 fn lagged_cap_changes_the_cost_not_the_sheet() {
-    let every = bench_shell_with(500, 0).unwrap();
+    let every = bench_shell_with(
+        500,
+        LinearAlgebra {
+            lagged_solves: 0,
+            ..LinearAlgebra::FAST
+        },
+    )
+    .unwrap();
     let lagged = bench_shell(500).unwrap();
     for v in [&every, &lagged] {
         assert_eq!(v["status"], "converged", "{v}");

@@ -73,11 +73,10 @@ fn profile_one_iteration() {
         n_free: nf,
         n_cons: nc,
         hessian: &t,
-        hessian_values: None,
+        hessian_values: furrow::solver::kkt::HessianValues::Triplets,
         constraints: &cf,
         gamma,
         delta: 1e-4 * gamma,
-        positions: None,
     };
     time("KKT build: pattern, AMD, symbolic, map", &mut || {
         kkt.assemble(&blocks).unwrap();

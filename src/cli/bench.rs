@@ -1,13 +1,13 @@
 //! `furrow bench …`: benchmarks printing their measurements (text or JSON).
 
 use super::Output;
-use crate::solver::StaticSettings;
 
 /// `furrow bench …` subcommands.
 #[derive(Debug, clap::Subcommand)]
 pub enum BenchCommand {
     /// Skin solve: a square sheet of about N triangles under in-plane compression, centre
-    /// clamped by constraints, solved to equilibrium from a warm start.
+    /// clamped by constraints, solved to equilibrium from a warm start, with the skin's fast
+    /// linear algebra and with the reference (the speed-up in one run).
     #[command(
         after_help = "Example:\n  furrow bench shell --faces 20000\n  furrow bench shell --faces 2000 --json\n  furrow bench shell --faces 20000 --lagged-solves 0"
     )]
@@ -16,7 +16,8 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 20_000)]
         faces: usize,
         /// Most GMRES solves a Newton direction may spend with a lagged factorisation before
-        /// a fresh one (0: factorise every direction); default: the solver's (5).
+        /// a fresh one (0: factorise every direction); default: the skin's fast solver's (10).
+        /// The reference (double precision, 5) runs beside it in any case.
         #[arg(long)]
         lagged_solves: Option<usize>,
     },
@@ -63,11 +64,11 @@ pub enum BenchCommand {
         #[command(flatten)]
         on: RigFrames,
     },
-    /// The skin's local solver (fresh factors of only the patches whose Hessian changed, the
-    /// default) against the global reference on the same skin, in one process: skin time,
+    /// The skin's fast solver (the scene's `solver.skin_solver`: `lagged` by default, or
+    /// `patches`) against the global reference on the same skin, in one process: skin time,
     /// factorisations, solves, and how far apart the wrinkles are.
     #[command(
-        after_help = "Example:\n  furrow bench skin --rig rigs/face.glb --frames 0:40\n  furrow bench skin --rig rigs/head.glb --frames 0:10 --json"
+        after_help = "Example:\n  furrow bench skin --rig rigs/face.glb --frames 0:40\n  furrow bench skin --rig rigs/head.glb --frames 0:10 --json\n  furrow bench skin --rig rigs/face.glb --scene patches.toml   (a scene with [solver] skin_solver = \"patches\")"
     )]
     Skin {
         #[command(flatten)]
@@ -116,7 +117,8 @@ pub fn run(c: BenchCommand, out: &Output) -> anyhow::Result<()> {
                 (2..=5_000_000).contains(&faces),
                 "--faces must be between 2 and 5,000,000, got {faces}"
             );
-            let lagged = lagged_solves.unwrap_or(StaticSettings::default().lagged_solves);
+            let fast = crate::solver::LinearAlgebra::FAST;
+            let lagged = lagged_solves.unwrap_or(fast.lagged_solves);
             anyhow::ensure!(
                 lagged <= 1000,
                 "--lagged-solves must be between 0 and 1000, got {lagged}"
@@ -124,7 +126,13 @@ pub fn run(c: BenchCommand, out: &Output) -> anyhow::Result<()> {
             print(
                 out,
                 "bench shell",
-                &crate::shell::bench::bench_shell_with(faces, lagged)?,
+                &crate::shell::bench::bench_shell_with(
+                    faces,
+                    crate::solver::LinearAlgebra {
+                        lagged_solves: lagged,
+                        ..fast
+                    },
+                )?,
             );
         }
         BenchCommand::Lattice { elements } => {

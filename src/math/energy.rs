@@ -1,5 +1,8 @@
 //! The interface every potential energy in furrow implements.
 
+/// The slot of a Hessian triplet that [`Energy::hessian_scatter`] leaves out.
+pub const NO_SLOT: u32 = u32::MAX;
+
 /// A potential energy over a flat vector of degrees of freedom (positions in metres, so the
 /// energy is in joules, the gradient in newtons and the Hessian in newtons per metre).
 ///
@@ -31,5 +34,29 @@ pub trait Energy: Sync {
         self.eval(x, None, Some(&mut t), project_psd);
         values.clear();
         values.extend(t.iter().map(|e| e.2));
+    }
+
+    /// The number of Hessian triplets [`Energy::eval`] emits, when the energy knows it
+    /// without evaluating (the default: `None`). A solver that kept the triplets' layout
+    /// scatters later Hessians by it only while this count agrees.
+    fn triplet_count(&self) -> Option<usize> {
+        None
+    }
+
+    /// Add the Hessian's values (J/m², at `x`, element-projected with `project_psd`) into
+    /// the values of a sparse matrix: the value of triplet i (in `eval`'s order) goes to
+    /// `out[slot[i]]`, nowhere when `slot[i]` is [`NO_SLOT`]. `slot` must be a *slot map*:
+    /// triplets with the same (row, column) share a slot, different ones never do (an
+    /// energy may rely on this to add element blocks in parallel). The default evaluates
+    /// [`Energy::hessian_values`] and adds them in order; energies with many elements
+    /// scatter their element blocks straight into `out` (no triplet buffer).
+    fn hessian_scatter(&self, x: &[f64], slot: &[u32], out: &mut [f64], project_psd: bool) {
+        let mut v = Vec::new();
+        self.hessian_values(x, &mut v, project_psd);
+        for (&s, &h) in slot.iter().zip(&v) {
+            if s != NO_SLOT {
+                out[s as usize] += h;
+            }
+        }
     }
 }

@@ -159,11 +159,15 @@ pub struct MuscleSection {
     pub source: Option<String>,
 }
 
+/// The values of `solver.skin_solver`.
+pub const SKIN_SOLVERS: [&str; 3] = ["lagged", "patches", "global"];
+
 /// `[solver]`: tolerances.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SolverSection {
-    /// Shell Newton tolerance relative to the skin's stretch stiffness × typical edge (default 1e-6).
+    /// Shell Newton tolerance: the RMS residual force per skin vertex relative to the skin's
+    /// stretch stiffness × mean edge (default 1e-6 on rigs, 1e-8 in synthetic scenes).
     pub shell_tolerance: Option<f64>,
     /// Shell Newton iteration limit (default 60).
     pub shell_iterations: Option<usize>,
@@ -179,10 +183,13 @@ pub struct SolverSection {
     /// When the skin's stiffness Bᵀ K_x B seen by the interior is recomputed: `once` (at
     /// rest; default, the force Bᵀ F_x is always current) or `every_frame` (the paper).
     pub skin_stiffness: Option<String>,
-    /// How the skin's Newton directions are solved: `local` (default: GMRES with the lagged
-    /// global factor and fresh factors of only the patches whose Hessian changed) or
-    /// `global` (the reference: a fresh factor of the whole skin whenever the lagged one
-    /// does not do). Both solve to the same residual test.
+    /// How the skin's Newton directions are solved: `lagged` (default: GMRES preconditioned
+    /// with a single-precision factor of the whole skin, kept across iterations and frames
+    /// while it converges within 10 solves), `patches` (the same, corrected by fresh factors
+    /// of only the patches whose Hessian changed) or `global` (the reference: a
+    /// double-precision factor, made afresh whenever the last one does not converge within
+    /// 5 solves). All solve each direction to the same forcing term and stop at the same
+    /// residual test.
     pub skin_solver: Option<String>,
 }
 
@@ -427,8 +434,10 @@ impl Scene {
             }
         }
         if let Some(m) = &self.solver.skin_solver {
-            if m != "local" && m != "global" {
-                bail!("`solver.skin_solver` must be \"local\" or \"global\", got \"{m}\"");
+            if !SKIN_SOLVERS.contains(&m.as_str()) {
+                bail!(
+                    "`solver.skin_solver` must be \"lagged\", \"patches\" or \"global\", got \"{m}\""
+                );
             }
         }
         if let Some(m) = &self.export.surface {

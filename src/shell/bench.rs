@@ -14,7 +14,9 @@
 use super::sheet::equilateral_sheet;
 use super::{Shell, ShellMaterial};
 use crate::mesh::TriMesh;
-use crate::solver::{LinearConstraints, SolveReport, StaticProblem, StaticSettings, StaticSolver};
+use crate::solver::{
+    LinearAlgebra, LinearConstraints, SolveReport, StaticProblem, StaticSettings, StaticSolver,
+};
 use serde_json::json;
 use std::time::Instant;
 
@@ -264,33 +266,24 @@ fn prepare(
     Ok((x, solver, report, levels))
 }
 
-/// Run the shell benchmark on a sheet of about `faces` triangles and return its measurements
-/// as a flat JSON object: faces, vertices, constraints, then the warm-start solve (newton
-/// iterations, residual in N, times in seconds, status) and `prep_*` fields for the
-/// preparation solve from the flat sheet.
+/// Run the shell benchmark on a sheet of about `faces` triangles with the skin's fast linear
+/// algebra ([`LinearAlgebra::FAST`]) and the reference ([`LinearAlgebra::REFERENCE`]), and
+/// return the measurements as a flat JSON object (see [`bench_shell_with`]).
 pub fn bench_shell(faces: usize) -> anyhow::Result<serde_json::Value> {
-    bench_shell_with(faces, StaticSettings::default().lagged_solves)
+    bench_shell_with(faces, LinearAlgebra::FAST)
 }
 
-/// [`bench_shell`] with the lagged-factor cap `lagged_solves` (see
-/// [`StaticSettings::lagged_solves`]; 0 factorises every direction), reported as
-/// `lagged_solves`.
-pub fn bench_shell_with(faces: usize, lagged_solves: usize) -> anyhow::Result<serde_json::Value> {
+/// The shell benchmark with the linear algebra `fast` against the reference, each from its
+/// own preparation solve: faces, vertices, constraints, then `fast`'s warm-start solve
+/// (Newton iterations, residual in N, times in seconds, status), `prep_*` fields for its
+/// preparation solve from the flat sheet, `reference_*` fields for the reference's warm
+/// solve, and `speedup`, the reference's warm-solve time over `fast`'s (one process).
+pub fn bench_shell_with(faces: usize, fast: LinearAlgebra) -> anyhow::Result<serde_json::Value> {
     let t_build = Instant::now();
     let b = bench_sheet(faces)?;
     let build_s = t_build.elapsed().as_secs_f64();
-    let settings = StaticSettings {
-        tolerance: b.tolerance(),
-        max_iterations: 400,
-        energy_merit: true,
-        lagged_solves,
-        ..Default::default()
-    };
-    let t_prep = Instant::now();
-    let (mut x, mut solver, prep, levels) = prepare(&b, faces, &settings)?;
-    let prep_wall_s = t_prep.elapsed().as_secs_f64();
-    let problem = b.problem(0.0105, &mut x);
-    let warm = solver.solve(&b.shell, &problem, &mut x)?;
+    let (fast_run, x) = bench_solver(&b, faces, fast)?;
+    let (reference, _) = bench_solver(&b, faces, LinearAlgebra::REFERENCE)?;
     let zmax = x.chunks(3).map(|c| c[2].abs()).fold(0.0, f64::max);
     let mut out = json!({
         "faces": b.shell.rest.triangle_count(),
@@ -298,19 +291,51 @@ pub fn bench_shell_with(faces: usize, lagged_solves: usize) -> anyhow::Result<se
         "constraints": b.constraints.rows,
         "build_s": build_s,
         "max_out_of_plane_m": zmax,
+        "threads": rayon::current_num_threads(),
+        "lagged_solves": fast.lagged_solves,
+        "precision": fast.precision,
     });
     let obj = out.as_object_mut().expect("object");
-    for (k, v) in report_json(&warm).as_object().expect("object") {
+    for (k, v) in fast_run.as_object().expect("object") {
         obj.insert(k.clone(), v.clone());
     }
+    for (k, v) in reference.as_object().expect("object") {
+        if !k.starts_with("prep_") {
+            obj.insert(format!("reference_{k}"), v.clone());
+        }
+    }
+    let speedup = reference["total_s"].as_f64().unwrap_or(f64::NAN)
+        / fast_run["total_s"].as_f64().unwrap_or(f64::NAN);
+    obj.insert("speedup".into(), json!(speedup));
+    Ok(out)
+}
+
+/// Prepare the sheet `b` and time its warm solve with the linear algebra `linear`: the
+/// warm solve's report with the preparation's as `prep_*` fields, and the final state.
+fn bench_solver(
+    b: &BenchSheet,
+    faces: usize,
+    linear: LinearAlgebra,
+) -> anyhow::Result<(serde_json::Value, Vec<f64>)> {
+    let settings = linear.apply(StaticSettings {
+        tolerance: b.tolerance(),
+        max_iterations: 400,
+        energy_merit: true,
+        ..Default::default()
+    });
+    let t_prep = Instant::now();
+    let (mut x, mut solver, prep, levels) = prepare(b, faces, &settings)?;
+    let prep_wall_s = t_prep.elapsed().as_secs_f64();
+    let problem = b.problem(0.0105, &mut x);
+    let warm = solver.solve(&b.shell, &problem, &mut x)?;
+    let mut out = report_json(&warm);
+    let obj = out.as_object_mut().expect("object");
     for (k, v) in report_json(&prep).as_object().expect("object") {
         obj.insert(format!("prep_{k}"), v.clone());
     }
     obj.insert("prep_levels".into(), json!(levels));
     obj.insert("prep_wall_s".into(), json!(prep_wall_s));
-    obj.insert("threads".into(), json!(rayon::current_num_threads()));
-    obj.insert("lagged_solves".into(), json!(lagged_solves));
-    Ok(out)
+    Ok((out, x))
 }
 
 #[cfg(test)]

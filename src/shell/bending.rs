@@ -32,6 +32,7 @@
 
 use super::material::ShellMaterial;
 use super::psd::{element_hessians, project_psd};
+use super::scatter::{scatter_element_hessians, Colouring};
 use crate::math::Energy;
 use crate::mesh::topology::Topology;
 use crate::mesh::TriMesh;
@@ -278,6 +279,9 @@ pub struct BendingEnergy {
     /// Bending rigidity D (N·m) at the material's reference thickness.
     pub rigidity: f64,
     n_dofs: usize,
+    /// Hinges grouped by shared vertices, for [`Self::hessian_scatter_into`] (made at the
+    /// first call; the hinges' vertices do not change after construction).
+    colouring: std::sync::OnceLock<Colouring>,
 }
 
 impl BendingEnergy {
@@ -339,12 +343,27 @@ impl BendingEnergy {
             hinges,
             rigidity: d,
             n_dofs: 3 * p.len(),
+            colouring: std::sync::OnceLock::new(),
         })
     }
 
     /// Number of Hessian triplets emitted per evaluation.
     pub fn triplet_count(&self) -> usize {
         144 * self.hinges.len()
+    }
+
+    /// [`Energy::hessian_scatter`] of the hinges: hinge Hessians at `x` (J/m², projected
+    /// to PSD when `project` is set) added into `out` by the slot map `slot` (one slot per
+    /// triplet, [`Self::triplet_count`] of them), in parallel by colours ([`super::scatter`]).
+    pub fn hessian_scatter_into(&self, x: &[f64], slot: &[u32], out: &mut [f64], project: bool) {
+        let colouring = self
+            .colouring
+            .get_or_init(|| Colouring::greedy(self.hinges.iter().map(|el| el.v)));
+        scatter_element_hessians(out, slot, 12, project, colouring, |i, h| {
+            let el = &self.hinges[i];
+            let h: &mut [f64; 144] = h.try_into().expect("144 values per hinge");
+            hinge_element(el, gather4(x, el.v), None, Some(h));
+        });
     }
 
     /// The Hessian values of [`Energy::eval`]'s triplets at `x` (J/m²), in their order,

@@ -18,6 +18,7 @@
 
 use super::material::ShellMaterial;
 use super::psd::{element_hessians, project_psd};
+use super::scatter::{scatter_element_hessians, Colouring};
 use crate::math::Energy;
 use crate::mesh::TriMesh;
 use nalgebra::Vector3;
@@ -49,6 +50,9 @@ pub struct MembraneEnergy {
     /// The constitutive law.
     pub law: MembraneLaw,
     n_dofs: usize,
+    /// Elements grouped by shared vertices, for [`Self::hessian_scatter_into`] (made at the
+    /// first call; the elements' vertices do not change after construction).
+    colouring: std::sync::OnceLock<Colouring>,
 }
 
 /// Rest data for the triangle `p`, or `None` if it has (numerically) zero area.
@@ -344,12 +348,28 @@ impl MembraneEnergy {
             element_lame,
             law: MembraneLaw::default(),
             n_dofs: 3 * rest.positions.len(),
+            colouring: std::sync::OnceLock::new(),
         })
     }
 
     /// Number of Hessian triplets emitted per evaluation.
     pub fn triplet_count(&self) -> usize {
         81 * self.elements.len()
+    }
+
+    /// [`Energy::hessian_scatter`] of the membrane: element Hessians at `x` (J/m², projected
+    /// to PSD when `project` is set) added into `out` by the slot map `slot` (one slot per
+    /// triplet, [`Self::triplet_count`] of them), in parallel by colours ([`super::scatter`]).
+    pub fn hessian_scatter_into(&self, x: &[f64], slot: &[u32], out: &mut [f64], project: bool) {
+        let colouring = self
+            .colouring
+            .get_or_init(|| Colouring::greedy(self.elements.iter().map(|el| el.v)));
+        let law = self.law;
+        scatter_element_hessians(out, slot, 9, project, colouring, |i, h| {
+            let (el, (mu_h, lambda_h)) = (&self.elements[i], self.element_lame[i]);
+            let h: &mut [f64; 81] = h.try_into().expect("81 values per element");
+            membrane_element(el, gather3(x, el.v), (law, mu_h, lambda_h), None, Some(h));
+        });
     }
 
     /// The Hessian values of [`Energy::eval`]'s triplets at `x` (J/m²), in their order,

@@ -6,6 +6,7 @@ pub mod material;
 pub mod membrane;
 pub mod model;
 pub mod psd;
+pub mod scatter;
 pub mod sheet;
 
 pub use material::ShellMaterial;

@@ -98,6 +98,16 @@ impl Energy for Shell {
         self.membrane.hessian_values_into(x, vm, project_psd);
         self.bending.hessian_values_into(x, vb, project_psd);
     }
+
+    fn triplet_count(&self) -> Option<usize> {
+        Some(Shell::triplet_count(self))
+    }
+
+    fn hessian_scatter(&self, x: &[f64], slot: &[u32], out: &mut [f64], project_psd: bool) {
+        let (sm, sb) = slot.split_at(self.membrane.triplet_count());
+        self.membrane.hessian_scatter_into(x, sm, out, project_psd);
+        self.bending.hessian_scatter_into(x, sb, out, project_psd);
+    }
 }
 
 #[cfg(test)]

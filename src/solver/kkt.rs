@@ -27,7 +27,15 @@
 /// faer tasks for large factorisations (fixed, so results do not depend on the thread count).
 const FAER_TASKS: usize = 2;
 
+/// LDLᵀ without dynamic regularisation: a zero pivot is reported, not perturbed.
+const NO_REGULARIZATION: LdltRegularization<'static, f64> = LdltRegularization {
+    dynamic_regularization_signs: None,
+    dynamic_regularization_delta: 0.0,
+    dynamic_regularization_epsilon: 0.0,
+};
+
 use super::gmres::{fgmres, GmresReport};
+use crate::math::energy::NO_SLOT;
 use crate::math::sparse::{mul_sym_vec_into, Pattern, SparseError};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
@@ -53,6 +61,24 @@ pub struct KktFactorInfo {
     pub numeric_s: f64,
 }
 
+/// The floating-point precision of a KKT factor. The factor only preconditions GMRES, which
+/// works on the double-precision matrix, so a single-precision factor changes the cost of a
+/// Newton direction, not its accuracy: on the face rig's skin KKT (31,242 rows) it factorises
+/// in 106 ms against 157 and solves in 4.9 ms against 11 (METIS order, one run), and GMRES
+/// reaches 1e-10 in 10 iterations with it against 9 with the double factor. Its negative
+/// pivots counted the same inertia as the double factor's on every dumped matrix of the
+/// demo's buckling frames (15 matrices, shifted and unshifted, 0 to 14 extra negative
+/// eigenvalues).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FactorPrecision {
+    /// f64 factor and solves.
+    #[default]
+    Double,
+    /// f32 factor and solves (half the memory traffic, twice the SIMD lanes).
+    Single,
+}
+
 /// A KKT factorisation with cached pattern and symbolic analysis. Hold one per problem
 /// (per skin) and reuse it: only the numeric factorisation is redone while the triplet
 /// layout is unchanged.
@@ -68,11 +94,34 @@ pub struct KktSolver {
     mirror: Vec<(usize, usize)>,
     /// Lower slot of each constraint triplet.
     cmap: Vec<usize>,
+    /// Slot map of the Hessian triplets ([`crate::math::Energy::hessian_scatter`]): a
+    /// lower-triangle free–free triplet's value slot in the matrix, a (free row, pinned
+    /// column) triplet's slot `nnz + k` (its pair is `coupling[k]`), the rest `NO_SLOT`.
+    slot: Vec<u32>,
+    /// (free row, pinned dof) of each coupling slot.
+    coupling: Vec<(usize, usize)>,
+    /// The Hessian's coupling values K_fp (N/m) of the last assembly, one per `coupling` pair.
+    coupling_values: Vec<f64>,
     symbolic: Option<SymbolicCholesky<usize>>,
+    /// The factor's values in double precision (empty when the factor is single).
     values: Vec<f64>,
+    /// The factor's values in single precision (empty when the factor is double).
+    values32: Vec<f32>,
+    /// The precision the next factorisations are made in.
+    precision: FactorPrecision,
+    /// The lower triangle of the shifted matrix rounded to single precision (a
+    /// single-precision factorisation's input).
+    matrix32: Option<SparseColMat<usize, f32>>,
     mem: Option<MemBuffer>,
+    /// The matrix of the current factor (unshifted), once `base` has been assembled anew
+    /// after the factorisation (the buffers are swapped, not copied).
     matrix: Option<SparseColMat<usize, f64>>,
+    /// The assembled matrix (unshifted).
     base: Option<SparseColMat<usize, f64>>,
+    /// `base` is the matrix of the current factor (no assembly since the factorisation).
+    base_is_factored: bool,
+    /// The shifted copy a double-precision factorisation with a shift reads.
+    shifted: Option<SparseColMat<usize, f64>>,
     diag_pos: Vec<usize>,
     n_free: usize,
     n_cons: usize,
@@ -102,18 +151,38 @@ pub struct KktBlocks<'a> {
     /// Hessian triplets over all dofs, both triangles, as an
     /// [`Energy`](crate::math::Energy) emits them (N/m).
     pub hessian: &'a [(usize, usize, f64)],
-    /// Values replacing those of `hessian` (same order and length: the values of
-    /// [`Energy::hessian_values`](crate::math::Energy::hessian_values) for its layout).
-    pub hessian_values: Option<&'a [f64]>,
+    /// Where the Hessian's values come from.
+    pub hessian_values: HessianValues<'a>,
     /// Constraint triplets `(row, free dof, value)`, unscaled.
     pub constraints: &'a [(usize, usize, f64)],
     /// Row scale γ of the constraint rows (N/m).
     pub gamma: f64,
     /// Regularisation δ subtracted on the constraint diagonal (N/m).
     pub delta: f64,
-    /// The dofs' coordinates (m, 3 per vertex: dof `d` belongs to vertex `d / 3`), read
-    /// only by a new analysis to try the nested-dissection ordering.
-    pub positions: Option<&'a [f64]>,
+}
+
+/// Where [`KktSolver::assemble`] takes the Hessian's values from.
+#[derive(Clone, Copy)]
+pub enum HessianValues<'a> {
+    /// The values of the [`KktBlocks::hessian`] triplets themselves.
+    Triplets,
+    /// Values replacing those of the triplets (same order and length: the values of
+    /// [`Energy::hessian_values`](crate::math::Energy::hessian_values) for its layout).
+    Values(&'a [f64]),
+    /// A function that adds the Hessian into matrix values by a slot map, as
+    /// [`Energy::hessian_scatter`](crate::math::Energy::hessian_scatter) does (the
+    /// triplets then give only the layout).
+    Scatter(&'a (dyn Fn(&[u32], &mut [f64]) + Sync)),
+}
+
+impl std::fmt::Debug for HessianValues<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Triplets => write!(f, "Triplets"),
+            Self::Values(v) => write!(f, "Values({} values)", v.len()),
+            Self::Scatter(_) => write!(f, "Scatter"),
+        }
+    }
 }
 
 /// The KKT pattern of `blocks` (both triangles, zero diagonal slots included) with the
@@ -194,18 +263,17 @@ impl KktSolver {
     /// Assemble the unshifted KKT matrix of `blocks` (shift slots on the diagonal kept at
     /// zero).
     ///
-    /// The first call (or a call whose layout differs) builds the pattern, the AMD
-    /// ordering and symbolic factorisation, and gather lists: for each lower-triangle slot
+    /// The first call (or a call whose layout differs) builds the pattern, the ordering
+    /// (METIS or AMD, [`Self::analysis`]) and symbolic factorisation, and gather lists: for
+    /// each lower-triangle slot
     /// the Hessian triplets that sum into it (the upper-triangle triplets are not read; the
     /// upper triangle is copied from the lower one). Later calls only sum the values into
     /// the slots, in parallel (no sorting or copying of triplets). The layout check compares
     /// the sizes, the pinned set, the constraints and every 31st Hessian triplet index.
-    /// [`KktBlocks::positions`], when given, are read only by a new analysis: it then also
-    /// tries the geometric nested-dissection ordering ([`super::ordering`]) and keeps it if
-    /// it is cheaper. Returns the seconds spent building (0 when reused).
+    /// Returns the seconds spent building (0 when reused).
     pub fn assemble(&mut self, blocks: &KktBlocks) -> Result<f64, SparseError> {
         let k = blocks.hessian;
-        if let Some(v) = blocks.hessian_values {
+        if let HessianValues::Values(v) = blocks.hessian_values {
             if v.len() != k.len() {
                 return Err(SparseError::PatternMismatch {
                     expected: k.len(),
@@ -238,7 +306,11 @@ impl KktSolver {
             .factorize_numeric_ldlt_scratch::<f64>(par, Default::default())
             .or(sym.solve_in_place_scratch::<f64>(1, par));
         self.mem = Some(MemBuffer::new(req));
-        self.values = vec![0.0; sym.len_val()];
+        self.values = Vec::new();
+        self.values32 = Vec::new();
+        self.matrix32 = None;
+        self.shifted = None;
+        self.base_is_factored = false;
         let n = blocks.n_free + blocks.n_cons;
         self.diag_pos = (0..n)
             .map(|j| slot_of(&a, j, j))
@@ -253,11 +325,9 @@ impl KktSolver {
         Ok(())
     }
 
-    /// Symbolic LDLᵀ of the pattern `a` with the AMD ordering or, when positions are known
-    /// and it needs fewer flops, the nested-dissection one. Nested dissection wins on a bare
-    /// sheet (about 10 % at 20k faces, more above), but the wide cluster rows of the
-    /// coupling join far-apart vertices and there AMD measured 9× fewer flops (face rig:
-    /// 6.0e9 against 5.2e10), so both are analysed and the cheaper kept.
+    /// Symbolic LDLᵀ of the pattern `a` with METIS's nested-dissection ordering or AMD,
+    /// whichever needs fewer flops ([`super::ordering`]: METIS on the skins, AMD on small
+    /// or chain-like systems where its local choices are as good).
     fn choose_ordering(
         &mut self,
         a: &SparseColMat<usize, f64>,
@@ -275,21 +345,16 @@ impl KktSolver {
         let mut sym = analyse(SymmetricOrdering::Amd)?;
         self.flops = factor_flops(&sym);
         self.nested_dissection = false;
-        let free_of = blocks.free_of;
-        if let Some(x) = blocks.positions {
-            if x.len() == free_of.len() && x.len() % 3 == 0 {
-                let (n_free, n) = (blocks.n_free, blocks.n_free + blocks.n_cons);
-                let (fwd, inv) = nd_permutation(a, x, free_of, n_free, blocks.constraints);
-                let nd = analyse(SymmetricOrdering::Custom(faer::perm::PermRef::new_checked(
-                    &fwd, &inv, n,
-                )))?;
-                let nd_flops = factor_flops(&nd);
-                if nd_flops < self.flops {
-                    sym = nd;
-                    self.flops = nd_flops;
-                    self.nested_dissection = true;
-                }
-            }
+        let n = blocks.n_free + blocks.n_cons;
+        let (fwd, inv) = nd_permutation(a, blocks.free_of, blocks.n_free);
+        let nd = analyse(SymmetricOrdering::Custom(faer::perm::PermRef::new_checked(
+            &fwd, &inv, n,
+        )))?;
+        let nd_flops = factor_flops(&nd);
+        if nd_flops < self.flops {
+            sym = nd;
+            self.flops = nd_flops;
+            self.nested_dissection = true;
         }
         Ok(sym)
     }
@@ -346,27 +411,61 @@ impl KktSolver {
             .iter()
             .map(|&(r, j, _)| slot_of(a, blocks.n_free + r, j))
             .collect::<Result<_, SparseError>>()?;
+        self.build_slot_map(&lower_slot, blocks)
+    }
+
+    /// The slot map of the Hessian triplets (see `slot`) from the lower-triangle slots
+    /// `lower_slot` (`usize::MAX` where none), and the coupling pairs.
+    fn build_slot_map(
+        &mut self,
+        lower_slot: &[usize],
+        blocks: &KktBlocks,
+    ) -> Result<(), SparseError> {
+        let nnz = self.gather_ptr.len() - 1;
+        let too_many = || SparseError::Build("more than 2³² − 1 matrix slots".into());
+        let mut pair_slot: std::collections::HashMap<(usize, usize), u32> = Default::default();
+        self.coupling = Vec::new();
+        self.slot = Vec::with_capacity(lower_slot.len());
+        for (&(r, c, _), &q) in blocks.hessian.iter().zip(lower_slot) {
+            let (fr, fc) = (blocks.free_of[r], blocks.free_of[c]);
+            let s = if q != usize::MAX {
+                u32::try_from(q).map_err(|_| too_many())?
+            } else if fr != usize::MAX && fc == usize::MAX {
+                let next = u32::try_from(nnz + self.coupling.len()).map_err(|_| too_many())?;
+                *pair_slot.entry((fr, c)).or_insert_with(|| {
+                    self.coupling.push((fr, c));
+                    next
+                })
+            } else {
+                NO_SLOT
+            };
+            if s == NO_SLOT && q != usize::MAX {
+                return Err(too_many());
+            }
+            self.slot.push(s);
+        }
+        self.coupling_values = vec![0.0; self.coupling.len()];
         Ok(())
     }
 
-    /// Sum the values of `blocks` into the analysed matrix: Hessian triplets gathered per
-    /// slot in parallel, γ C, −δ on the constraint diagonal, and the mirrored upper triangle.
+    /// The Hessian's coupling of free rows to pinned dofs at the last assembly: (free row,
+    /// pinned dof) pairs and their values K_fp (N/m).
+    pub fn pinned_coupling(&self) -> (&[(usize, usize)], &[f64]) {
+        (&self.coupling, &self.coupling_values)
+    }
+
+    /// Sum the values of `blocks` into the analysed matrix: the Hessian (its triplets
+    /// gathered per slot in parallel, or scattered by its energy), γ C, −δ on the constraint
+    /// diagonal, and the mirrored upper triangle.
     fn sum_values(&mut self, blocks: &KktBlocks) {
-        let (k, k_values) = (blocks.hessian, blocks.hessian_values);
+        self.keep_factored_matrix();
+        match blocks.hessian_values {
+            HessianValues::Scatter(scatter) => self.scatter_hessian(scatter),
+            HessianValues::Values(v) => self.gather_hessian(blocks.hessian, Some(v)),
+            HessianValues::Triplets => self.gather_hessian(blocks.hessian, None),
+        }
         let base = self.base.as_mut().expect("base set");
         let vals = base.val_mut();
-        let (ptr, src) = (&self.gather_ptr, &self.gather_src);
-        let sum = |q: usize| -> f64 {
-            let idx = &src[ptr[q]..ptr[q + 1]];
-            match k_values {
-                Some(v) => idx.iter().map(|&i| v[i as usize]).sum(),
-                None => idx.iter().map(|&i| k[i as usize].2).sum(),
-            }
-        };
-        vals.par_iter_mut()
-            .with_min_len(4096)
-            .enumerate()
-            .for_each(|(q, v)| *v = sum(q));
         for (&lo, t) in self.cmap.iter().zip(blocks.constraints) {
             vals[lo] += blocks.gamma * t.2;
         }
@@ -378,50 +477,76 @@ impl KktSolver {
         }
         self.delta = blocks.delta;
     }
+
+    /// Before `base` is assembled anew: when it is the matrix of the current factor, it
+    /// becomes `matrix` and `base` takes `matrix`'s buffer (a swap, no copy; the first time
+    /// a clone).
+    fn keep_factored_matrix(&mut self) {
+        if !self.base_is_factored {
+            return;
+        }
+        let base = self.base.as_mut().expect("base set");
+        match &mut self.matrix {
+            Some(m) if m.col_ptr() == base.col_ptr() => std::mem::swap(m, base),
+            _ => self.matrix = Some(base.clone()),
+        }
+        self.base_is_factored = false;
+    }
+
+    /// The Hessian's values into the matrix's lower triangle (and the coupling values) by
+    /// gathering each slot's triplets in parallel: values `v`, or the triplets' own.
+    fn gather_hessian(&mut self, k: &[(usize, usize, f64)], v: Option<&[f64]>) {
+        let value = |i: usize| v.map_or(k[i].2, |v| v[i]);
+        let base = self.base.as_mut().expect("base set");
+        let (ptr, src) = (&self.gather_ptr, &self.gather_src);
+        base.val_mut()
+            .par_iter_mut()
+            .with_min_len(4096)
+            .enumerate()
+            .for_each(|(q, out)| {
+                *out = src[ptr[q]..ptr[q + 1]]
+                    .iter()
+                    .map(|&i| value(i as usize))
+                    .sum()
+            });
+        let nnz = ptr.len() - 1;
+        self.coupling_values.iter_mut().for_each(|c| *c = 0.0);
+        for (i, &s) in self.slot.iter().enumerate() {
+            if s != NO_SLOT && s as usize >= nnz {
+                self.coupling_values[s as usize - nnz] += value(i);
+            }
+        }
+    }
+
+    /// The Hessian's values into the matrix's lower triangle (and the coupling values) by
+    /// the energy's own scatter through the slot map.
+    fn scatter_hessian(&mut self, scatter: &(dyn Fn(&[u32], &mut [f64]) + Sync)) {
+        let (sym, mut vals) = self.base.take().expect("base set").into_parts();
+        let nnz = vals.len();
+        vals.par_iter_mut()
+            .with_min_len(1 << 14)
+            .for_each(|v| *v = 0.0);
+        vals.resize(nnz + self.coupling.len(), 0.0);
+        scatter(&self.slot, &mut vals);
+        self.coupling_values.clear();
+        self.coupling_values.extend_from_slice(&vals[nnz..]);
+        vals.truncate(nnz);
+        self.base = Some(SparseColMat::new(sym, vals));
+    }
     /// Numeric LDLᵀ of the assembled matrix with `shift` added to the free-dof diagonal.
     /// Call repeatedly with growing shifts for inertia correction (no re-assembly).
     pub fn factor(&mut self, shift: f64) -> KktFactorInfo {
         let t1 = std::time::Instant::now();
-        let base = self
-            .base
-            .as_ref()
-            .expect("KktSolver::factor before assemble");
-        // The shifted matrix reuses its buffer across factorisations (values copied only).
-        let mut a = match self.matrix.take() {
-            Some(mut m) if m.val().len() == base.val().len() && m.col_ptr() == base.col_ptr() => {
-                m.val_mut().copy_from_slice(base.val());
-                m
-            }
-            _ => base.clone(),
+        assert!(self.base.is_some(), "KktSolver::factor before assemble");
+        let res = match self.precision {
+            FactorPrecision::Double => self.factor_double(shift),
+            FactorPrecision::Single => self.factor_single(shift),
         };
-        if shift != 0.0 {
-            let v = a.val_mut();
-            for &q in &self.diag_pos[..self.n_free] {
-                v[q] += shift;
-            }
-        }
-        let sym = self.symbolic.as_ref().expect("symbolic set");
-        let par = self.par();
-        let stack = MemStack::new(self.mem.as_mut().expect("memory set"));
-        let reg = LdltRegularization {
-            dynamic_regularization_signs: None,
-            dynamic_regularization_delta: 0.0,
-            dynamic_regularization_epsilon: 0.0,
-        };
-        let res = sym.factorize_numeric_ldlt(
-            &mut self.values,
-            a.as_ref(),
-            Side::Lower,
-            reg,
-            par,
-            stack,
-            Default::default(),
-        );
         self.shift = shift;
         self.factor_delta = self.delta;
-        self.matrix = Some(a);
+        self.base_is_factored = true;
         let numeric_s = t1.elapsed().as_secs_f64();
-        if res.is_err() {
+        if !res {
             self.factored = false;
             return KktFactorInfo {
                 negative_pivots: usize::MAX,
@@ -431,13 +556,102 @@ impl KktSolver {
             };
         }
         self.factored = true;
-        let neg = negative_pivots(sym, &self.values);
+        let sym = self.symbolic.as_ref().expect("symbolic set");
+        let neg = match self.precision {
+            FactorPrecision::Double => negative_pivots(sym, &self.values),
+            FactorPrecision::Single => negative_pivots(sym, &self.values32),
+        };
         KktFactorInfo {
             negative_pivots: neg,
             inertia_ok: neg == self.n_cons,
             symbolic_s: 0.0,
             numeric_s,
         }
+    }
+
+    /// Numeric LDLᵀ of the assembled matrix plus `shift` on the free diagonal, in double
+    /// precision, into `values` (the matrix is read in place, or from a shifted copy);
+    /// false on a zero pivot.
+    fn factor_double(&mut self, shift: f64) -> bool {
+        let par = self.par();
+        let base = self.base.as_ref().expect("base set");
+        let a = if shift == 0.0 {
+            base
+        } else {
+            let m = match &mut self.shifted {
+                Some(m) if m.col_ptr() == base.col_ptr() => m,
+                slot => slot.insert(base.clone()),
+            };
+            m.val_mut().copy_from_slice(base.val());
+            let v = m.val_mut();
+            for &q in &self.diag_pos[..self.n_free] {
+                v[q] += shift;
+            }
+            &*m
+        };
+        let sym = self.symbolic.as_ref().expect("symbolic set");
+        self.values32 = Vec::new();
+        self.values.resize(sym.len_val(), 0.0);
+        let stack = MemStack::new(self.mem.as_mut().expect("memory set"));
+        sym.factorize_numeric_ldlt(
+            &mut self.values,
+            a.as_ref(),
+            Side::Lower,
+            NO_REGULARIZATION,
+            par,
+            stack,
+            Default::default(),
+        )
+        .is_ok()
+    }
+
+    /// Numeric LDLᵀ of the lower triangle of the assembled matrix plus `shift` on the free
+    /// diagonal, rounded to single precision, into `values32`; false on a zero or
+    /// non-finite pivot.
+    fn factor_single(&mut self, shift: f64) -> bool {
+        let par = self.par();
+        let base = self.base.as_ref().expect("base set");
+        let (cp, diag, nf) = (base.col_ptr(), &self.diag_pos, self.n_free);
+        let m32 = self
+            .matrix32
+            .get_or_insert_with(|| lower_triangle_f32(base, diag));
+        let dst = m32.val_mut();
+        let mut k = 0;
+        for j in 0..base.ncols() {
+            let src = &base.val()[diag[j]..cp[j + 1]];
+            for (d, &v) in dst[k..k + src.len()].iter_mut().zip(src) {
+                *d = v as f32;
+            }
+            if j < nf {
+                dst[k] = (src[0] + shift) as f32;
+            }
+            k += src.len();
+        }
+        let sym = self.symbolic.as_ref().expect("symbolic set");
+        self.values = Vec::new();
+        self.values32.resize(sym.len_val(), 0.0);
+        let stack = MemStack::new(self.mem.as_mut().expect("memory set"));
+        let ok = sym
+            .factorize_numeric_ldlt(
+                &mut self.values32,
+                m32.as_ref(),
+                Side::Lower,
+                LdltRegularization {
+                    dynamic_regularization_signs: None,
+                    dynamic_regularization_delta: 0.0,
+                    dynamic_regularization_epsilon: 0.0,
+                },
+                par,
+                stack,
+                Default::default(),
+            )
+            .is_ok();
+        ok && self.values32.iter().all(|v| v.is_finite())
+    }
+
+    /// The precision of the factorisations from now on (the default is double).
+    pub fn set_precision(&mut self, precision: FactorPrecision) {
+        self.precision = precision;
     }
 
     /// Parallelism for faer: sequential below 10¹⁰ factorisation flops, rayon above. faer
@@ -511,12 +725,13 @@ impl KktSolver {
     ) -> GmresReport {
         let b = rhs.to_vec();
         let (nf, nc) = (self.n_free, self.n_cons);
-        let delta = if assembled {
-            self.delta
+        let (delta, shift) = if assembled {
+            (self.delta, 0.0)
         } else {
-            self.factor_delta
+            (self.factor_delta, self.shift)
         };
-        let a = if assembled {
+        let from_base = assembled || self.base_is_factored;
+        let a = if from_base {
             self.base.take().expect("assembled matrix")
         } else {
             self.matrix.take().expect("factored matrix")
@@ -524,7 +739,7 @@ impl KktSolver {
         let rep = {
             let this = &mut *self;
             fgmres(
-                |v, out| kkt_mul(&a, (nf, nc), delta, &[], v, out),
+                |v, out| kkt_mul(&a, (nf, nc), (delta, shift), &[], v, out),
                 |v| this.raw_solve(v),
                 &b,
                 rhs,
@@ -533,7 +748,7 @@ impl KktSolver {
                 assembled,
             )
         };
-        if assembled {
+        if from_base {
             self.base = Some(a);
         } else {
             self.matrix = Some(a);
@@ -566,10 +781,15 @@ impl KktSolver {
         self.base.as_ref()
     }
 
-    /// The matrix of the current factor (the assembled one of its time, shift included),
+    /// The matrix of the current factor (the assembled one of its time, without its shift),
     /// when the last factorisation succeeded.
     pub(crate) fn factored_matrix(&self) -> Option<&SparseColMat<usize, f64>> {
-        self.matrix.as_ref().filter(|_| self.factored)
+        let m = if self.base_is_factored {
+            self.base.as_ref()
+        } else {
+            self.matrix.as_ref()
+        };
+        m.filter(|_| self.factored)
     }
 
     /// (free dofs, constraint rows) of the assembled system.
@@ -617,7 +837,7 @@ impl KktSolver {
         let rep = {
             let this = &mut *self;
             fgmres(
-                |v, out| kkt_mul(&a, (nf, nc), delta, shifts, v, out),
+                |v, out| kkt_mul(&a, (nf, nc), (delta, 0.0), shifts, v, out),
                 |v| {
                     r.copy_from_slice(v);
                     this.raw_solve(v);
@@ -636,18 +856,29 @@ impl KktSolver {
 
     fn raw_solve(&mut self, rhs: &mut [f64]) {
         let sym = self.symbolic.as_ref().expect("symbolic");
-        let ldlt = LdltRef::<usize, f64>::new(sym, &self.values);
         let n = rhs.len();
-        let m = MatMut::from_column_major_slice_mut(rhs, n, 1);
         let par = self.par();
         let stack = MemStack::new(self.mem.as_mut().expect("memory"));
-        ldlt.solve_in_place_with_conj(Conj::No, m, par, stack);
+        if self.values.is_empty() {
+            let mut r32: Vec<f32> = rhs.iter().map(|&v| v as f32).collect();
+            let ldlt = LdltRef::<usize, f32>::new(sym, &self.values32);
+            let m = MatMut::from_column_major_slice_mut(&mut r32, n, 1);
+            ldlt.solve_in_place_with_conj(Conj::No, m, par, stack);
+            for (a, b) in rhs.iter_mut().zip(&r32) {
+                *a = f64::from(*b);
+            }
+        } else {
+            let ldlt = LdltRef::<usize, f64>::new(sym, &self.values);
+            let m = MatMut::from_column_major_slice_mut(rhs, n, 1);
+            ldlt.solve_in_place_with_conj(Conj::No, m, par, stack);
+        }
     }
 
-    /// Forget the cached analysis.
+    /// Forget the cached analysis (the precision is kept).
     pub fn reset(&mut self) {
         *self = Self {
             symbolic_count: self.symbolic_count,
+            precision: self.precision,
             ..Self::default()
         };
     }
@@ -676,76 +907,75 @@ fn factor_flops(sym: &SymbolicCholesky<usize>) -> f64 {
     }
 }
 
+/// The lower triangle of `a` (its entries from the diagonal `diag[j]` down in each column)
+/// in single precision, values zero: a single-precision factorisation's input.
+fn lower_triangle_f32(a: &SparseColMat<usize, f64>, diag: &[usize]) -> SparseColMat<usize, f32> {
+    let (cp, ri) = (a.col_ptr(), a.row_idx());
+    let mut col_ptr = Vec::with_capacity(a.ncols() + 1);
+    let mut rows = Vec::new();
+    col_ptr.push(0);
+    for j in 0..a.ncols() {
+        rows.extend_from_slice(&ri[diag[j]..cp[j + 1]]);
+        col_ptr.push(rows.len());
+    }
+    let nnz = rows.len();
+    let sym =
+        faer::sparse::SymbolicSparseColMat::new_checked(a.nrows(), a.ncols(), col_ptr, None, rows);
+    SparseColMat::new(sym, vec![0.0f32; nnz])
+}
+
 /// Nested-dissection permutation (forward: new → old index, inverse) of the KKT matrix `a`
-/// whose first `n_free` rows are free dofs (`free_of` maps dofs to them, vertex = dof / 3,
-/// positions from `x`) and whose last rows are constraints, each placed at the weighted centre
-/// of the vertices it couples.
+/// whose first `n_free` rows are free dofs (`free_of` maps dofs to them; dof `d` belongs to
+/// vertex `d / 3`) and whose last rows are constraints. The graph METIS orders has one node
+/// per vertex with a free dof and one per set of constraint rows that couple the same
+/// vertices (a cluster's three coordinate rows), weighted by their index counts.
 fn nd_permutation(
     a: &SparseColMat<usize, f64>,
-    x: &[f64],
     free_of: &[usize],
     n_free: usize,
-    c: &[(usize, usize, f64)],
 ) -> (Vec<usize>, Vec<usize>) {
     let n = a.nrows();
-    let n_cons = n - n_free;
-    // Nodes: vertices with a free dof (in vertex order), then constraint rows.
     let mut vertex_of_free = vec![0usize; n_free];
     for (d, &f) in free_of.iter().enumerate() {
         if f != usize::MAX {
             vertex_of_free[f] = d / 3;
         }
     }
-    let mut node_of_vertex = vec![usize::MAX; free_of.len() / 3];
-    let mut positions: Vec<[f64; 3]> = Vec::new();
-    let mut members: Vec<Vec<usize>> = Vec::new();
-    for f in 0..n_free {
-        let v = vertex_of_free[f];
-        if node_of_vertex[v] == usize::MAX {
-            node_of_vertex[v] = positions.len();
-            positions.push([x[3 * v], x[3 * v + 1], x[3 * v + 2]]);
-            members.push(Vec::new());
-        }
-        members[node_of_vertex[v]].push(f);
-    }
-    let nv = positions.len();
-    let mut centre = vec![[0.0; 3]; n_cons];
-    let mut weight = vec![0.0; n_cons];
-    for &(r, j, w) in c {
-        let v = vertex_of_free[j];
-        for k in 0..3 {
-            centre[r][k] += w.abs() * x[3 * v + k];
-        }
-        weight[r] += w.abs();
-    }
-    for r in 0..n_cons {
-        let w = if weight[r] > 0.0 { weight[r] } else { 1.0 };
-        positions.push(centre[r].map(|p| p / w));
-        members.push(vec![n_free + r]);
-    }
-    let node = |row: usize| {
-        if row < n_free {
-            node_of_vertex[vertex_of_free[row]]
-        } else {
-            nv + row - n_free
-        }
-    };
-    let mut neighbours = vec![Vec::new(); positions.len()];
     let (cp, ri) = (a.col_ptr(), a.row_idx());
+    let mut node_of = vec![usize::MAX; n];
+    let mut members: Vec<Vec<usize>> = Vec::new();
+    let mut node_of_vertex: std::collections::HashMap<usize, usize> = Default::default();
+    for f in 0..n_free {
+        let node = *node_of_vertex.entry(vertex_of_free[f]).or_insert_with(|| {
+            members.push(Vec::new());
+            members.len() - 1
+        });
+        node_of[f] = node;
+        members[node].push(f);
+    }
+    let mut node_of_rows: std::collections::HashMap<Vec<usize>, usize> = Default::default();
+    for row in n_free..n {
+        let mut verts: Vec<usize> = ri[cp[row]..cp[row + 1]]
+            .iter()
+            .filter(|&&i| i < n_free)
+            .map(|&i| vertex_of_free[i])
+            .collect();
+        verts.sort_unstable();
+        verts.dedup();
+        let node = *node_of_rows.entry(verts).or_insert_with(|| {
+            members.push(Vec::new());
+            members.len() - 1
+        });
+        node_of[row] = node;
+        members[node].push(row);
+    }
+    let mut neighbours = vec![Vec::new(); members.len()];
     for col in 0..n {
-        let nc = node(col);
-        for &row in &ri[cp[col]..cp[col + 1]] {
-            let nr = node(row);
-            if nr != nc {
-                neighbours[nc].push(nr);
-            }
-        }
+        let nc = node_of[col];
+        neighbours[nc].extend(ri[cp[col]..cp[col + 1]].iter().map(|&r| node_of[r]));
     }
-    for l in &mut neighbours {
-        l.sort_unstable();
-        l.dedup();
-    }
-    let order = super::ordering::nested_dissection(&positions, &neighbours, 16);
+    let weight: Vec<usize> = members.iter().map(Vec::len).collect();
+    let order = super::ordering::nested_dissection(&neighbours, &weight);
     let fwd: Vec<usize> = order
         .iter()
         .flat_map(|&nd| members[nd].iter().copied())
@@ -758,11 +988,16 @@ fn nd_permutation(
 }
 
 /// Count negative entries of D in an LDLᵀ factor (D is stored on the factor's diagonal).
-fn negative_pivots(sym: &SymbolicCholesky<usize>, values: &[f64]) -> usize {
+fn negative_pivots<T: Copy + PartialOrd + Default>(
+    sym: &SymbolicCholesky<usize>,
+    values: &[T],
+) -> usize {
     match sym.raw() {
         SymbolicCholeskyRaw::Simplicial(s) => {
             let cp = s.col_ptr();
-            (0..sym.nrows()).filter(|&k| values[cp[k]] < 0.0).count()
+            (0..sym.nrows())
+                .filter(|&k| values[cp[k]] < T::default())
+                .count()
         }
         SymbolicCholeskyRaw::Supernodal(s) => {
             let begin = s.supernode_begin();
@@ -774,7 +1009,7 @@ fn negative_pivots(sym: &SymbolicCholesky<usize>, values: &[f64]) -> usize {
                 let len = cpv[sn + 1] - cpv[sn];
                 let nrows = len / ncols;
                 for k in 0..ncols {
-                    if values[cpv[sn] + k * nrows + k] < 0.0 {
+                    if values[cpv[sn] + k * nrows + k] < T::default() {
                         neg += 1;
                     }
                 }
@@ -803,28 +1038,32 @@ fn factorize_free(
         n_free: n,
         n_cons,
         hessian: k,
-        hessian_values: None,
+        hessian_values: HessianValues::Triplets,
         constraints: c,
         gamma,
         delta,
-        positions: None,
     };
     s.factorize(&blocks, shift).unwrap()
 }
 
-/// out = (A + δ I on the constraint block + `shifts` on the diagonal) v: the KKT operator
-/// GMRES solves, from the assembled lower-triangular KKT matrix `a` of `sizes` = (free dofs,
-/// constraint rows), with δ (the regularisation the factor carries) removed again and the
-/// diagonal `shifts` (KKT index, N/m) added.
+/// out = (A + τ I on the free block + δ I on the constraint block + `shifts` on the
+/// diagonal) v: the KKT operator GMRES solves, from the assembled KKT matrix `a` of `sizes`
+/// = (free dofs, constraint rows), with δ (the regularisation the factor carries) removed
+/// again and the uniform shift τ and the diagonal `shifts` (KKT index, N/m) added.
 fn kkt_mul(
     a: &SparseColMat<usize, f64>,
     (nf, nc): (usize, usize),
-    delta: f64,
+    (delta, tau): (f64, f64),
     shifts: &[(usize, f64)],
     v: &[f64],
     out: &mut [f64],
 ) {
     mul_sym_vec_into(a, v, out);
+    if tau != 0.0 {
+        for i in 0..nf {
+            out[i] += tau * v[i];
+        }
+    }
     for i in nf..nf + nc {
         out[i] += delta * v[i];
     }
@@ -871,17 +1110,15 @@ mod ordering_tests {
     use super::*;
 
     /// A 3-dof-per-node grid "membrane" (graph Laplacian ⊗ I₃ plus a small mass) with one
-    /// averaging constraint: with positions given, the analysis keeps the ordering with fewer
-    /// flops, and the solution equals the AMD-ordered one to round-off.
+    /// averaging constraint: the analysis keeps the ordering with fewer flops (never more
+    /// than AMD's) and the solution solves the system to round-off.
     #[test]
-    fn positions_choose_the_cheaper_ordering_and_the_same_solution() {
+    fn a_grid_is_ordered_by_the_cheaper_ordering_and_solved() {
         let k = 24usize;
         let id = |i: usize, j: usize| i * k + j;
         let mut t = Vec::new();
-        let mut x = Vec::new();
         for i in 0..k {
             for j in 0..k {
-                x.extend([i as f64, j as f64, 0.0]);
                 for a in 0..3 {
                     t.push((3 * id(i, j) + a, 3 * id(i, j) + a, 0.01));
                 }
@@ -905,32 +1142,41 @@ mod ordering_tests {
             .collect();
         let free_of: Vec<usize> = (0..n).collect();
         let rhs: Vec<f64> = (0..n + 1).map(|i| ((i * 7919) % 13) as f64 - 6.0).collect();
-        let solve = |positions: bool| {
-            let mut s = KktSolver::new();
-            let geometry = positions.then_some(x.as_slice());
-            s.assemble(&KktBlocks {
-                free_of: &free_of,
-                n_free: n,
-                n_cons: 1,
-                hessian: &t,
-                hessian_values: None,
-                constraints: &c,
-                gamma: 1.0,
-                delta: 1e-8,
-                positions: geometry,
-            })
-            .unwrap();
-            assert!(s.factor(0.0).inertia_ok);
-            let mut r = rhs.clone();
-            s.solve(&mut r, 3, 1e-15);
-            (r, s.analysis())
+        let mut s = KktSolver::new();
+        let blocks = KktBlocks {
+            free_of: &free_of,
+            n_free: n,
+            n_cons: 1,
+            hessian: &t,
+            hessian_values: HessianValues::Triplets,
+            constraints: &c,
+            gamma: 1.0,
+            delta: 1e-8,
         };
-        let (amd, (amd_flops, amd_nd)) = solve(false);
-        let (geo, (geo_flops, _)) = solve(true);
-        assert!(!amd_nd);
-        assert!(geo_flops <= amd_flops, "{geo_flops} > {amd_flops}");
-        let scale = amd.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        for (a, b) in amd.iter().zip(&geo) {
+        s.assemble(&blocks).unwrap();
+        assert!(s.factor(0.0).inertia_ok);
+        let (flops, _) = s.analysis();
+        let amd = factorize_symbolic_cholesky(
+            s.assembled().unwrap().symbolic(),
+            Side::Lower,
+            SymmetricOrdering::Amd,
+            CholeskySymbolicParams::default(),
+        )
+        .unwrap();
+        assert!(flops <= factor_flops(&amd), "{flops} > AMD's");
+        let mut x = rhs.clone();
+        s.solve(&mut x, 3, 1e-15);
+        let mut ax = vec![0.0; n + 1];
+        kkt_mul(
+            s.assembled().unwrap(),
+            (n, 1),
+            (1e-8, 0.0),
+            &[],
+            &x,
+            &mut ax,
+        );
+        let scale = rhs.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        for (a, b) in ax.iter().zip(&rhs) {
             assert!((a - b).abs() <= 1e-9 * scale, "{a} vs {b}");
         }
     }

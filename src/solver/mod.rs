@@ -9,5 +9,7 @@ pub mod patch;
 pub mod statics;
 pub mod status;
 
-pub use statics::{HessianMode, LinearConstraints, StaticProblem, StaticSettings, StaticSolver};
+pub use statics::{
+    HessianMode, LinearAlgebra, LinearConstraints, StaticProblem, StaticSettings, StaticSolver,
+};
 pub use status::{SolveReport, SolveStatus};

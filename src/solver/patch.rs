@@ -30,7 +30,7 @@
 //! Patches are factorised and solved in parallel; each writes only its own dofs, in a fixed
 //! order, so the result does not depend on the thread count.
 
-use super::kkt::{KktBlocks, KktSolver};
+use super::kkt::{FactorPrecision, HessianValues, KktBlocks, KktSolver};
 use faer::sparse::SparseColMat;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
@@ -139,6 +139,8 @@ pub struct PatchSet {
     n_cons: usize,
     /// The settings the set was built with.
     pub settings: PatchSettings,
+    /// Precision of the blocks' factors.
+    precision: FactorPrecision,
 }
 
 /// Share of a constraint row's weight that must lie on a block's dofs for the block to hold
@@ -154,12 +156,13 @@ fn cell_of(p: &[f64; 3], size: f64) -> [i64; 3] {
 
 impl PatchSet {
     /// Patches of a KKT system of `n_free` free dofs at `positions` (m) and `n_cons`
-    /// constraint rows.
+    /// constraint rows, their blocks factorised in `precision`.
     pub fn build(
         n_free: usize,
         n_cons: usize,
         positions: &[[f64; 3]],
         settings: PatchSettings,
+        precision: FactorPrecision,
     ) -> Self {
         let (keys, members, core) = cell_members(positions, &settings);
         let mut own = vec![Vec::new(); keys.len()];
@@ -178,6 +181,7 @@ impl PatchSet {
             n_free,
             n_cons,
             settings,
+            precision,
         }
     }
 
@@ -283,7 +287,9 @@ impl PatchSet {
             .collect();
         core.sort_unstable();
         let rows = constraint_rows(a, self.n_free, &dofs);
-        Patch::new(a, dofs, &core, rows)
+        let mut patch = Patch::new(a, dofs, &core, rows);
+        patch.solver.set_precision(self.precision);
+        patch
     }
 
     /// Diagonal shifts (KKT index, N/m) of the blocks' own free dofs: the operator GMRES
@@ -509,11 +515,10 @@ impl Patch {
             n_free: self.n_dofs,
             n_cons: self.index.len() - self.n_dofs,
             hessian: &self.hess,
-            hessian_values: Some(&vals),
+            hessian_values: HessianValues::Values(&vals),
             constraints: &self.cons,
             gamma: 1.0,
             delta,
-            positions: None,
         };
         self.shift = 0.0;
         let mut info = match self.solver.factorize(&blocks, 0.0) {

@@ -20,7 +20,7 @@
 //! 22 → 4 factorisations).
 
 use super::gmres::GmresReport;
-use super::kkt::{KktBlocks, KktFactorInfo, KktSolver};
+use super::kkt::{FactorPrecision, HessianValues, KktBlocks, KktFactorInfo, KktSolver};
 use super::linesearch::{judge, EnergyMerit, Trial};
 use super::newton::{self, Check, NewtonLimits, NewtonProblem, Rejection, Verdict};
 use super::patch::{PatchSet, PatchSettings};
@@ -129,6 +129,11 @@ pub struct StaticSettings {
     /// fresh global factor whenever the lagged one does not do within `lagged_solves`).
     #[serde(default)]
     pub patches: Option<PatchSettings>,
+    /// Precision of the KKT factors (they precondition GMRES on the double-precision
+    /// system, so this changes the cost of a direction, not its accuracy; see
+    /// [`FactorPrecision`]).
+    #[serde(default)]
+    pub factor_precision: FactorPrecision,
 }
 
 impl Default for StaticSettings {
@@ -144,6 +149,44 @@ impl Default for StaticSettings {
             max_line_search: 30,
             energy_merit: false,
             patches: None,
+            factor_precision: FactorPrecision::Double,
+        }
+    }
+}
+
+/// The linear algebra of the skin's Newton directions: how many GMRES solves a lagged factor
+/// may spend on a direction before a fresh one is made, and the factors' precision.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LinearAlgebra {
+    /// [`StaticSettings::lagged_solves`].
+    pub lagged_solves: usize,
+    /// [`StaticSettings::factor_precision`].
+    pub precision: FactorPrecision,
+}
+
+impl LinearAlgebra {
+    /// The reference (`solver.skin_solver = "global"`): double-precision factors, a fresh
+    /// one when the lagged one needs more than 5 solves.
+    pub const REFERENCE: Self = Self {
+        lagged_solves: 5,
+        precision: FactorPrecision::Double,
+    };
+
+    /// The fast default (`solver.skin_solver = "lagged"`): single-precision factors, kept
+    /// while they precondition a direction within 10 solves. On the demo's frames 0–39 the
+    /// cap of 10 halved the factorisations against 5 (37 against 60, skin 16.6 s against
+    /// 19.1 s); 20 was no faster.
+    pub const FAST: Self = Self {
+        lagged_solves: 10,
+        precision: FactorPrecision::Single,
+    };
+
+    /// `settings` with this linear algebra.
+    pub fn apply(self, settings: StaticSettings) -> StaticSettings {
+        StaticSettings {
+            lagged_solves: self.lagged_solves,
+            factor_precision: self.precision,
+            ..settings
         }
     }
 }
@@ -212,11 +255,12 @@ pub struct StaticSolver {
     multipliers: Vec<f64>,
     /// Hessian triplets of the last full evaluation (their indices give the layout).
     trip: Vec<(usize, usize, f64)>,
-    /// Hessian values of the last evaluation, in the order of `trip`.
-    hvals: Vec<f64>,
     /// `trip` holds the layout of the energy of the current solve (set by its first Hessian;
-    /// later Hessians of the same solve only refresh `hvals`).
+    /// later Hessians are scattered into the KKT matrix by that layout).
     trip_current: bool,
+    /// The energy whose layout `trip` holds (its address and dof count): a solve of the same
+    /// energy keeps the layout, so a frame's first Hessian costs values only.
+    trip_owner: Option<(usize, usize)>,
     last_shift: f64,
     /// Final state of the previous solve and its pinned dofs (for the pinned-motion predictor).
     last_x: Vec<f64>,
@@ -271,13 +315,20 @@ fn forcing(floor: f64, tolerance: f64, rn: f64, rn_prev: Option<f64>) -> f64 {
         .max(floor)
 }
 
+/// Where [`StaticSolver::assemble_at`] takes the Hessian's values from.
+enum Source {
+    Triplets,
+    Values,
+    Scatter,
+}
+
 /// Regularisation δ of the constraint block, relative to γ. The factorisation sees the
 /// penalty K + (γ²/δ) CᵀC on the free block; δ = 1e-4 γ keeps that penalty (1e4 γ) strong
 /// enough for the inertia test yet small enough that its round-off (1e4 γ × 1e-16) stays far
 /// below the soft bending eigenvalues of a thin skin (with δ = 1e-8 γ the Euler test strip
 /// lost its lowest mode in round-off). GMRES preconditioned with the factor removes δ from the
 /// solution.
-const KKT_DELTA: f64 = 1e-4;
+const KKT_DELTA: f64 = 1e-6;
 
 /// The fixed data of one solve: the energy, the problem, its free-dof set-up and the row
 /// scale γ (N/m) of the KKT system.
@@ -403,22 +454,54 @@ impl StaticSolver {
         self.multipliers.iter().map(|m| g * m).collect()
     }
 
-    /// Assemble the regularised KKT matrix of the model from the current Hessian triplets
-    /// (positions `x` guide a new ordering); returns the symbolic-analysis time (s), zero
-    /// when the cached analysis was reused.
-    fn assemble_kkt(&mut self, m: &Model, x: &[f64]) -> Result<f64, SolverError> {
+    /// Assemble the regularised KKT matrix of the model with the Hessian at `x`
+    /// (element-projected when `project`): after the energy's first Hessian (its triplets
+    /// give the layout) the energy scatters its values straight into the matrix (when it
+    /// says how many triplets it has and that is still the layout's count; else its values
+    /// are gathered). Returns the symbolic-analysis time (s), zero when the cached analysis
+    /// was reused.
+    fn assemble_at(&mut self, m: &Model, x: &[f64], project: bool) -> Result<f64, SolverError> {
+        let e = m.e;
+        let mut values = Vec::new();
+        let source = if !self.trip_current {
+            self.evaluate_layout(e, x, project);
+            Source::Triplets
+        } else if e.triplet_count() == Some(self.trip.len()) {
+            Source::Scatter
+        } else {
+            e.hessian_values(x, &mut values, project);
+            if values.len() == self.trip.len() {
+                Source::Values
+            } else {
+                self.evaluate_layout(e, x, project);
+                Source::Triplets
+            }
+        };
+        let scatter = |slot: &[u32], out: &mut [f64]| e.hessian_scatter(x, slot, out, project);
+        let hessian_values = match source {
+            Source::Triplets => HessianValues::Triplets,
+            Source::Values => HessianValues::Values(&values),
+            Source::Scatter => HessianValues::Scatter(&scatter),
+        };
         Ok(self.kkt.assemble(&KktBlocks {
             free_of: &m.s.free_of,
             n_free: m.free(),
             n_cons: m.rows(),
             hessian: &self.trip,
-            hessian_values: Some(&self.hvals),
+            hessian_values,
             constraints: &m.s.cfree,
             gamma: m.gamma,
             delta: KKT_DELTA * m.gamma,
-            positions: Some(x),
         })?)
     }
+
+    /// Evaluate the energy's Hessian triplets at `x` (their indices are the layout).
+    fn evaluate_layout(&mut self, e: &dyn Energy, x: &[f64], project: bool) {
+        self.trip.clear();
+        e.eval(x, None, Some(&mut self.trip), project);
+        self.trip_current = true;
+    }
+
     fn setup(&self, e: &dyn Energy, p: &StaticProblem, x: &[f64]) -> Result<Setup, SolverError> {
         let n = e.dofs();
         if x.len() != n {
@@ -481,24 +564,11 @@ impl StaticSolver {
         })
     }
 
-    /// Evaluate the Hessian (all dofs): values into `self.hvals`, and the triplets with
-    /// their indices into `self.trip` the first time in a solve.
-    fn hessian(&mut self, e: &dyn Energy, x: &[f64], project: bool) {
-        if self.trip_current {
-            e.hessian_values(x, &mut self.hvals, project);
-            return;
-        }
-        self.trip.clear();
-        e.eval(x, None, Some(&mut self.trip), project);
-        self.hvals.clear();
-        self.hvals.extend(self.trip.iter().map(|t| t.2));
-        self.trip_current = true;
-    }
-
+    /// Mean |diagonal| of the free dofs of the Hessian in `trip` (N/m), 1 when it is zero.
     fn mean_diag(&self, s: &Setup) -> f64 {
         let nfree = s.free.len();
         let mut d = vec![0.0; nfree];
-        for (&(r, c, _), &v) in self.trip.iter().zip(&self.hvals) {
+        for &(r, c, v) in &self.trip {
             if r == c && s.free_of[r] != PINNED {
                 d[s.free_of[r]] += v;
             }
@@ -520,11 +590,11 @@ impl StaticSolver {
         x: &[f64],
     ) -> Result<KktFactorInfo, SolverError> {
         let s = self.setup(e, p, x)?;
-        self.trip_current = false;
-        self.hessian(e, x, false);
+        self.trip_owner = Some((e as *const dyn Energy as *const () as usize, e.dofs()));
+        self.evaluate_layout(e, x, false);
         let gamma = self.gamma_for(&s);
         let m = Model { e, p, s: &s, gamma };
-        let sym_s = self.assemble_kkt(&m, x)?;
+        let sym_s = self.assemble_at(&m, x, false)?;
         let mut info = self.factor_fresh(0.0, false, &m);
         info.symbolic_s = sym_s;
         Ok(info)
@@ -549,8 +619,8 @@ impl StaticSolver {
     }
 
     /// Assemble the KKT matrix of the Hessian at `x` (element-projected when `project`),
-    /// evaluating that Hessian unless `have` (which Hessian `self.hvals` holds at `x`)
-    /// says it is current; the times go to `rep`.
+    /// unless `have` (which Hessian the KKT matrix holds at `x`) says it is there; the times
+    /// go to `rep`.
     fn assemble_hessian(
         &mut self,
         m: &Model,
@@ -559,12 +629,12 @@ impl StaticSolver {
         have: &mut Option<bool>,
         rep: &mut SolveReport,
     ) -> Result<(), SolverError> {
-        let t = Instant::now();
-        if *have != Some(project) {
-            self.hessian(m.e, x, project);
-            *have = Some(project);
+        if *have == Some(project) {
+            return Ok(());
         }
-        let sym_s = self.assemble_kkt(m, x)?;
+        let t = Instant::now();
+        let sym_s = self.assemble_at(m, x, project)?;
+        *have = Some(project);
         rep.symbolic_s += sym_s;
         rep.factor_s += sym_s;
         rep.assembly_s += t.elapsed().as_secs_f64() - sym_s;
@@ -638,7 +708,10 @@ impl StaticSolver {
                     [x[v], x[v + 1], x[v + 2]]
                 })
                 .collect();
-        self.patches = Some((PatchSet::build(nf, nc, &positions, settings), count));
+        self.patches = Some((
+            PatchSet::build(nf, nc, &positions, settings, self.settings.factor_precision),
+            count,
+        ));
     }
 
     /// Try the Newton direction for the assembled (exact) KKT matrix by GMRES with the lagged
@@ -720,8 +793,9 @@ impl StaticSolver {
     }
 
     /// Right-hand side of the pinned-motion predictor about `x_prev` (the previous solution
-    /// with the new free values of `x`): `[−(r_x(x_prev) + K_fp Δp); −γ(Cx − d)]` with the
-    /// Hessian at `x_prev` evaluated into `self.hvals`.
+    /// with the new free values of `x`): `[−(r_x(x_prev) + K_fp Δp); −γ(Cx − d)]`, with the
+    /// KKT matrix assembled at `x_prev` (its K_fp is the Hessian's coupling of free rows to
+    /// pinned dofs). Returns it and the symbolic-analysis time (s).
     fn predictor_rhs(
         &mut self,
         m: &Model,
@@ -729,16 +803,13 @@ impl StaticSolver {
         x_prev: &[f64],
         mu: &[f64],
         dp: &[f64],
-    ) -> Vec<f64> {
+    ) -> Result<(Vec<f64>, f64), SolverError> {
         let (r_prev, _) = m.residual(x_prev, mu);
-        self.hessian(m.e, x_prev, false);
-        let s = m.s;
+        let sym_s = self.assemble_at(m, x_prev, false)?;
         let mut rhs: Vec<f64> = r_prev[..m.free()].iter().map(|v| -v).collect();
-        for (&(row, col, _), &v) in self.trip.iter().zip(&self.hvals) {
-            let fr = s.free_of[row];
-            if fr != PINNED && s.free_of[col] == PINNED {
-                rhs[fr] -= v * dp[col];
-            }
+        let (pairs, values) = self.kkt.pinned_coupling();
+        for (&(fr, col), &v) in pairs.iter().zip(values) {
+            rhs[fr] -= v * dp[col];
         }
         let cx = m.p.constraints.apply(x);
         rhs.extend(
@@ -746,7 +817,7 @@ impl StaticSolver {
                 .zip(&m.p.constraints.rhs)
                 .map(|(a, b)| -m.gamma * (a - b)),
         );
-        rhs
+        Ok((rhs, sym_s))
     }
 
     /// Pinned-motion predictor: when the pinned dofs moved since the previous solve (same
@@ -779,8 +850,7 @@ impl StaticSolver {
             return Ok(None);
         }
         let t = Instant::now();
-        let mut rhs = self.predictor_rhs(m, x, &x_prev, &at.mu, &dp);
-        let sym_s = self.assemble_kkt(m, x)?;
+        let (mut rhs, sym_s) = self.predictor_rhs(m, x, &x_prev, &at.mu, &dp)?;
         rep.symbolic_s += sym_s;
         rep.factor_s += sym_s;
         rep.assembly_s += t.elapsed().as_secs_f64() - sym_s;
@@ -811,16 +881,24 @@ impl StaticSolver {
 
     /// Hessians Newton tries for a direction, in order, as (element-projected, shift / γ):
     /// the exact Hessian; if it is not positive definite on the constraint null space, the
-    /// exact Hessian shifted by τ I (τ grown ×10 from a quarter of the last successful
-    /// shift, or 1e-10 γ, up to γ; keeps the negative-curvature information so Newton
-    /// escapes saddles quickly, as in IPOPT's inertia correction); as a last resort (in
-    /// [`HessianMode::Auto`]) the element-projected Hessian.
+    /// exact Hessian shifted by τ I, up to γ, by the inertia correction of IPOPT (Wächter
+    /// and Biegler 2006, §3.1): τ starts at a third of the last shift that worked and grows
+    /// ×8, or, when no shift has been needed yet, starts at 1e-4 γ and grows ×100 (it keeps
+    /// the negative-curvature information so Newton escapes saddles quickly); as a last
+    /// resort (in [`HessianMode::Auto`]) the element-projected Hessian. The demo's first
+    /// buckling frames needed shifts of 2.5e-4 to 1e-2 γ; the ×10 ladder from 1e-10 γ used
+    /// before took up to 10 factorisations to get there.
     fn hessian_attempts(&self) -> Vec<(bool, f64)> {
-        let start_shift = (self.last_shift / 4.0).max(1e-10);
-        let shifts: Vec<f64> = (0..12)
-            .map(|k| start_shift * 10f64.powi(k))
-            .filter(|&t| t <= 1.0)
+        let (start, growth) = if self.last_shift > 0.0 {
+            ((self.last_shift / 3.0).max(1e-10), 8.0)
+        } else {
+            (1e-4, 100.0)
+        };
+        let mut shifts: Vec<f64> = (0..40)
+            .map(|k| start * f64::powi(growth, k))
+            .take_while(|&t| t < 1.0)
             .collect();
+        shifts.push(1.0);
         let mut modes: Vec<(bool, f64)> = Vec::new();
         match self.settings.hessian {
             HessianMode::Exact => {
@@ -842,22 +920,15 @@ impl StaticSolver {
         modes
     }
 
-    /// Evaluate the Hessian at `x` for γ when neither the settings nor an earlier solve
-    /// gave γ; returns which Hessian `self.hvals` then holds at `x` (see
-    /// [`Self::assemble_hessian`]).
-    fn hessian_for_gamma(
-        &mut self,
-        e: &dyn Energy,
-        x: &[f64],
-        rep: &mut SolveReport,
-    ) -> Option<bool> {
+    /// Evaluate the Hessian's triplets at `x` for γ when neither the settings nor an
+    /// earlier solve gave γ (its mean diagonal, [`Self::gamma_for`]).
+    fn hessian_for_gamma(&mut self, e: &dyn Energy, x: &[f64], rep: &mut SolveReport) {
         if self.gamma.is_some() || self.settings.gamma.is_some() {
-            return None;
+            return;
         }
         let t = Instant::now();
-        self.hessian(e, x, false);
+        self.evaluate_layout(e, x, false);
         rep.assembly_s += t.elapsed().as_secs_f64();
-        Some(false)
     }
 
     /// The first Newton iterate: the warm start (x, μ), or the pinned-motion prediction when
@@ -935,13 +1006,17 @@ impl StaticSolver {
     ) -> Result<SolveReport, SolverError> {
         let t_start = Instant::now();
         self.settings.validate()?;
+        self.kkt.set_precision(self.settings.factor_precision);
         let s = self.setup(e, p, x)?;
-        self.trip_current = false;
+        let owner = Some((e as *const dyn Energy as *const () as usize, e.dofs()));
+        self.trip_current = self.trip_current && self.trip_owner == owner;
+        self.trip_owner = owner;
         let mut rep = empty_report();
         if self.multipliers.len() != p.constraints.rows {
             self.multipliers = vec![0.0; p.constraints.rows];
         }
-        let mut have_hessian = self.hessian_for_gamma(e, x, &mut rep);
+        self.hessian_for_gamma(e, x, &mut rep);
+        let mut have_hessian = None;
         let gamma = self.gamma_for(&s);
         let m = Model { e, p, s: &s, gamma };
         let mu = std::mem::take(&mut self.multipliers);
@@ -1163,16 +1238,11 @@ struct StaticNewton<'a, 'm> {
 
 impl StaticNewton<'_, '_> {
     /// The direction by GMRES with the lagged factor of the exact Hessian, when that factor
-    /// may be used: returns whether `step` now holds it, and which Hessian (`Some(false)`:
-    /// exact) was assembled for the attempt.
-    fn try_lagged(
-        &mut self,
-        lin_tol: f64,
-        step: &mut [f64],
-    ) -> Result<(bool, Option<bool>), SolverError> {
+    /// may be used: returns whether `step` now holds it.
+    fn try_lagged(&mut self, lin_tol: f64, step: &mut [f64]) -> Result<bool, SolverError> {
         let m = &self.model;
         if self.solver.settings.hessian == HessianMode::Projected || !self.solver.lag_usable(m) {
-            return Ok((false, None));
+            return Ok(false);
         }
         let rep = &mut *self.rep;
         self.solver
@@ -1183,25 +1253,18 @@ impl StaticNewton<'_, '_> {
         } else {
             self.solver.lagged_direction(m, lin_tol, step, rep)
         };
-        Ok((done, Some(false)))
+        Ok(done)
     }
 
     /// Factorise the KKT matrix with the first Hessian of
     /// [`StaticSolver::hessian_attempts`] that has the right inertia (or the last one, when
-    /// none does but it factorised); `assembled` says which Hessian the assembled matrix
-    /// holds. Returns whether a factor was made.
-    fn factor_with_inertia_control(
-        &mut self,
-        mut assembled: Option<bool>,
-    ) -> Result<bool, SolverError> {
+    /// none does but it factorised). Returns whether a factor was made.
+    fn factor_with_inertia_control(&mut self) -> Result<bool, SolverError> {
         let (m, solver, rep) = (&self.model, &mut *self.solver, &mut *self.rep);
         let modes = solver.hessian_attempts();
         for (k, &(project, shift)) in modes.iter().enumerate() {
             let last = k + 1 == modes.len();
-            if self.have_hessian != Some(project) || assembled != Some(project) {
-                solver.assemble_hessian(m, &self.at.x, project, &mut self.have_hessian, rep)?;
-                assembled = Some(project);
-            }
+            solver.assemble_hessian(m, &self.at.x, project, &mut self.have_hessian, rep)?;
             let info = solver.factor_fresh(shift * m.gamma, project, m);
             rep.factor_s += info.numeric_s;
             rep.factorizations += 1;
@@ -1209,7 +1272,7 @@ impl StaticNewton<'_, '_> {
                 if k > 0 {
                     rep.modified_hessian_steps += 1;
                 }
-                if !project {
+                if !project && shift > 0.0 {
                     solver.last_shift = shift;
                 }
                 return Ok(true);
@@ -1238,8 +1301,8 @@ impl NewtonProblem for StaticNewton<'_, '_> {
         let st = self.solver.settings;
         let lin_tol = forcing(st.linear_tolerance, st.tolerance, self.at.rn, self.rn_prev);
         let mut step: Vec<f64> = self.at.r.iter().map(|v| -v).collect();
-        let (lagged, assembled) = self.try_lagged(lin_tol, &mut step)?;
-        let factored = lagged || self.factor_with_inertia_control(assembled)?;
+        let lagged = self.try_lagged(lin_tol, &mut step)?;
+        let factored = lagged || self.factor_with_inertia_control()?;
         self.have_hessian = None;
         if !factored {
             return Ok(Some(SolveStatus::NotFinite));

@@ -127,6 +127,9 @@ pub fn shell_solve(faces: usize) -> anyhow::Result<Vec<BenchRow>> {
             ("line_search_s", "line_search_s"),
             ("total_s", "total_s"),
             ("residual", "residual_n"),
+            ("reference_total_s", "reference_total_s"),
+            ("reference_factorizations", "reference_factorizations"),
+            ("speedup", "speedup"),
         ],
     ))
 }
@@ -262,8 +265,8 @@ pub fn to_markdown(rows: &[BenchRow]) -> String {
             .unwrap_or_else(|| "–".into())
     };
     let mut s = String::new();
-    s.push_str("| shell (faces) | energy+gradient+Hessian (ms) | Newton iterations | factorisations (ms, total) | assembly (ms, total) | warm solve (ms) |\n");
-    s.push_str("|---:|---:|---:|---:|---:|---:|\n");
+    s.push_str("| shell (faces) | energy+gradient+Hessian (ms) | Newton iterations | factorisations (ms, total) | assembly (ms, total) | warm solve (ms) | reference warm solve (ms) | speed-up |\n");
+    s.push_str("|---:|---:|---:|---:|---:|---:|---:|---:|\n");
     let mut sizes: Vec<usize> = rows
         .iter()
         .filter(|r| r.benchmark == "shell_solve")
@@ -275,12 +278,14 @@ pub fn to_markdown(rows: &[BenchRow]) -> String {
         let eval = value(rows, "shell_assembly", n, "eval_s");
         let _ = writeln!(
             s,
-            "| {n} | {} | {} | {} | {} | {} |",
+            "| {n} | {} | {} | {} | {} | {} | {} | {}× |",
             fmt(eval, 1e3, 1),
             fmt(value(rows, "shell_solve", n, "newton_iterations"), 1.0, 0),
             fmt(value(rows, "shell_solve", n, "factorisation_s"), 1e3, 0),
             fmt(value(rows, "shell_solve", n, "assembly_s"), 1e3, 0),
             fmt(value(rows, "shell_solve", n, "total_s"), 1e3, 0),
+            fmt(value(rows, "shell_solve", n, "reference_total_s"), 1e3, 0),
+            fmt(value(rows, "shell_solve", n, "speedup"), 1.0, 2),
         );
     }
     let exp = |b: &str, m: &str| {
@@ -290,11 +295,12 @@ pub fn to_markdown(rows: &[BenchRow]) -> String {
     };
     let _ = writeln!(
         s,
-        "| growth | {} | | {} | {} | {} |",
+        "| growth | {} | | {} | {} | {} | {} | |",
         exp("shell_assembly", "eval_s"),
         exp("shell_solve", "factorisation_s"),
         exp("shell_solve", "assembly_s"),
         exp("shell_solve", "total_s"),
+        exp("shell_solve", "reference_total_s"),
     );
     s.push('\n');
     let find = |b: &str, m: &str| rows.iter().find(|r| r.benchmark == b && r.metric == m);

@@ -2,9 +2,10 @@
 //! frame compresses past the wrinkling threshold is simulated) against the reference that
 //! simulates all of it, in one process: the skin's time, the share of the skin simulated, and
 //! the phase-free difference of the wrinkle amplitude per 2λ region ([`super::tradeoff`]).
-//! And temporal locality: the skin's local solver (fresh factors of only the patches whose
-//! Hessian changed, `solver.skin_solver = "local"`) against the global reference, on the same
-//! selected skin, in one process.
+//! And temporal locality: the skin's fast solvers (`solver.skin_solver = "lagged"`, a
+//! single-precision factor kept across iterations and frames, or `"patches"`, which also
+//! refactorises only the patches whose Hessian changed) against the global reference, on the
+//! same selected skin, in one process.
 
 use super::tradeoff::{amplitude_error, amplitude_map, region_size};
 use crate::io::load::Rig;
@@ -78,7 +79,7 @@ pub fn compare_selection(rig: &Rig, opts: &RunOptions) -> anyhow::Result<Selecti
 /// One run of the solver comparison.
 #[derive(Debug, Clone, Serialize)]
 pub struct SolverRun {
-    /// `global` (the reference) or `local`.
+    /// `global` (the reference), `lagged` or `patches`.
     pub solver: String,
     /// Milliseconds in the skin's solves over the frames.
     pub shell_ms: f64,
@@ -102,9 +103,9 @@ pub struct SolverRun {
 pub struct SolverComparison {
     /// Shell vertices simulated (the same in both runs).
     pub simulated_vertices: usize,
-    /// The reference (global) and the local run.
+    /// The reference (global) and the compared run.
     pub runs: Vec<SolverRun>,
-    /// Skin time of the global run over the local run's.
+    /// Skin time of the global run over the compared run's.
     pub shell_speedup: f64,
     /// Phase-free relative difference of the wrinkle amplitude per region (dimensionless).
     pub amplitude_error: f64,
@@ -145,10 +146,15 @@ fn run_solver(
     Ok((run, out))
 }
 
-/// Run `opts` on `rig` with the global skin solver (the reference) and the local one.
+/// Run `opts` on `rig` with the global skin solver (the reference) and with the solver the
+/// scene names (`lagged`, the default, when it names none or the reference itself).
 pub fn compare_solvers(rig: &Rig, opts: &RunOptions) -> anyhow::Result<SolverComparison> {
+    let candidate = match opts.scene.solver.skin_solver.as_deref() {
+        Some(s) if s != "global" => s.to_string(),
+        _ => "lagged".to_string(),
+    };
     let (reference, global) = run_solver(rig, opts, "global")?;
-    let (local_run, local) = run_solver(rig, opts, "local")?;
+    let (local_run, local) = run_solver(rig, opts, &candidate)?;
     let region = region_size(&global);
     let error = amplitude_error(
         &amplitude_map(&local, region),

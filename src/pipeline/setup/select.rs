@@ -18,6 +18,7 @@ use crate::pipeline::record::StagePlan;
 use crate::pipeline::step::blend::weld_positions;
 use crate::scene::{Materials, Scene};
 use nalgebra::{Matrix2, Vector3};
+use rayon::prelude::*;
 use std::collections::HashMap;
 use std::time::Instant;
 
@@ -163,57 +164,80 @@ pub const FOLD_ANGLE: f64 = 150.0 * std::f64::consts::PI / 180.0;
 /// The first edge of `rest` that `pose` folds over (see [`FOLD_ANGLE`]): the two triangles
 /// and the angle (rad) between their normals, or `None`.
 pub fn first_fold(rest: &TriMesh, pose: &[Vector3<f64>]) -> Option<(usize, usize, f64)> {
-    let normal = |p: &[Vector3<f64>], t: usize| {
-        let [a, b, c] = rest.triangles[t].map(|v| p[v]);
-        (b - a).cross(&(c - a)).try_normalize(1e-300)
-    };
+    fold_in(rest, &judged_edges(rest), pose)
+}
+
+/// The pairs of triangles (in edge order) sharing an edge whose normals agree at rest: the
+/// edges a fold is judged on (a crease at rest, or a non-manifold pair, is not judged).
+fn judged_edges(rest: &TriMesh) -> Vec<(usize, usize)> {
+    let normals: Vec<Option<Vector3<f64>>> = (0..rest.triangles.len())
+        .map(|t| triangle_normal(rest, &rest.positions, t))
+        .collect();
     let mut by_edge: HashMap<(usize, usize), usize> = HashMap::new();
-    let cos_fold = FOLD_ANGLE.cos();
+    let mut pairs = Vec::new();
     for (t, tri) in rest.triangles.iter().enumerate() {
         for k in 0..3 {
             let (a, b) = (tri[k], tri[(k + 1) % 3]);
             let Some(u) = by_edge.insert((a.min(b), a.max(b)), t) else {
                 continue;
             };
-            let (Some(n0), Some(n1)) = (normal(&rest.positions, u), normal(&rest.positions, t))
-            else {
-                continue;
-            };
-            if n0.dot(&n1) <= 0.0 {
-                continue; // a crease at rest (or a non-manifold pair): not judged
-            }
-            if let (Some(p0), Some(p1)) = (normal(pose, u), normal(pose, t)) {
-                let c = p0.dot(&p1);
-                if c < cos_fold {
-                    return Some((u, t, c.clamp(-1.0, 1.0).acos()));
+            if let (Some(n0), Some(n1)) = (normals[u], normals[t]) {
+                if n0.dot(&n1) > 0.0 {
+                    pairs.push((u, t));
                 }
             }
         }
     }
-    None
+    pairs
+}
+
+/// Unit normal of triangle `t` of `mesh` at positions `p`, `None` when degenerate.
+fn triangle_normal(mesh: &TriMesh, p: &[Vector3<f64>], t: usize) -> Option<Vector3<f64>> {
+    let [a, b, c] = mesh.triangles[t].map(|v| p[v]);
+    (b - a).cross(&(c - a)).try_normalize(1e-300)
+}
+
+/// The first of the judged triangle pairs `edges` that `pose` folds over (see
+/// [`first_fold`]).
+fn fold_in(
+    rest: &TriMesh,
+    edges: &[(usize, usize)],
+    pose: &[Vector3<f64>],
+) -> Option<(usize, usize, f64)> {
+    let cos_fold = FOLD_ANGLE.cos();
+    edges.iter().find_map(|&(u, t)| {
+        let (p0, p1) = (
+            triangle_normal(rest, pose, u)?,
+            triangle_normal(rest, pose, t)?,
+        );
+        let c = p0.dot(&p1);
+        (c < cos_fold).then(|| (u, t, c.clamp(-1.0, 1.0).acos()))
+    })
 }
 
 /// Refuse blend shapes that fold the welded skin over itself in some pose of the clip (or,
-/// for a still rig, some shape at weight 1): the error names the frame or shape, the two
-/// triangles, the angle and the limit.
+/// for a still rig, some shape at weight 1): the error names the first such frame or shape,
+/// the two triangles, the angle and the limit. Poses are judged in parallel.
 pub fn check_folds(rig: &Rig, plan: &Plan, welded: &Welded, path: &str) -> anyhow::Result<()> {
     let (weights, what) = pose_weights(plan);
     let count = welded.mesh.positions.len();
-    for (k, w) in weights.iter().enumerate() {
+    let edges = judged_edges(&welded.mesh);
+    let fold = weights.par_iter().enumerate().find_map_first(|(k, w)| {
         let pose = weld_positions(&rig.blend(w), &welded.of_loaded, count);
-        if let Some((a, b, angle)) = first_fold(&welded.mesh, &pose) {
-            let which = match what {
-                PoseKind::Frames => format!("frame {k}"),
-                PoseKind::Shapes => {
-                    format!("shape {k} (\"{}\") at weight 1", rig.face().targets[k].name)
-                }
-            };
-            anyhow::bail!(
-                "{path}: the blend shapes fold the skin over itself: in {which}, skin triangles {a} and {b}, which share an edge, turn {:.0}° apart (limit {:.0}°). furrow's skin has no contact, so such targets are outside its model; check the shape weights (values far beyond 1) or the shape itself",
-                angle.to_degrees(),
-                FOLD_ANGLE.to_degrees()
-            );
-        }
+        fold_in(&welded.mesh, &edges, &pose).map(|f| (k, f))
+    });
+    if let Some((k, (a, b, angle))) = fold {
+        let which = match what {
+            PoseKind::Frames => format!("frame {k}"),
+            PoseKind::Shapes => {
+                format!("shape {k} (\"{}\") at weight 1", rig.face().targets[k].name)
+            }
+        };
+        anyhow::bail!(
+            "{path}: the blend shapes fold the skin over itself: in {which}, skin triangles {a} and {b}, which share an edge, turn {:.0}° apart (limit {:.0}°). furrow's skin has no contact, so such targets are outside its model; check the shape weights (values far beyond 1) or the shape itself",
+            angle.to_degrees(),
+            FOLD_ANGLE.to_degrees()
+        );
     }
     Ok(())
 }
