@@ -27,6 +27,9 @@
 /// faer tasks for large factorisations (fixed, so results do not depend on the thread count).
 const FAER_TASKS: usize = 2;
 
+/// Columns per parallel chunk of [`KktSolver::curvature`].
+const CURVATURE_CHUNK: usize = 4096;
+
 /// LDLᵀ without dynamic regularisation: a zero pivot is reported, not perturbed.
 const NO_REGULARIZATION: LdltRegularization<'static, f64> = LdltRegularization {
     dynamic_regularization_signs: None,
@@ -36,7 +39,7 @@ const NO_REGULARIZATION: LdltRegularization<'static, f64> = LdltRegularization {
 
 use super::gmres::{fgmres, GmresReport};
 use crate::math::energy::NO_SLOT;
-use crate::math::sparse::{mul_sym_vec_into, Pattern, SparseError};
+use crate::math::sparse::{mul_sym_lower_into, Pattern, SparseError};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
 use faer::sparse::linalg::cholesky::{
@@ -736,10 +739,11 @@ impl KktSolver {
         } else {
             self.matrix.take().expect("factored matrix")
         };
+        let diag = std::mem::take(&mut self.diag_pos);
         let rep = {
             let this = &mut *self;
             fgmres(
-                |v, out| kkt_mul(&a, (nf, nc), (delta, shift), &[], v, out),
+                |v, out| kkt_mul((&a, &diag), (nf, nc), (delta, shift), &[], v, out),
                 |v| this.raw_solve(v),
                 &b,
                 rhs,
@@ -748,6 +752,7 @@ impl KktSolver {
                 assembled,
             )
         };
+        self.diag_pos = diag;
         if from_base {
             self.base = Some(a);
         } else {
@@ -757,22 +762,35 @@ impl KktSolver {
     }
 
     /// Curvature dᵀ K d (J/m² times the units of d²) of the last assembled Hessian along
-    /// `d`, a vector over the free dofs.
+    /// `d`, a vector over the free dofs: from the lower triangle, Σ_j d_j (K_jj d_j + 2 Σ_{i>j}
+    /// K_ij d_i), in fixed chunks of columns summed in order (the same bits on any number of
+    /// threads).
     pub fn curvature(&self, d: &[f64]) -> f64 {
         let a = self
             .base
             .as_ref()
             .expect("KktSolver::curvature before assemble");
-        let ar = a.as_ref();
-        let mut sum = 0.0;
-        for (j, &dj) in d.iter().enumerate().take(self.n_free) {
-            for (i, v) in ar.row_idx_of_col(j).zip(ar.val_of_col(j)) {
-                if i < self.n_free {
-                    sum += d[i] * v * dj;
-                }
-            }
-        }
-        sum
+        let (cp, ri, val) = (a.col_ptr(), a.row_idx(), a.val());
+        let nf = self.n_free.min(d.len());
+        let column = |j: usize| {
+            let range = self.diag_pos[j]..cp[j + 1];
+            let off: f64 = range
+                .clone()
+                .skip(1)
+                .take_while(|&q| ri[q] < nf)
+                .map(|q| val[q] * d[ri[q]])
+                .sum();
+            d[j] * (val[range.start] * d[j] + 2.0 * off)
+        };
+        let chunks: Vec<f64> = (0..nf.div_ceil(CURVATURE_CHUNK))
+            .into_par_iter()
+            .map(|c| {
+                (c * CURVATURE_CHUNK..((c + 1) * CURVATURE_CHUNK).min(nf))
+                    .map(column)
+                    .sum()
+            })
+            .collect();
+        chunks.iter().sum()
     }
 
     /// The assembled KKT matrix (free dofs, then constraint rows; both triangles; −δ on the
@@ -833,11 +851,12 @@ impl KktSolver {
         let b = rhs.to_vec();
         let (nf, nc, delta) = (self.n_free, self.n_cons, self.delta);
         let a = self.base.take().expect("assembled matrix");
+        let diag = std::mem::take(&mut self.diag_pos);
         let mut r = vec![0.0; nf + nc];
         let rep = {
             let this = &mut *self;
             fgmres(
-                |v, out| kkt_mul(&a, (nf, nc), (delta, 0.0), shifts, v, out),
+                |v, out| kkt_mul((&a, &diag), (nf, nc), (delta, 0.0), shifts, v, out),
                 |v| {
                     r.copy_from_slice(v);
                     this.raw_solve(v);
@@ -850,6 +869,7 @@ impl KktSolver {
                 true,
             )
         };
+        self.diag_pos = diag;
         self.base = Some(a);
         rep
     }
@@ -1047,18 +1067,19 @@ fn factorize_free(
 }
 
 /// out = (A + τ I on the free block + δ I on the constraint block + `shifts` on the
-/// diagonal) v: the KKT operator GMRES solves, from the assembled KKT matrix `a` of `sizes`
+/// diagonal) v: the KKT operator GMRES solves, from the assembled KKT matrix `a` (read by its
+/// lower triangle, `diag` its diagonal slots) of `sizes`
 /// = (free dofs, constraint rows), with δ (the regularisation the factor carries) removed
 /// again and the uniform shift τ and the diagonal `shifts` (KKT index, N/m) added.
 fn kkt_mul(
-    a: &SparseColMat<usize, f64>,
+    (a, diag): (&SparseColMat<usize, f64>, &[usize]),
     (nf, nc): (usize, usize),
     (delta, tau): (f64, f64),
     shifts: &[(usize, f64)],
     v: &[f64],
     out: &mut [f64],
 ) {
-    mul_sym_vec_into(a, v, out);
+    mul_sym_lower_into(a, diag, v, out);
     if tau != 0.0 {
         for i in 0..nf {
             out[i] += tau * v[i];
@@ -1168,7 +1189,7 @@ mod ordering_tests {
         s.solve(&mut x, 3, 1e-15);
         let mut ax = vec![0.0; n + 1];
         kkt_mul(
-            s.assembled().unwrap(),
+            (s.assembled().unwrap(), &s.diag_pos),
             (n, 1),
             (1e-8, 0.0),
             &[],
