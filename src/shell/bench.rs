@@ -273,8 +273,8 @@ pub fn bench_shell(faces: usize) -> anyhow::Result<serde_json::Value> {
     bench_shell_with(faces, LinearAlgebra::FAST)
 }
 
-/// The shell benchmark with the linear algebra `fast` against the reference, each from its
-/// own preparation solve: faces, vertices, constraints, then `fast`'s warm-start solve
+/// The shell benchmark with the linear algebra `fast` against the reference, each from the
+/// same prepared state: faces, vertices, constraints, then `fast`'s warm-start solve
 /// (Newton iterations, residual in N, times in seconds, status), `prep_*` fields for its
 /// preparation solve from the flat sheet, `reference_*` fields for the reference's warm
 /// solve, and `speedup`, the reference's warm-solve time over `fast`'s (one process).
@@ -310,22 +310,26 @@ pub fn bench_shell_with(faces: usize, fast: LinearAlgebra) -> anyhow::Result<ser
     Ok(out)
 }
 
-/// Prepare the sheet `b` and time its warm solve with the linear algebra `linear`: the
-/// warm solve's report with the preparation's as `prep_*` fields, and the final state.
+/// Prepare the sheet `b` with the reference linear algebra (deterministic, so every solver
+/// starts from the same state, with the same lagged factor) and time its warm solve with the
+/// linear algebra `linear`: the warm solve's report with the preparation's as `prep_*`
+/// fields, and the final state.
 fn bench_solver(
     b: &BenchSheet,
     faces: usize,
     linear: LinearAlgebra,
 ) -> anyhow::Result<(serde_json::Value, Vec<f64>)> {
-    let settings = linear.apply(StaticSettings {
+    let settings = StaticSettings {
         tolerance: b.tolerance(),
         max_iterations: 400,
         energy_merit: true,
         ..Default::default()
-    });
+    };
     let t_prep = Instant::now();
-    let (mut x, mut solver, prep, levels) = prepare(b, faces, &settings)?;
+    let (mut x, mut solver, prep, levels) =
+        prepare(b, faces, &LinearAlgebra::REFERENCE.apply(settings))?;
     let prep_wall_s = t_prep.elapsed().as_secs_f64();
+    solver.settings = linear.apply(settings);
     let problem = b.problem(0.0105, &mut x);
     let warm = solver.solve(&b.shell, &problem, &mut x)?;
     let mut out = report_json(&warm);
