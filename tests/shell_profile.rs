@@ -77,6 +77,7 @@ fn profile_one_iteration() {
         constraints: &cf,
         gamma,
         delta: 1e-4 * gamma,
+        layout_key: None,
     };
     time("KKT build: pattern, AMD, symbolic, map", &mut || {
         kkt.assemble(&blocks).unwrap();

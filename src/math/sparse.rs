@@ -194,12 +194,7 @@ const PRODUCT_CHUNKS: usize = 4;
 /// and a_ij x_j to each y_i below; the columns are split into a fixed number of chunks of
 /// about equal entries, each summed into its own vector in parallel, then added in order, so
 /// the result does not depend on the thread count.
-pub fn mul_sym_lower_into(
-    a: &SparseColMat<usize, f64>,
-    diag: &[usize],
-    x: &[f64],
-    y: &mut [f64],
-) {
+pub fn mul_sym_lower_into(a: &SparseColMat<usize, f64>, diag: &[usize], x: &[f64], y: &mut [f64]) {
     use rayon::prelude::*;
     let (cp, ri, val) = (a.col_ptr(), a.row_idx(), a.val());
     let n = a.ncols();

@@ -62,6 +62,9 @@ pub struct KktFactorInfo {
     pub symbolic_s: f64,
     /// Seconds spent in the numeric factorisation.
     pub numeric_s: f64,
+    /// A single-precision factor's inertia was not the expected one, so the factor was made
+    /// again in double precision (its inertia is the one reported).
+    pub double_retry: bool,
 }
 
 /// The floating-point precision of a KKT factor. The factor only preconditions GMRES, which
@@ -85,7 +88,6 @@ pub enum FactorPrecision {
 /// A KKT factorisation with cached pattern and symbolic analysis. Hold one per problem
 /// (per skin) and reuse it: only the numeric factorisation is redone while the triplet
 /// layout is unchanged.
-#[derive(Default)]
 pub struct KktSolver {
     fingerprint: Option<(usize, usize, u64)>,
     /// For each compressed slot, the range in `gather_src` of the Hessian triplets summed
@@ -106,12 +108,14 @@ pub struct KktSolver {
     /// The Hessian's coupling values K_fp (N/m) of the last assembly, one per `coupling` pair.
     coupling_values: Vec<f64>,
     symbolic: Option<SymbolicCholesky<usize>>,
-    /// The factor's values in double precision (empty when the factor is single).
+    /// The factor's values in double precision (current when `factor_precision` is double).
     values: Vec<f64>,
-    /// The factor's values in single precision (empty when the factor is double).
+    /// The factor's values in single precision (current when `factor_precision` is single).
     values32: Vec<f32>,
     /// The precision the next factorisations are made in.
     precision: FactorPrecision,
+    /// The precision of the current factor (`values` or `values32`).
+    factor_precision: FactorPrecision,
     /// The lower triangle of the shifted matrix rounded to single precision (a
     /// single-precision factorisation's input).
     matrix32: Option<SparseColMat<usize, f32>>,
@@ -123,6 +127,10 @@ pub struct KktSolver {
     base: Option<SparseColMat<usize, f64>>,
     /// `base` is the matrix of the current factor (no assembly since the factorisation).
     base_is_factored: bool,
+    /// Whether the upper triangle of `base` is filled (mirrored from the lower one): the
+    /// factorisation, products and curvature read only the lower triangle; the patches read
+    /// whole columns.
+    full_storage: bool,
     /// The shifted copy a double-precision factorisation with a shift reads.
     shifted: Option<SparseColMat<usize, f64>>,
     diag_pos: Vec<usize>,
@@ -162,6 +170,10 @@ pub struct KktBlocks<'a> {
     pub gamma: f64,
     /// Regularisation δ subtracted on the constraint diagonal (N/m).
     pub delta: f64,
+    /// A key the caller gives the layout (sizes, pinned set, constraint pattern and Hessian
+    /// triplet indices): equal keys promise equal layouts, so the solver skips fingerprinting
+    /// them. `None`: the solver fingerprints the layout itself.
+    pub layout_key: Option<u64>,
 }
 
 /// Where [`KktSolver::assemble`] takes the Hessian's values from.
@@ -244,6 +256,43 @@ fn layout_fingerprint(
     (n, k.len(), h)
 }
 
+impl Default for KktSolver {
+    fn default() -> Self {
+        Self {
+            fingerprint: None,
+            gather_ptr: Vec::new(),
+            gather_src: Vec::new(),
+            mirror: Vec::new(),
+            cmap: Vec::new(),
+            slot: Vec::new(),
+            coupling: Vec::new(),
+            coupling_values: Vec::new(),
+            symbolic: None,
+            values: Vec::new(),
+            values32: Vec::new(),
+            precision: FactorPrecision::Double,
+            factor_precision: FactorPrecision::Double,
+            matrix32: None,
+            mem: None,
+            matrix: None,
+            base: None,
+            base_is_factored: false,
+            full_storage: true,
+            shifted: None,
+            diag_pos: Vec::new(),
+            n_free: 0,
+            n_cons: 0,
+            shift: 0.0,
+            delta: 0.0,
+            factor_delta: 0.0,
+            factored: false,
+            flops: 0.0,
+            nested_dissection: false,
+            symbolic_count: 0,
+        }
+    }
+}
+
 impl KktSolver {
     /// An empty solver (no cached analysis).
     pub fn new() -> Self {
@@ -285,7 +334,10 @@ impl KktSolver {
             }
         }
         let n = blocks.n_free + blocks.n_cons;
-        let fp = layout_fingerprint(n, blocks.free_of, k, blocks.constraints);
+        let fp = match blocks.layout_key {
+            Some(key) => (n, k.len(), key),
+            None => layout_fingerprint(n, blocks.free_of, k, blocks.constraints),
+        };
         let mut symbolic_s = 0.0;
         self.n_free = blocks.n_free;
         self.n_cons = blocks.n_cons;
@@ -475,8 +527,10 @@ impl KktSolver {
         for &q in &self.diag_pos[blocks.n_free..] {
             vals[q] -= blocks.delta;
         }
-        for &(up, lo) in &self.mirror {
-            vals[up] = vals[lo];
+        if self.full_storage {
+            for &(up, lo) in &self.mirror {
+                vals[up] = vals[lo];
+            }
         }
         self.delta = blocks.delta;
     }
@@ -537,39 +591,51 @@ impl KktSolver {
         self.base = Some(SparseColMat::new(sym, vals));
     }
     /// Numeric LDLᵀ of the assembled matrix with `shift` added to the free-dof diagonal.
-    /// Call repeatedly with growing shifts for inertia correction (no re-assembly).
+    /// Call repeatedly with growing shifts for inertia correction (no re-assembly). A
+    /// single-precision factor whose inertia is not the expected one is made again in double
+    /// precision, and that one is kept: single-precision rounding of the large entries a
+    /// constraint row eliminated early brings (γ²/δ) can miscount the skin's soft modes (a
+    /// 500-face sheet: every exact Hessian looked indefinite in single precision, none in
+    /// double).
     pub fn factor(&mut self, shift: f64) -> KktFactorInfo {
         let t1 = std::time::Instant::now();
+        let mut info = self.factor_in(self.precision, shift);
+        if self.precision == FactorPrecision::Single && !info.inertia_ok {
+            info = self.factor_in(FactorPrecision::Double, shift);
+            info.double_retry = true;
+        }
+        info.numeric_s = t1.elapsed().as_secs_f64();
+        info
+    }
+
+    /// [`Self::factor`] in `precision`, without the retry.
+    fn factor_in(&mut self, precision: FactorPrecision, shift: f64) -> KktFactorInfo {
         assert!(self.base.is_some(), "KktSolver::factor before assemble");
-        let res = match self.precision {
+        let res = match precision {
             FactorPrecision::Double => self.factor_double(shift),
             FactorPrecision::Single => self.factor_single(shift),
         };
         self.shift = shift;
         self.factor_delta = self.delta;
         self.base_is_factored = true;
-        let numeric_s = t1.elapsed().as_secs_f64();
-        if !res {
-            self.factored = false;
-            return KktFactorInfo {
-                negative_pivots: usize::MAX,
-                inertia_ok: false,
-                symbolic_s: 0.0,
-                numeric_s,
-            };
-        }
-        self.factored = true;
-        let sym = self.symbolic.as_ref().expect("symbolic set");
-        let neg = match self.precision {
-            FactorPrecision::Double => negative_pivots(sym, &self.values),
-            FactorPrecision::Single => negative_pivots(sym, &self.values32),
-        };
-        KktFactorInfo {
-            negative_pivots: neg,
-            inertia_ok: neg == self.n_cons,
+        self.factor_precision = precision;
+        let mut info = KktFactorInfo {
+            negative_pivots: usize::MAX,
+            inertia_ok: false,
             symbolic_s: 0.0,
-            numeric_s,
+            numeric_s: 0.0,
+            double_retry: false,
+        };
+        self.factored = res;
+        if res {
+            let sym = self.symbolic.as_ref().expect("symbolic set");
+            info.negative_pivots = match precision {
+                FactorPrecision::Double => negative_pivots(sym, &self.values),
+                FactorPrecision::Single => negative_pivots(sym, &self.values32),
+            };
+            info.inertia_ok = info.negative_pivots == self.n_cons;
         }
+        info
     }
 
     /// Numeric LDLᵀ of the assembled matrix plus `shift` on the free diagonal, in double
@@ -593,7 +659,6 @@ impl KktSolver {
             &*m
         };
         let sym = self.symbolic.as_ref().expect("symbolic set");
-        self.values32 = Vec::new();
         self.values.resize(sym.len_val(), 0.0);
         let stack = MemStack::new(self.mem.as_mut().expect("memory set"));
         sym.factorize_numeric_ldlt(
@@ -631,7 +696,6 @@ impl KktSolver {
             k += src.len();
         }
         let sym = self.symbolic.as_ref().expect("symbolic set");
-        self.values = Vec::new();
         self.values32.resize(sym.len_val(), 0.0);
         let stack = MemStack::new(self.mem.as_mut().expect("memory set"));
         let ok = sym
@@ -655,6 +719,13 @@ impl KktSolver {
     /// The precision of the factorisations from now on (the default is double).
     pub fn set_precision(&mut self, precision: FactorPrecision) {
         self.precision = precision;
+    }
+
+    /// Whether the assembled matrix also holds its upper triangle (the patches read whole
+    /// columns of it; the default). Without it, an assembly skips mirroring the lower
+    /// triangle, and [`Self::assembled`] holds the lower triangle only.
+    pub fn set_full_storage(&mut self, full: bool) {
+        self.full_storage = full;
     }
 
     /// Parallelism for faer: sequential below 10¹⁰ factorisation flops, rayon above. faer
@@ -879,7 +950,7 @@ impl KktSolver {
         let n = rhs.len();
         let par = self.par();
         let stack = MemStack::new(self.mem.as_mut().expect("memory"));
-        if self.values.is_empty() {
+        if self.factor_precision == FactorPrecision::Single {
             let mut r32: Vec<f32> = rhs.iter().map(|&v| v as f32).collect();
             let ldlt = LdltRef::<usize, f32>::new(sym, &self.values32);
             let m = MatMut::from_column_major_slice_mut(&mut r32, n, 1);
@@ -894,11 +965,12 @@ impl KktSolver {
         }
     }
 
-    /// Forget the cached analysis (the precision is kept).
+    /// Forget the cached analysis (the precision and storage are kept).
     pub fn reset(&mut self) {
         *self = Self {
             symbolic_count: self.symbolic_count,
             precision: self.precision,
+            full_storage: self.full_storage,
             ..Self::default()
         };
     }
@@ -1062,6 +1134,7 @@ fn factorize_free(
         constraints: c,
         gamma,
         delta,
+        layout_key: None,
     };
     s.factorize(&blocks, shift).unwrap()
 }
@@ -1173,6 +1246,7 @@ mod ordering_tests {
             constraints: &c,
             gamma: 1.0,
             delta: 1e-8,
+            layout_key: None,
         };
         s.assemble(&blocks).unwrap();
         assert!(s.factor(0.0).inertia_ok);

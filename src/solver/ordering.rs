@@ -16,8 +16,13 @@
 //! three coordinate rows) weighted by their size: a third of the nodes to bisect, and a
 //! group's indices stay together in the order, as they do in the factor's supernodes.
 //!
-//! METIS is deterministic for a given graph (its random choices use a fixed seed) and
-//! serial, so the order does not depend on the thread count.
+//! METIS is deterministic for a given graph (each call seeds its random choices with a fixed
+//! seed) and serial, so the order does not depend on the thread count. Its random generator
+//! is one global state, so calls are serialised by a lock (two at once would interleave
+//! their random choices).
+
+/// Serialises the calls into METIS (its random generator is global state).
+static METIS: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 /// Nested-dissection order of the nodes of an undirected graph: `neighbours[v]` lists the
 /// nodes v shares a matrix entry with (it may contain v itself and repeats), `weight[v]` the
@@ -52,6 +57,7 @@ pub fn nested_dissection(neighbours: &[Vec<usize>], weight: &[usize]) -> Vec<usi
     // xadj[n], vwgt, perm and iperm n, options METIS_NOPTIONS), the adjacency is symmetric
     // (callers build it from a symmetric matrix) without self loops, and every pointer
     // outlives the call.
+    let _lock = METIS.lock().unwrap_or_else(|e| e.into_inner());
     let status = unsafe {
         metis_sys::METIS_SetDefaultOptions(options.as_mut_ptr());
         metis_sys::METIS_NodeND(
@@ -139,6 +145,24 @@ mod tests {
             "nd fill {f_nd}, band fill {f_band}"
         );
         assert_eq!(order, nested_dissection(&adj, &vec![1; 32 * 32]));
+    }
+
+    /// Calls from several threads at once give the order of a lone call: METIS's global
+    /// random state is not shared between them.
+    #[test]
+    fn concurrent_calls_give_the_same_order() {
+        let adj = grid(40);
+        let w = vec![1; 40 * 40];
+        let alone = nested_dissection(&adj, &w);
+        let orders: Vec<Vec<usize>> = std::thread::scope(|s| {
+            let handles: Vec<_> = (0..4)
+                .map(|_| s.spawn(|| nested_dissection(&adj, &w)))
+                .collect();
+            handles.into_iter().map(|h| h.join().unwrap()).collect()
+        });
+        for o in orders {
+            assert_eq!(o, alone);
+        }
     }
 
     #[test]

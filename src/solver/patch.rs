@@ -519,6 +519,7 @@ impl Patch {
             constraints: &self.cons,
             gamma: 1.0,
             delta,
+            layout_key: None,
         };
         self.shift = 0.0;
         let mut info = match self.solver.factorize(&blocks, 0.0) {

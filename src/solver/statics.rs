@@ -261,6 +261,9 @@ pub struct StaticSolver {
     /// The energy whose layout `trip` holds (its address and dof count): a solve of the same
     /// energy keeps the layout, so a frame's first Hessian costs values only.
     trip_owner: Option<(usize, usize)>,
+    /// Hash of the indices of `trip` (with the free set and constraint pattern, the KKT
+    /// layout key).
+    trip_key: u64,
     last_shift: f64,
     /// Final state of the previous solve and its pinned dofs (for the pinned-motion predictor).
     last_x: Vec<f64>,
@@ -296,6 +299,23 @@ struct Setup {
     free_of: Vec<usize>,
     free: Vec<usize>,
     cfree: Vec<(usize, usize, f64)>,
+    /// Hash of the free set and the constraint pattern (with the Hessian's layout, the KKT
+    /// matrix's layout key).
+    key: u64,
+}
+
+/// FNV-1a hash of the free set `free_of` and the pattern of the constraint entries `cfree`.
+fn setup_key(free_of: &[usize], cfree: &[(usize, usize, f64)]) -> u64 {
+    let mut h: u64 = 0xcbf29ce484222325;
+    let mut mix = |v: usize| h = (h ^ (v as u64)).wrapping_mul(0x100000001b3);
+    mix(free_of.len());
+    free_of.iter().for_each(|&f| mix(f));
+    mix(cfree.len());
+    for &(r, j, _) in cfree {
+        mix(r);
+        mix(j);
+    }
+    h
 }
 
 const PINNED: usize = usize::MAX;
@@ -492,14 +512,24 @@ impl StaticSolver {
             constraints: &m.s.cfree,
             gamma: m.gamma,
             delta: KKT_DELTA * m.gamma,
+            layout_key: Some(m.s.key ^ self.trip_key.rotate_left(29)),
         })?)
     }
 
-    /// Evaluate the energy's Hessian triplets at `x` (their indices are the layout).
+    /// Evaluate the energy's Hessian triplets at `x` (their indices are the layout) and the
+    /// hash of their indices.
     fn evaluate_layout(&mut self, e: &dyn Energy, x: &[f64], project: bool) {
         self.trip.clear();
         e.eval(x, None, Some(&mut self.trip), project);
         self.trip_current = true;
+        let mut h: u64 = 0xcbf29ce484222325;
+        let mut mix = |v: usize| h = (h ^ (v as u64)).wrapping_mul(0x100000001b3);
+        mix(self.trip.len());
+        for &(r, c, _) in &self.trip {
+            mix(r);
+            mix(c);
+        }
+        self.trip_key = h;
     }
 
     fn setup(&self, e: &dyn Energy, p: &StaticProblem, x: &[f64]) -> Result<Setup, SolverError> {
@@ -557,10 +587,12 @@ impl StaticSolver {
                 "start state x contains NaN or infinity".into(),
             ));
         }
+        let key = setup_key(&free_of, &cfree);
         Ok(Setup {
             free_of,
             free,
             cfree,
+            key,
         })
     }
 
@@ -1007,6 +1039,7 @@ impl StaticSolver {
         let t_start = Instant::now();
         self.settings.validate()?;
         self.kkt.set_precision(self.settings.factor_precision);
+        self.kkt.set_full_storage(self.settings.patches.is_some());
         let s = self.setup(e, p, x)?;
         let owner = Some((e as *const dyn Energy as *const () as usize, e.dofs()));
         self.trip_current = self.trip_current && self.trip_owner == owner;
@@ -1247,6 +1280,10 @@ impl StaticNewton<'_, '_> {
         let rep = &mut *self.rep;
         self.solver
             .assemble_hessian(m, &self.at.x, false, &mut self.have_hessian, rep)?;
+        if !self.solver.lag_usable(m) {
+            // The assembly found a new layout: the factor went with the old analysis.
+            return Ok(false);
+        }
         let done = if self.solver.settings.patches.is_some() {
             self.solver
                 .patched_direction(m, &self.at.x, lin_tol, step, rep)
