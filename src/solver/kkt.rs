@@ -116,6 +116,10 @@ pub struct KktSolver {
     precision: FactorPrecision,
     /// The precision of the current factor (`values` or `values32`).
     factor_precision: FactorPrecision,
+    /// Whether single-precision inertia is trusted for the current analysis: `None` until a
+    /// double-precision check of a failed single-precision test, then whether the check agreed
+    /// (a disagreement is kept: every later single-precision failure is checked).
+    single_inertia: Option<bool>,
     /// The lower triangle of the shifted matrix rounded to single precision (a
     /// single-precision factorisation's input).
     matrix32: Option<SparseColMat<usize, f32>>,
@@ -272,6 +276,7 @@ impl Default for KktSolver {
             values32: Vec::new(),
             precision: FactorPrecision::Double,
             factor_precision: FactorPrecision::Double,
+            single_inertia: None,
             matrix32: None,
             mem: None,
             matrix: None,
@@ -364,6 +369,7 @@ impl KktSolver {
         self.values = Vec::new();
         self.values32 = Vec::new();
         self.matrix32 = None;
+        self.single_inertia = None;
         self.shifted = None;
         self.base_is_factored = false;
         let n = blocks.n_free + blocks.n_cons;
@@ -600,9 +606,16 @@ impl KktSolver {
     pub fn factor(&mut self, shift: f64) -> KktFactorInfo {
         let t1 = std::time::Instant::now();
         let mut info = self.factor_in(self.precision, shift);
-        if self.precision == FactorPrecision::Single && !info.inertia_ok {
+        let single = self.precision == FactorPrecision::Single;
+        if single && !info.inertia_ok && self.single_inertia != Some(true) {
             info = self.factor_in(FactorPrecision::Double, shift);
             info.double_retry = true;
+            // Once double precision has confirmed a single-precision verdict, single
+            // precision is trusted for this analysis; once it has contradicted one, every
+            // single-precision failure is checked.
+            if self.single_inertia.is_none() {
+                self.single_inertia = Some(!info.inertia_ok);
+            }
         }
         info.numeric_s = t1.elapsed().as_secs_f64();
         info
