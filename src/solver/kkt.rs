@@ -24,9 +24,6 @@
 //! space of C (exactly m negative pivots), i.e. whether the equilibrium is stable; Newton
 //! uses that to decide between the exact and a projected Hessian.
 
-/// faer tasks for large factorisations (fixed, so results do not depend on the thread count).
-const FAER_TASKS: usize = 2;
-
 /// Columns per parallel chunk of [`KktSolver::curvature`].
 const CURVATURE_CHUNK: usize = 4096;
 
@@ -741,21 +738,16 @@ impl KktSolver {
         self.full_storage = full;
     }
 
-    /// Parallelism for faer: sequential below 10¹⁰ factorisation flops, rayon above. faer
-    /// parallelises inside the dense fronts; a shell's fronts are small and many, and there
-    /// the synchronisation costs more than it saves (measured on the benchmark sheet: at 20k
-    /// faces, 3.5·10⁹ flops, sequential 0.24 s against 0.45 s with two threads; at 80k faces,
-    /// 4·10¹⁰ flops, sequential 2.0 s against 1.6 s; the face rig's skin with its cluster
-    /// rows, 6·10⁹ flops: 20 frames of the demo took 83 s of skin solves sequential against
-    /// 100 s with two threads, measured one after the other).
+    /// Parallelism for faer: sequential. faer parallelises inside the dense fronts; a shell's
+    /// fronts are small and many, and there the synchronisation costs more than it saves,
+    /// at every size measured since the METIS ordering and single-precision factors (one run
+    /// each way, 2 cores): the capture head's skin KKT (79k rows, 1.6·10¹⁰ flops) 0.73 s per
+    /// single-precision factorisation against 1.09 s with two faer tasks (frames 12–39:
+    /// skin 27.3 s against 32.4 s); `bench shell --faces 80000` warm solve 1.69 s against
+    /// 2.27 s (the double-precision reference 2.55 s against 3.90 s). Earlier, in double
+    /// precision with a coordinate-bisection order, two tasks had won above 10¹⁰ flops.
     fn par(&self) -> faer::Par {
-        if self.flops < 1e10 {
-            faer::Par::Seq
-        } else {
-            // A fixed task count, not the pool size: faer splits its work by this number,
-            // so the factor (and every output) is the same whatever the thread count.
-            faer::Par::rayon(FAER_TASKS)
-        }
+        faer::Par::Seq
     }
 
     /// Flops of one numeric factorisation with the current analysis, and whether its ordering
