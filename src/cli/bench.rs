@@ -66,7 +66,8 @@ pub enum BenchCommand {
     },
     /// The skin's fast solver (the scene's `solver.skin_solver`: `lagged` by default, or
     /// `patches`) against the global reference on the same skin, in one process: skin time,
-    /// factorisations, solves, and how far apart the wrinkles are.
+    /// factorisations, solves, and how far apart the wrinkles are; then the fast solver's cost
+    /// on a held frame (the first frame's weights repeated: `held_frame_skin_ms`).
     #[command(
         after_help = "Example:\n  furrow bench skin --rig rigs/face.glb --frames 0:40\n  furrow bench skin --rig rigs/head.glb --frames 0:10 --json\n  furrow bench skin --rig rigs/face.glb --scene patches.toml   (a scene with [solver] skin_solver = \"patches\")"
     )]
@@ -231,11 +232,27 @@ fn select(on: &RigFrames, out: &Output) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// `furrow bench skin`: the local skin solver against the global one on a rig.
+/// Repeats of the held frame in `bench skin`.
+const HELD_REPEATS: usize = 6;
+/// The first repeats of the held frame, left out of its figure while the interior comes to
+/// rest.
+const HELD_SETTLE: usize = 2;
+
+/// `furrow bench skin`: the local skin solver against the global one on a rig, then the
+/// skin's cost on a held frame (the first frame's weights repeated).
 fn skin(on: &RigFrames, out: &Output) -> anyhow::Result<()> {
     let (loaded, opts) = bench_rig(on)?;
     let c = crate::studies::locality::compare_solvers(&loaded, &opts)?;
-    print(out, "bench skin", &serde_json::to_value(&c)?);
+    let held = crate::studies::locality::held_frames(&loaded, &opts, HELD_REPEATS)?;
+    // The first repeats still see the interior settle; the rest hold still.
+    let settled = held[HELD_SETTLE..]
+        .iter()
+        .map(|h| h.skin_ms)
+        .fold(0.0, f64::max);
+    let mut v = serde_json::to_value(&c)?;
+    v["held_frames"] = serde_json::to_value(&held)?;
+    v["held_frame_skin_ms"] = settled.into();
+    print(out, "bench skin", &v);
     Ok(())
 }
 

@@ -236,3 +236,54 @@ pub fn check_with_global(rig: &Rig, opts: &RunOptions) -> anyhow::Result<Residua
     }
     Ok(check)
 }
+
+/// One repeat of a held frame: the skin stage's cost when the rig's weights do not change.
+#[derive(Debug, Clone, Serialize)]
+pub struct HeldFrame {
+    /// Skin stage wall time (ms).
+    pub skin_ms: f64,
+    /// Skin Newton iterations (0 when the constraint targets moved less than the tolerance
+    /// allows and the solve was skipped).
+    pub iterations: usize,
+    /// Factorisations of the whole skin.
+    pub factorizations: usize,
+}
+
+/// The skin's cost on frames where nothing moves: step the clip up to the first frame of
+/// `opts`' range (its history), then step that frame's weights `repeats` more times with the
+/// scene's skin solver. Backward Euler damps the interior's velocity within a few repeats,
+/// but after an expression the coupled interior still creeps by about 0.1 µm per frame for
+/// over a second (measured on the face at frame 30: its Newton stops at its tolerance with
+/// 3·10⁻⁵ N left), enough to move the skin's targets past the skin's tolerance: such a frame
+/// costs one Newton iteration, not none.
+pub fn held_frames(rig: &Rig, opts: &RunOptions, repeats: usize) -> anyhow::Result<Vec<HeldFrame>> {
+    use crate::pipeline::step::{step_frame, Scratch, StepOptions};
+    let plan = pipeline::plan::Plan::new(rig, opts)?;
+    let mut log = pipeline::setup::Log::default();
+    let (model, mut state) =
+        pipeline::setup::set_up(rig, &opts.scene, &plan, &mut log, &|_, _, _| {})?;
+    let options = StepOptions::of(&opts.scene, plan.substeps, plan.fps);
+    let mut scratch = Scratch::new(model.lattice.node_count());
+    let first = plan.range.start;
+    let mut held = Vec::with_capacity(repeats);
+    for (i, k) in (0..=first).chain(std::iter::repeat_n(first, repeats)).enumerate() {
+        let (record, _) = step_frame(
+            rig,
+            &plan.weights[k],
+            k,
+            &model,
+            &mut state,
+            &mut scratch,
+            options,
+        )?;
+        if i > first {
+            let shell = record.shell.unwrap_or_default();
+            held.push(HeldFrame {
+                skin_ms: shell.ms,
+                iterations: shell.iterations,
+                factorizations: shell.factorizations,
+            });
+        }
+    }
+    Ok(held)
+}
