@@ -266,7 +266,10 @@ pub fn held_frames(rig: &Rig, opts: &RunOptions, repeats: usize) -> anyhow::Resu
     let mut scratch = Scratch::new(model.lattice.node_count());
     let first = plan.range.start;
     let mut held = Vec::with_capacity(repeats);
-    for (i, k) in (0..=first).chain(std::iter::repeat_n(first, repeats)).enumerate() {
+    for (i, k) in (0..=first)
+        .chain(std::iter::repeat_n(first, repeats))
+        .enumerate()
+    {
         let (record, _) = step_frame(
             rig,
             &plan.weights[k],
