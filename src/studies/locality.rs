@@ -195,34 +195,63 @@ pub struct ResidualCheck {
     pub tolerance: f64,
 }
 
+/// The pipeline set up on one rig, stepped frame by frame by the studies below.
+struct Stepper {
+    plan: pipeline::plan::Plan,
+    model: pipeline::setup::Model,
+    state: pipeline::setup::State,
+    scratch: pipeline::step::Scratch,
+    options: pipeline::step::StepOptions,
+}
+
+impl Stepper {
+    /// Plan and set up `opts` on `rig`.
+    fn new(rig: &Rig, opts: &RunOptions) -> anyhow::Result<Self> {
+        let plan = pipeline::plan::Plan::new(rig, opts)?;
+        let mut log = pipeline::setup::Log::default();
+        let (model, state) =
+            pipeline::setup::set_up(rig, &opts.scene, &plan, &mut log, &|_, _, _| {})?;
+        let options = pipeline::step::StepOptions::of(&opts.scene, plan.substeps, plan.fps);
+        let scratch = pipeline::step::Scratch::new(model.lattice.node_count());
+        Ok(Self {
+            plan,
+            model,
+            state,
+            scratch,
+            options,
+        })
+    }
+
+    /// Step the clip's frame `k` (its weights at clip time k / fps).
+    fn step(&mut self, rig: &Rig, k: usize) -> anyhow::Result<pipeline::record::FrameRecord> {
+        let (record, _) = pipeline::step::step_frame(
+            rig,
+            &self.plan.weights[k],
+            k,
+            &self.model,
+            &mut self.state,
+            &mut self.scratch,
+            self.options,
+        )?;
+        Ok(record)
+    }
+}
+
 /// Step every frame of `opts` on `rig` and, after each, evaluate the skin's residual at its
 /// final state the way the global reference tests convergence.
 pub fn check_with_global(rig: &Rig, opts: &RunOptions) -> anyhow::Result<ResidualCheck> {
-    use crate::pipeline::step::{step_frame, Scratch, StepOptions};
-    let plan = pipeline::plan::Plan::new(rig, opts)?;
-    let mut log = pipeline::setup::Log::default();
-    let (model, mut state) =
-        pipeline::setup::set_up(rig, &opts.scene, &plan, &mut log, &|_, _, _| {})?;
-    let options = StepOptions::of(&opts.scene, plan.substeps, plan.fps);
-    let mut scratch = Scratch::new(model.lattice.node_count());
+    let mut run = Stepper::new(rig, opts)?;
     let mut check = ResidualCheck {
         frames: 0,
         failed: 0,
         worst_residual: 0.0,
         tolerance: 0.0,
     };
-    for k in 0..plan.range.end {
-        step_frame(
-            rig,
-            &plan.weights[k],
-            k,
-            &model,
-            &mut state,
-            &mut scratch,
-            options,
-        )?;
-        let q = state.interior.q.clone();
-        let skin = state
+    for k in 0..run.plan.range.end {
+        run.step(rig, k)?;
+        let q = run.state.interior.q.clone();
+        let skin = run
+            .state
             .skin
             .as_mut()
             .ok_or_else(|| anyhow::anyhow!("no skin is simulated"))?;
@@ -257,28 +286,14 @@ pub struct HeldFrame {
 /// 3·10⁻⁵ N left), enough to move the skin's targets past the skin's tolerance: such a frame
 /// costs one Newton iteration, not none.
 pub fn held_frames(rig: &Rig, opts: &RunOptions, repeats: usize) -> anyhow::Result<Vec<HeldFrame>> {
-    use crate::pipeline::step::{step_frame, Scratch, StepOptions};
-    let plan = pipeline::plan::Plan::new(rig, opts)?;
-    let mut log = pipeline::setup::Log::default();
-    let (model, mut state) =
-        pipeline::setup::set_up(rig, &opts.scene, &plan, &mut log, &|_, _, _| {})?;
-    let options = StepOptions::of(&opts.scene, plan.substeps, plan.fps);
-    let mut scratch = Scratch::new(model.lattice.node_count());
-    let first = plan.range.start;
+    let mut run = Stepper::new(rig, opts)?;
+    let first = run.plan.range.start;
     let mut held = Vec::with_capacity(repeats);
     for (i, k) in (0..=first)
         .chain(std::iter::repeat_n(first, repeats))
         .enumerate()
     {
-        let (record, _) = step_frame(
-            rig,
-            &plan.weights[k],
-            k,
-            &model,
-            &mut state,
-            &mut scratch,
-            options,
-        )?;
+        let record = run.step(rig, k)?;
         if i > first {
             let shell = record.shell.unwrap_or_default();
             held.push(HeldFrame {
