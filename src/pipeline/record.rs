@@ -65,7 +65,7 @@ pub struct StageRecord {
     /// Skin: factorisations of the whole skin's KKT matrix.
     #[serde(skip_serializing_if = "is_zero")]
     pub factorizations: usize,
-    /// Skin: factorisations of patch blocks (`solver.skin_solver = "local"`).
+    /// Skin: factorisations of patch blocks (`solver.skin_solver = "patches"`).
     #[serde(skip_serializing_if = "is_zero")]
     pub patch_factorizations: usize,
     /// Skin: solves with a factor (GMRES iterations).
