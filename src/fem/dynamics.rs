@@ -555,17 +555,15 @@ fn node_csr(n: usize, mut t: Vec<(usize, usize, f64)>) -> (Vec<usize>, Vec<usize
 
 /// FNV-1a hash of the (row, column) sequence of the extra stiffness triplets.
 fn extra_layout_hash(extra: Option<&ExtraTerms>) -> u64 {
-    let mut h: u64 = 0xcbf29ce484222325;
+    let mut h = crate::math::hash::Fnv1a::new();
     if let Some(x) = extra {
         for &(r, c, _) in x.stiffness {
-            for v in [r as u64, c as u64] {
-                h ^= v;
-                h = h.wrapping_mul(0x100000001b3);
-            }
+            h.mix_usize(r);
+            h.mix_usize(c);
         }
-        h ^= x.stiffness.len() as u64;
+        h.mix_usize(x.stiffness.len());
     }
-    h
+    h.finish()
 }
 
 fn extra_signature(extra: Option<&ExtraTerms>) -> Vec<(usize, usize)> {

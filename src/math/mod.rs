@@ -3,6 +3,7 @@
 
 pub mod energy;
 pub mod fd;
+pub mod hash;
 pub mod modes;
 pub mod rng;
 pub mod sparse;

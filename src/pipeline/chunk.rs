@@ -63,12 +63,11 @@ pub struct Chunk {
 
 /// FNV-1a 64 of bytes, as 16 hex digits.
 pub fn fnv64(bytes: &[u8]) -> String {
-    let mut h: u64 = 0xcbf29ce484222325;
+    let mut h = crate::math::hash::Fnv1a::new();
     for &b in bytes {
-        h ^= b as u64;
-        h = h.wrapping_mul(0x100000001b3);
+        h.mix(u64::from(b));
     }
-    format!("{h:016x}")
+    format!("{:016x}", h.finish())
 }
 
 /// Origins as plain arrays (for the header).

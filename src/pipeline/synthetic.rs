@@ -313,13 +313,14 @@ fn copy_skin(
         model.nodes,
         sigma_for_wavelength(&model.skin_mesh, materials.lambda),
         StaticSettings {
-            tolerance: scene
-                .solver
-                .shell_tolerance
-                .unwrap_or(SYNTHETIC_SHELL_TOLERANCE)
-                * skin_mat.stretch_stiffness()
-                * edge
-                * (model.skin_mesh.positions.len() as f64).sqrt(),
+            tolerance: skin_mat.residual_tolerance(
+                scene
+                    .solver
+                    .shell_tolerance
+                    .unwrap_or(SYNTHETIC_SHELL_TOLERANCE),
+                edge,
+                model.skin_mesh.positions.len(),
+            ),
             max_iterations: scene.solver.shell_iterations.unwrap_or(100),
             hessian: HessianMode::Auto,
             energy_merit: true,

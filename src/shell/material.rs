@@ -60,6 +60,14 @@ impl ShellMaterial {
         self.young * self.thickness / (1.0 - self.poisson * self.poisson)
     }
 
+    /// The Newton tolerance (N) on the residual's L2 norm of a skin of `vertices` vertices
+    /// with mean edge `edge` (m) whose RMS residual force per vertex may be `relative` times
+    /// the force scale E h / (1 − ν²) × edge (`solver.shell_tolerance`): the norm grows as
+    /// √vertices, so a finer or larger skin is held to the same force per vertex.
+    pub fn residual_tolerance(&self, relative: f64, edge: f64, vertices: usize) -> f64 {
+        relative * self.stretch_stiffness() * edge * (vertices as f64).sqrt()
+    }
+
     /// Plane-stress Lamé parameters times thickness, (μ h, λ h) in N/m:
     /// μ = E / (2 (1 + ν)), λ = E ν / (1 − ν²).
     pub fn lame_times_thickness(&self) -> (f64, f64) {

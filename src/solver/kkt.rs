@@ -27,15 +27,15 @@
 /// Columns per parallel chunk of [`KktSolver::curvature`].
 const CURVATURE_CHUNK: usize = 4096;
 
-/// LDLᵀ without dynamic regularisation: a zero pivot is reported, not perturbed.
-const NO_REGULARIZATION: LdltRegularization<'static, f64> = LdltRegularization {
-    dynamic_regularization_signs: None,
-    dynamic_regularization_delta: 0.0,
-    dynamic_regularization_epsilon: 0.0,
-};
+/// LDLᵀ without dynamic regularisation (faer's default: no signs, δ = ε = 0), in either
+/// precision: a zero pivot is reported, not perturbed.
+fn no_regularization<T: faer::traits::RealField>() -> LdltRegularization<'static, T> {
+    LdltRegularization::default()
+}
 
 use super::gmres::{fgmres, GmresReport};
 use crate::math::energy::NO_SLOT;
+use crate::math::hash::Fnv1a;
 use crate::math::sparse::{mul_sym_lower_into, Pattern, SparseError};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
@@ -239,22 +239,21 @@ fn layout_fingerprint(
     k: &[(usize, usize, f64)],
     c: &[(usize, usize, f64)],
 ) -> (usize, usize, u64) {
-    let mut h: u64 = 0xcbf29ce484222325;
-    let mut mix = |v: usize| h = (h ^ (v as u64)).wrapping_mul(0x100000001b3);
-    mix(free_of.len());
+    let mut h = Fnv1a::new();
+    h.mix_usize(free_of.len());
     for &f in free_of {
-        mix(f);
+        h.mix_usize(f);
     }
     for &(r, j, _) in c {
-        mix(r);
-        mix(j);
+        h.mix_usize(r);
+        h.mix_usize(j);
     }
-    mix(c.len());
+    h.mix_usize(c.len());
     for &(r, cc, _) in k.iter().step_by(31).chain(k.last()) {
-        mix(r);
-        mix(cc);
+        h.mix_usize(r);
+        h.mix_usize(cc);
     }
-    (n, k.len(), h)
+    (n, k.len(), h.finish())
 }
 
 impl Default for KktSolver {
@@ -675,7 +674,7 @@ impl KktSolver {
             &mut self.values,
             a.as_ref(),
             Side::Lower,
-            NO_REGULARIZATION,
+            no_regularization(),
             par,
             stack,
             Default::default(),
@@ -713,11 +712,7 @@ impl KktSolver {
                 &mut self.values32,
                 m32.as_ref(),
                 Side::Lower,
-                LdltRegularization {
-                    dynamic_regularization_signs: None,
-                    dynamic_regularization_delta: 0.0,
-                    dynamic_regularization_epsilon: 0.0,
-                },
+                no_regularization(),
                 par,
                 stack,
                 Default::default(),
@@ -1041,14 +1036,15 @@ fn nd_permutation(
     let (cp, ri) = (a.col_ptr(), a.row_idx());
     let mut node_of = vec![usize::MAX; n];
     let mut members: Vec<Vec<usize>> = Vec::new();
-    let mut node_of_vertex: std::collections::HashMap<usize, usize> = Default::default();
+    let mut node_of_vertex = vec![usize::MAX; free_of.len().div_ceil(3)];
     for f in 0..n_free {
-        let node = *node_of_vertex.entry(vertex_of_free[f]).or_insert_with(|| {
+        let v = vertex_of_free[f];
+        if node_of_vertex[v] == usize::MAX {
+            node_of_vertex[v] = members.len();
             members.push(Vec::new());
-            members.len() - 1
-        });
-        node_of[f] = node;
-        members[node].push(f);
+        }
+        node_of[f] = node_of_vertex[v];
+        members[node_of_vertex[v]].push(f);
     }
     let mut node_of_rows: std::collections::HashMap<Vec<usize>, usize> = Default::default();
     for row in n_free..n {

@@ -25,6 +25,7 @@ use super::linesearch::{judge, EnergyMerit, Trial};
 use super::newton::{self, Check, NewtonLimits, NewtonProblem, Rejection, Verdict};
 use super::patch::{PatchSet, PatchSettings};
 use super::status::{SolveReport, SolveStatus};
+use crate::math::hash::Fnv1a;
 use crate::math::sparse::SparseError;
 use crate::math::Energy;
 use std::time::Instant;
@@ -306,16 +307,20 @@ struct Setup {
 
 /// FNV-1a hash of the free set `free_of` and the pattern of the constraint entries `cfree`.
 fn setup_key(free_of: &[usize], cfree: &[(usize, usize, f64)]) -> u64 {
-    let mut h: u64 = 0xcbf29ce484222325;
-    let mut mix = |v: usize| h = (h ^ (v as u64)).wrapping_mul(0x100000001b3);
-    mix(free_of.len());
-    free_of.iter().for_each(|&f| mix(f));
-    mix(cfree.len());
+    let mut h = Fnv1a::new();
+    h.mix_usize(free_of.len());
+    free_of.iter().for_each(|&f| h.mix_usize(f));
+    h.mix_usize(cfree.len());
     for &(r, j, _) in cfree {
-        mix(r);
-        mix(j);
+        h.mix_usize(r);
+        h.mix_usize(j);
     }
-    h
+    h.finish()
+}
+
+/// Which energy a Hessian layout belongs to: its address and dof count.
+fn energy_identity(e: &dyn Energy) -> (usize, usize) {
+    (e as *const dyn Energy as *const () as usize, e.dofs())
 }
 
 const PINNED: usize = usize::MAX;
@@ -522,14 +527,13 @@ impl StaticSolver {
         self.trip.clear();
         e.eval(x, None, Some(&mut self.trip), project);
         self.trip_current = true;
-        let mut h: u64 = 0xcbf29ce484222325;
-        let mut mix = |v: usize| h = (h ^ (v as u64)).wrapping_mul(0x100000001b3);
-        mix(self.trip.len());
+        let mut h = Fnv1a::new();
+        h.mix_usize(self.trip.len());
         for &(r, c, _) in &self.trip {
-            mix(r);
-            mix(c);
+            h.mix_usize(r);
+            h.mix_usize(c);
         }
-        self.trip_key = h;
+        self.trip_key = h.finish();
     }
 
     fn setup(&self, e: &dyn Energy, p: &StaticProblem, x: &[f64]) -> Result<Setup, SolverError> {
@@ -622,7 +626,7 @@ impl StaticSolver {
         x: &[f64],
     ) -> Result<KktFactorInfo, SolverError> {
         let s = self.setup(e, p, x)?;
-        self.trip_owner = Some((e as *const dyn Energy as *const () as usize, e.dofs()));
+        self.trip_owner = Some(energy_identity(e));
         self.evaluate_layout(e, x, false);
         let gamma = self.gamma_for(&s);
         let m = Model { e, p, s: &s, gamma };
@@ -1041,7 +1045,7 @@ impl StaticSolver {
         self.kkt.set_precision(self.settings.factor_precision);
         self.kkt.set_full_storage(self.settings.patches.is_some());
         let s = self.setup(e, p, x)?;
-        let owner = Some((e as *const dyn Energy as *const () as usize, e.dofs()));
+        let owner = Some(energy_identity(e));
         self.trip_current = self.trip_current && self.trip_owner == owner;
         self.trip_owner = owner;
         let mut rep = empty_report();

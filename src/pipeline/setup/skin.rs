@@ -329,13 +329,13 @@ fn shell_over(
         .flat_map(|(i, &v)| skin.rows[v].iter().map(move |&(n, w)| (i, n, w)))
         .collect();
     let edge = refine::mean_edge(&sub);
-    let stretch = scene.skin.material()?.stretch_stiffness();
+    let relative = scene.solver.shell_tolerance.unwrap_or(SHELL_TOLERANCE);
     let (patches, linear) = linear_settings(scene, input.lambda);
     let settings = linear.apply(StaticSettings {
-        tolerance: scene.solver.shell_tolerance.unwrap_or(SHELL_TOLERANCE)
-            * stretch
-            * edge
-            * (sub.positions.len() as f64).sqrt(),
+        tolerance: scene
+            .skin
+            .material()?
+            .residual_tolerance(relative, edge, sub.positions.len()),
         max_iterations: scene.solver.shell_iterations.unwrap_or(60),
         hessian: HessianMode::Auto,
         energy_merit: true,
