@@ -949,3 +949,38 @@ fn every_muscle_makes_its_shape_on_the_face_rig() {
 fn every_muscle_makes_its_shape_on_the_capture_head() {
     muscles_make_their_shapes("rigs/head.glb");
 }
+
+/// The jaw's hinge fitted from the rigs' jaw-opening shapes matches the hinge the generators
+/// turn the lower face about (axis x through a known point, 10° on the face, 14° on the head).
+#[test]
+fn jaw_hinge_is_fitted_from_the_shape_that_opens_the_jaw() {
+    use furrow::muscle::jaw::{fit_hinge, is_jaw_shape};
+    let face = furrow::rig::face::generate();
+    let head = furrow::rig::head::generate();
+    let cases = [
+        (
+            &face.mesh,
+            &face.targets,
+            furrow::rig::shapes::JAW_ANGLE,
+            furrow::rig::shapes::JAW_PIVOT_YZ,
+        ),
+        (
+            &head.mesh,
+            &head.targets,
+            furrow::rig::head_shapes::JAW_ANGLE,
+            furrow::rig::head_shapes::JAW_PIVOT_YZ,
+        ),
+    ];
+    for (mesh, targets, angle, (py, pz)) in cases {
+        let t = targets.iter().find(|t| is_jaw_shape(&t.name)).unwrap();
+        let h = fit_hinge(&t.name, &mesh.positions, &t.positions).unwrap();
+        eprintln!("{h:?}");
+        assert!((h.angle_deg - angle.to_degrees()).abs() < 0.1, "{h:?}");
+        assert!(h.axis[0].abs() > 0.999, "{h:?}");
+        assert!(
+            (h.pivot_m[1] - py).abs() < 1e-3 && (h.pivot_m[2] - pz).abs() < 1e-3,
+            "{h:?}"
+        );
+        assert!(h.residual < 0.02 && h.vertices >= 10, "{h:?}");
+    }
+}

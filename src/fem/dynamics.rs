@@ -653,8 +653,9 @@ impl BackwardEuler {
         })
     }
 
-    /// y ↦ M y (flat, with the configured mass matrix).
-    fn mass_times(&self, y: &[f64]) -> Vec<f64> {
+    /// y ↦ M y (flat node vectors; the consistent mass matrix, or the lumped one when the
+    /// settings ask; kg · the unit of y).
+    pub fn mass_times(&self, y: &[f64]) -> Vec<f64> {
         let mut out = vec![0.0; y.len()];
         if self.settings.lumped_mass {
             for (n, m) in self.lumped.iter().enumerate() {

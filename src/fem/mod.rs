@@ -7,6 +7,7 @@ pub mod bench;
 pub mod cg;
 pub mod corot;
 pub mod dynamics;
+pub mod frame;
 pub mod interior;
 pub mod matfree;
 pub mod tangent;
@@ -15,6 +16,7 @@ pub use dynamics::{
     BackwardEuler, ExtraTerms, LinearSolver, SolveReport, SolveStatus, StepSettings, Tangent,
     AUTO_CG_DOFS,
 };
+pub use frame::FrameAcceleration;
 pub use interior::{FrozenInterior, Interior};
 
 use serde::{Deserialize, Serialize};

@@ -16,8 +16,9 @@ pub enum Interpolation {
     CubicSpline,
 }
 
-/// One `weights` channel: key times (s) and, per key, one weight per morph target
-/// (for CUBICSPLINE, `tangents_in`/`tangents_out` hold the tangents, in weight per second).
+/// One keyed channel: key times (s) and, per key, its values: for `weights` one weight per
+/// morph target, for a node's `translation` 3 and `rotation` 4 (quaternion x, y, z, w)
+/// (for CUBICSPLINE, `tangents_in`/`tangents_out` hold the tangents, in value per second).
 #[derive(Debug, Clone, PartialEq)]
 pub struct WeightTrack {
     /// Node whose morph weights are animated.
@@ -142,10 +143,25 @@ pub fn weight_track(
     node: usize,
     targets: usize,
 ) -> GltfResult<Option<WeightTrack>> {
+    channel_track(path, reader, json, (anim, node), "weights", targets)
+}
+
+/// Read the channel of animation `anim` that animates `target_path` (`weights`,
+/// `translation`, `rotation` or `scale`) of `node`, if there is one, as a keyed track of
+/// `width` values per key (morph targets, 3 or 4).
+pub fn channel_track(
+    path: &Path,
+    reader: &AccessorReader,
+    json: &serde_json::Value,
+    (anim, node): (usize, usize),
+    target_path: &str,
+    width: usize,
+) -> GltfResult<Option<WeightTrack>> {
+    let targets = width;
     let a = &json["animations"][anim];
     let Some(ch) = a["channels"].as_array().and_then(|cs| {
         cs.iter().find(|c| {
-            c["target"]["path"] == "weights" && usize_of(&c["target"]["node"]) == Some(node)
+            c["target"]["path"] == target_path && usize_of(&c["target"]["node"]) == Some(node)
         })
     }) else {
         return Ok(None);
@@ -200,15 +216,20 @@ pub fn weight_track(
         targets
     };
     if targets == 0 || output.data.len() != times.len() * per_key {
+        let what = if target_path == "weights" {
+            format!("mesh has {targets} morph targets")
+        } else {
+            format!("{target_path} has {targets} values")
+        };
         return Err(GltfError::new(path, format!(
-            "animation {anim} sampler {si}: {} output values do not match {} keys × {per_key} (mesh has {targets} morph targets)",
+            "animation {anim} sampler {si}: {} output values do not match {} keys × {per_key} ({what})",
             output.data.len(), times.len()
         )));
     }
     if output.data.iter().any(|v| !v.is_finite()) {
         return Err(GltfError::new(
             path,
-            format!("animation {anim} sampler {si}: non-finite weight"),
+            format!("animation {anim} sampler {si}: non-finite {target_path} value"),
         ));
     }
     let mut values = Vec::new();

@@ -37,6 +37,9 @@ pub struct Rig {
     pub animation: Option<usize>,
     /// The face's weight track in that animation.
     pub track: Option<WeightTrack>,
+    /// The face node's rigid motion in that animation (a head that turns and nods), if its
+    /// node or an ancestor is animated.
+    pub motion: Option<super::motion::NodeMotion>,
     /// Extensions the file uses.
     pub extensions_used: Vec<String>,
     /// The scale it is simulated at (metres per file unit; set by [`Rig::rescale`]).
@@ -250,6 +253,10 @@ fn load_container(path: &Path, c: Container, opts: &LoadOptions) -> GltfResult<R
         Some(ai) => animation::weight_track(path, &reader, &c.json, ai, node, nt)?,
         None => None,
     };
+    let motion = match animation {
+        Some(ai) => super::motion::node_motion(path, &reader, &c.json, ai, node)?,
+        None => None,
+    };
     let extensions_used = c.root.extensions_used.clone();
     drop(reader);
     Ok(Rig {
@@ -261,6 +268,7 @@ fn load_container(path: &Path, c: Container, opts: &LoadOptions) -> GltfResult<R
         animations,
         animation,
         track,
+        motion,
         extensions_used,
         scale: Default::default(),
     })

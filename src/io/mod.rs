@@ -16,6 +16,7 @@ pub mod load;
 pub mod mesh;
 pub mod meshopt_view;
 pub mod model;
+pub mod motion;
 pub mod scene;
 pub mod split;
 pub mod units;

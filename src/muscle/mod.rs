@@ -14,6 +14,7 @@
 //! * [`generate`]: muscles from the blend-shape basis when there is no file.
 //! * [`qp`]: the per-frame convex QP (clarabel) with exact active-set polishing.
 //! * [`fit`]: the per-frame fit with Gauss–Newton re-linearisations.
+//! * [`jaw`]: the jaw's hinge, fitted from the shape that opens it.
 //!
 //! # Muscles generated from blend shapes
 //!
@@ -44,6 +45,7 @@ pub mod bench;
 pub mod fit;
 pub mod forward;
 pub mod generate;
+pub mod jaw;
 pub mod model;
 pub mod qp;
 pub mod rigfile;

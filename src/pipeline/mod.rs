@@ -259,6 +259,14 @@ fn finish_report(
             .as_ref()
             .map(|m| m.made.clone())
             .unwrap_or_default(),
+        jaw: jaw_hinge(face),
         export: None,
     }
+}
+
+/// The jaw's hinge, fitted from the face's first jaw-opening shape (world space, m).
+fn jaw_hinge(face: &crate::io::mesh::MeshInstance) -> Option<crate::muscle::jaw::Hinge> {
+    use crate::muscle::jaw;
+    let t = face.targets.iter().find(|t| jaw::is_jaw_shape(&t.name))?;
+    jaw::fit_hinge(&t.name, &face.positions, &t.positions)
 }

@@ -77,6 +77,42 @@ pub struct Plan {
     pub substeps: usize,
     /// What drives the interior.
     pub driver: Driver,
+    /// The face node's motion the interior feels as inertial forces (dynamics only).
+    pub head_motion: Option<HeadMotion>,
+}
+
+/// The head's motion: the face node's animated rigid motion, felt by the interior as the
+/// inertial forces of its frame ([`crate::fem::frame`]).
+#[derive(Debug, Clone)]
+pub struct HeadMotion {
+    /// The node's motion (file units).
+    pub motion: crate::io::motion::NodeMotion,
+    /// Metres per file unit of the rig.
+    pub metres_per_unit: f64,
+}
+
+impl HeadMotion {
+    /// The frame's acceleration over the time step of `h` (s) that ends at `t` (s).
+    pub fn acceleration(&self, t: f64, h: f64) -> crate::fem::FrameAcceleration {
+        let g = |t: f64| self.motion.at_scaled(t, self.metres_per_unit);
+        crate::fem::FrameAcceleration::of_motion(g, t, h)
+    }
+
+    /// The largest rotation from the displayed pose (rad) and the largest frame acceleration
+    /// at `reach` (m) from the frame's origin (m/s²), over the clip sampled at `fps` (Hz).
+    pub fn extent(&self, frames: usize, fps: f64, reach: f64) -> (f64, f64) {
+        let h = 1.0 / fps;
+        (0..frames).fold((0.0f64, 0.0f64), |(ang, acc), k| {
+            let t = k as f64 * h;
+            let g = self.motion.at_scaled(t, self.metres_per_unit);
+            let a = self.acceleration(t, h);
+            let peak = a.linear.norm() * reach + a.offset.norm();
+            (
+                ang.max(crate::io::motion::rotation_angle(&g)),
+                acc.max(peak),
+            )
+        })
+    }
 }
 
 impl Plan {
@@ -122,6 +158,7 @@ impl Plan {
             skin,
             substeps,
             driver: Driver::of(scene),
+            head_motion: head_motion(rig, scene, substeps > 0),
         })
     }
 
@@ -218,6 +255,16 @@ fn check_skin_meshes(rig: &Rig, scene: &Scene) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// The face node's motion when the run feels it: dynamics on, the scene not opting out, and
+/// the node (or an ancestor) animated.
+fn head_motion(rig: &Rig, scene: &Scene, dynamics: bool) -> Option<HeadMotion> {
+    let wanted = dynamics && scene.dynamics.head_motion.unwrap_or(true);
+    rig.motion.as_ref().filter(|_| wanted).map(|m| HeadMotion {
+        motion: m.clone(),
+        metres_per_unit: rig.scale.metres_per_unit,
+    })
 }
 
 #[cfg(test)]

@@ -219,6 +219,10 @@ pub struct RunReport {
     /// How well each generated muscle makes its shape (absent without generated muscles).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub muscles: Vec<super::setup::muscles::MuscleMade>,
+    /// The jaw's hinge fitted from the shape that opens it (`jawOpen`, `jaw_open`), when the
+    /// rig has one: axis, pivot (m), angle at weight 1 and how rigidly the shape turns.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub jaw: Option<crate::muscle::jaw::Hinge>,
     /// The written file's form, its wrinkle targets and how well they reproduce the frames
     /// (filled by the export; absent for the frame-sequence form).
     #[serde(skip_serializing_if = "Option::is_none")]

@@ -134,6 +134,10 @@ pub struct InteriorSection {
     pub depth: Option<f64>,
     /// `quadratic` (default) or `trilinear` elements.
     pub elements: Option<String>,
+    /// Tracking stiffness factor κ (dimensionless, ≥ 0): each skin vertex is pulled towards
+    /// its blend-shape position with stiffness κ E_q A_v / ℓ. Default 10 when tracking drives
+    /// the interior, 1 with muscles; 0 leaves the flesh to its elasticity, bone and muscles.
+    pub tracking: Option<f64>,
 }
 
 /// `[dynamics]`: time stepping of the interior.
@@ -147,6 +151,9 @@ pub struct DynamicsSection {
     pub dt: Option<f64>,
     /// Apply gravity (default false for faces: the blend shapes were sculpted under gravity).
     pub gravity: Option<bool>,
+    /// Feel the face node's animated motion (a head that turns and nods) as inertial forces
+    /// in the head's frame (default true; needs dynamics).
+    pub head_motion: Option<bool>,
 }
 
 /// `[muscles]`: where activations come from.
@@ -445,6 +452,11 @@ impl Scene {
                 bail!(
                     "`export.surface` must be \"wrinkles_on_blend\" or \"simulated\", got \"{m}\""
                 );
+            }
+        }
+        if let Some(k) = self.interior.tracking {
+            if !(k.is_finite() && (0.0..=1e6).contains(&k)) {
+                bail!("`interior.tracking` must be a factor in [0, 1e6], got {k}");
             }
         }
         if let Some(m) = &self.muscles.source {

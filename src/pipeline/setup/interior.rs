@@ -68,19 +68,25 @@ pub fn stepper(lattice: &Lattice, scene: &Scene, plan: &Plan) -> anyhow::Result<
     Ok(stepper)
 }
 
+/// The tracking stiffness factor κ: the scene's `interior.tracking`, else
+/// [`TRACKING_STIFFNESS`] when tracking drives and [`MUSCLE_TRACKING`] when muscles do.
+pub fn tracking_factor(scene: &Scene, driver: &Driver) -> f64 {
+    scene.interior.tracking.unwrap_or(match driver {
+        Driver::Tracking => TRACKING_STIFFNESS,
+        Driver::Muscles { .. } => MUSCLE_TRACKING,
+    })
+}
+
 /// The tracking energy of the welded skin `welded` (m) whose vertices have embedding `rows`,
-/// for an interior of Young's modulus `young` (Pa) and cell size `cell` (m).
+/// with factor `kappa` ([`tracking_factor`]), for an interior of Young's modulus `young` (Pa)
+/// and cell size `cell` (m).
 pub fn tracking(
     welded: &TriMesh,
     rows: &[Vec<(usize, f64)>],
-    driver: &Driver,
+    kappa: f64,
     young: f64,
     cell: f64,
 ) -> Tracking {
-    let kappa = match driver {
-        Driver::Tracking => TRACKING_STIFFNESS,
-        Driver::Muscles { .. } => MUSCLE_TRACKING,
-    };
     let k: Vec<f64> = vertex_areas(welded)
         .iter()
         .map(|a| kappa * young * a / cell)
@@ -106,8 +112,15 @@ pub fn tracking(
 /// The `interior` stage's record: backward Euler and its sub-steps, or quasi-static and why.
 pub fn record(plan: &Plan, stepper: &BackwardEuler) -> StagePlan {
     let why = if plan.dynamics() {
+        let head = match &plan.head_motion {
+            Some(m) => format!(
+                "; the head's motion ({}) felt as inertial forces",
+                m.motion.animated.join(", ")
+            ),
+            None => String::new(),
+        };
         format!(
-            "backward Euler, {} step(s) of {:.4} s per frame, driven by {}",
+            "backward Euler, {} step(s) of {:.4} s per frame, driven by {}{head}",
             plan.substeps,
             stepper.settings.dt,
             plan.driver.name()
@@ -168,7 +181,8 @@ mod tests {
         );
         // Vertices 0 and 1 share node 7; vertex 2 sits on node 9.
         let rows = vec![vec![(7, 0.5), (8, 0.5)], vec![(7, 1.0)], vec![(9, 1.0)]];
-        let t = tracking(&m, &rows, &Driver::Tracking, 2.0, 4.0);
+        let kappa = tracking_factor(&Scene::default(), &Driver::Tracking);
+        let t = tracking(&m, &rows, kappa, 2.0, 4.0);
         // k_v = κ E A / ℓ = 10 · 2 · 1 / 4 = 5 N/m.
         assert_eq!(t.k, vec![5.0; 3]);
         let get = |a: usize, b: usize| {
@@ -184,15 +198,19 @@ mod tests {
         assert_eq!(get(21, 24), 1.25);
         assert_eq!(get(27, 27), 5.0);
         assert_eq!(get(21, 27), 0.0);
+        let muscles = Driver::Muscles {
+            source: "auto".into(),
+        };
         let weak = tracking(
             &m,
             &rows,
-            &Driver::Muscles {
-                source: "auto".into(),
-            },
+            tracking_factor(&Scene::default(), &muscles),
             2.0,
             4.0,
         );
         assert_eq!(weak.k, vec![0.5; 3]);
+        let mut scene = Scene::default();
+        scene.interior.tracking = Some(0.0);
+        assert_eq!(tracking_factor(&scene, &muscles), 0.0);
     }
 }

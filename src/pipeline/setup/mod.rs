@@ -64,6 +64,8 @@ pub struct Model {
     /// The simulated skin's stiffness Bᵀ K_x B at rest (N/m, triplets over node dofs; empty
     /// when no skin is simulated): the interior's coupling to it, and what the muscles' fit sees.
     pub skin_stiffness: skin::Stiffness,
+    /// The head's motion the interior feels as inertial forces, when the rig's face node moves.
+    pub head_motion: Option<crate::pipeline::plan::HeadMotion>,
 }
 
 impl Model {
@@ -148,7 +150,7 @@ pub fn set_up(
     let tracking = interior::tracking(
         &welded.mesh,
         &refined.rows,
-        &plan.driver,
+        interior::tracking_factor(scene, &plan.driver),
         young,
         lattice.cell_size,
     );
@@ -205,6 +207,7 @@ pub fn set_up(
         tracking,
         left_out,
         skin_stiffness,
+        head_motion: plan.head_motion.clone(),
     };
     let state = State {
         interior: stepper,

@@ -21,6 +21,8 @@ pub struct InteriorSchedule {
     pub substeps: usize,
     /// Re-linearise the skin's stiffness Bᵀ K_x B every frame (else once, at rest).
     pub every_frame_stiffness: bool,
+    /// Time between frames (s): frame k is at time k · `frame_interval`.
+    pub frame_interval: f64,
 }
 
 /// Halvings of one sub-step at most: a backward Euler step whose Newton solve does not
@@ -50,13 +52,26 @@ pub fn advance(
     let q = &state.interior.q;
     let skin_force = coupling_terms(model, state.skin.as_ref(), q, scratch, schedule);
     let from = state.last_target.take().unwrap_or_else(|| target.to_vec());
+    let skin_parts = [
+        scratch
+            .skin_stiffness
+            .as_deref()
+            .filter(|_| state.skin.is_some()),
+        model.left_out.as_ref().map(|(_, k)| k.as_slice()),
+    ];
     let mut load = StepLoad {
+        frame_q: state.interior.q.clone(),
+        skin_parts,
         stiffness: scratch.combined.clone().unwrap_or_default(),
         base_len: 0,
         skin_force,
         from: &from,
         target,
         zero_force: &scratch.zero_force,
+        interval: (
+            (k as f64 - 1.0) * schedule.frame_interval,
+            schedule.frame_interval,
+        ),
     };
     load.base_len = load.stiffness.len();
     if schedule.substeps == 0 {
@@ -80,16 +95,24 @@ pub fn advance(
     Ok(record)
 }
 
+/// One stiffness entry (row dof, column dof, N/m).
+type Triplet = (usize, usize, f64);
+
 /// What every solve of one frame shares: the combined stiffness (tracking and skin; muscle
-/// terms are appended after `base_len` per solve), the skin's force, the last frame's and
-/// this frame's targets (m) and a zero external force.
+/// terms are appended after `base_len` per solve), the skin's force at the frame's start
+/// positions `frame_q` (m) and the skin's stiffness (its parts: simulated and left out), the
+/// last frame's and this frame's targets (m), a zero external force and the frame interval
+/// (its start and length, s).
 struct StepLoad<'a> {
+    frame_q: Vec<f64>,
+    skin_parts: [Option<&'a [Triplet]>; 2],
     stiffness: Vec<(usize, usize, f64)>,
     base_len: usize,
     skin_force: Option<Vec<f64>>,
     from: &'a [Vector3<f64>],
     target: &'a [Vector3<f64>],
     zero_force: &'a [f64],
+    interval: (f64, f64),
 }
 
 /// One backward Euler step of the stepper's current dt (`dynamics`) or one quasi-static solve,
@@ -120,6 +143,13 @@ fn solve_once(
         }
     }
     if let Some(fs) = &load.skin_force {
+        // The skin's force at this step's start, from its linear model about the frame's
+        // start: F_x(q) = F_x(q_frame) − K_x (q − q_frame). The step's quadratic model is
+        // about its own start, so a sub-step must not re-apply the frame's force.
+        let dq: Vec<f64> = be.q.iter().zip(&load.frame_q).map(|(a, b)| b - a).collect();
+        for part in load.skin_parts.into_iter().flatten() {
+            crate::math::sparse::triplets_mul_add(part, &dq, &mut force);
+        }
         for (f, g) in force.iter_mut().zip(fs) {
             *f += g;
         }
@@ -129,7 +159,13 @@ fn solve_once(
         force: &force,
     };
     Ok(if dynamics {
-        state.interior.step(load.zero_force, Some(&extra))?
+        let inertial = model.head_motion.as_ref().map(|m| {
+            let end = load.interval.0 + at * load.interval.1;
+            let acc = m.acceleration(end, state.interior.settings.dt);
+            state.interior.frame_force(&acc)
+        });
+        let f_ext = inertial.as_deref().unwrap_or(load.zero_force);
+        state.interior.step(f_ext, Some(&extra))?
     } else {
         state.interior.quasi_static(load.zero_force, Some(&extra))?
     })

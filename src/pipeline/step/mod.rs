@@ -57,6 +57,7 @@ impl StepOptions {
                 substeps,
                 every_frame_stiffness: scene.solver.skin_stiffness.as_deref()
                     == Some("every_frame"),
+                frame_interval: 1.0 / fps,
             },
             simulated_surface: scene.export.surface.as_deref() == Some("simulated"),
             fps,
@@ -145,6 +146,7 @@ mod tests {
             schedule: InteriorSchedule {
                 substeps,
                 every_frame_stiffness: false,
+                frame_interval: 1.0 / 30.0,
             },
             simulated_surface: false,
             fps: 30.0,
