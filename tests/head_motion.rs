@@ -119,6 +119,7 @@ fn lag_per_frame(rig_bytes: &[u8], dt: f64, tracking: f64) -> Vec<f64> {
     let interior = out.report.stages.iter().find(|s| s.stage == "interior");
     let why = format!("{:?}", interior.unwrap());
     assert!(why.contains("inertial forces"), "{why}");
+    assert!(why.contains("up to 30.0° from the displayed pose"), "{why}");
     out.frames
         .iter()
         .zip(&out.smooth)
@@ -270,4 +271,40 @@ fn turning_head_lags_by_a_over_omega_squared_and_settles() {
         );
         assert!(measured < 0.6, "{name} does not settle: {v:?}");
     }
+}
+
+/// A rotation channel whose output does not match its keys is refused, naming the file and
+/// the channel.
+#[test]
+fn a_rotation_channel_of_the_wrong_size_is_refused() {
+    let (mut json, mut bin) = common::tiny_rig();
+    let off = bin.len();
+    bin.extend([0f32, 0.0, 0.0, 1.0].iter().flat_map(|v| v.to_le_bytes()));
+    json["bufferViews"]
+        .as_array_mut()
+        .unwrap()
+        .push(serde_json::json!({ "buffer": 0, "byteOffset": off, "byteLength": 16 }));
+    json["buffers"][0]["byteLength"] = bin.len().into();
+    let accessors = json["accessors"].as_array_mut().unwrap();
+    accessors.push(
+        serde_json::json!({ "bufferView": 5, "componentType": 5126, "count": 1, "type": "VEC4" }),
+    );
+    let anim = &mut json["animations"][0];
+    anim["samplers"]
+        .as_array_mut()
+        .unwrap()
+        .push(serde_json::json!({ "input": 3, "output": 5 }));
+    anim["channels"]
+        .as_array_mut()
+        .unwrap()
+        .push(serde_json::json!({ "sampler": 1, "target": { "node": 0, "path": "rotation" } }));
+    let bytes = common::glb_bytes(&json, &bin);
+    let err = load_bytes(Path::new("bad_turn.glb"), &bytes, &LoadOptions::default())
+        .err()
+        .expect("refused")
+        .to_string();
+    assert!(
+        err.contains("bad_turn.glb") && err.contains("rotation"),
+        "{err}"
+    );
 }

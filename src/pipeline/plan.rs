@@ -99,14 +99,17 @@ impl HeadMotion {
     }
 
     /// The largest rotation from the displayed pose (rad) and the largest frame acceleration
-    /// at `reach` (m) from the frame's origin (m/s²), over the clip sampled at `fps` (Hz).
-    pub fn extent(&self, frames: usize, fps: f64, reach: f64) -> (f64, f64) {
+    /// at any of `points` (flat, m; m/s²), over `frames` frames sampled at `fps` (Hz).
+    pub fn extent(&self, frames: usize, fps: f64, points: &[f64]) -> (f64, f64) {
         let h = 1.0 / fps;
         (0..frames).fold((0.0f64, 0.0f64), |(ang, acc), k| {
             let t = k as f64 * h;
             let g = self.motion.at_scaled(t, self.metres_per_unit);
             let a = self.acceleration(t, h);
-            let peak = a.linear.norm() * reach + a.offset.norm();
+            let peak = points
+                .chunks_exact(3)
+                .map(|p| a.at(&nalgebra::Vector3::new(p[0], p[1], p[2])).norm())
+                .fold(0.0, f64::max);
             (
                 ang.max(crate::io::motion::rotation_angle(&g)),
                 acc.max(peak),

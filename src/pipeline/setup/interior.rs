@@ -113,10 +113,15 @@ pub fn tracking(
 pub fn record(plan: &Plan, stepper: &BackwardEuler) -> StagePlan {
     let why = if plan.dynamics() {
         let head = match &plan.head_motion {
-            Some(m) => format!(
-                "; the head's motion ({}) felt as inertial forces",
-                m.motion.animated.join(", ")
-            ),
+            Some(m) => {
+                let (turn, accel) = m.extent(plan.weights.len(), plan.fps, &stepper.q);
+                format!(
+                    "; the head's motion ({}: up to {:.1}° from the displayed pose, frame \
+                     acceleration up to {accel:.2} m/s² in the flesh) felt as inertial forces",
+                    m.motion.animated.join(", "),
+                    turn.to_degrees()
+                )
+            }
             None => String::new(),
         };
         format!(
