@@ -282,9 +282,9 @@ pub struct HeldFrame {
 /// `opts`' range (its history), then step that frame's weights `repeats` more times with the
 /// scene's skin solver. Backward Euler damps the interior's velocity within a few repeats,
 /// but after an expression the coupled interior still creeps by about 0.1 µm per frame for
-/// over a second (measured on the face at frame 30: its Newton stops at its tolerance with
-/// 3·10⁻⁵ N left), enough to move the skin's targets past the skin's tolerance: such a frame
-/// costs one Newton iteration, not none.
+/// over a second (measured on the face at frame 30; the same with the interior's Newton
+/// tolerance at 1e-6, so not its stopping test), enough to move the skin's targets past the
+/// skin's tolerance: such a frame costs one Newton iteration, not none.
 pub fn held_frames(rig: &Rig, opts: &RunOptions, repeats: usize) -> anyhow::Result<Vec<HeldFrame>> {
     let mut run = Stepper::new(rig, opts)?;
     let first = run.plan.range.start;
