@@ -175,16 +175,11 @@ fn model_frequency(rig_bytes: &[u8], accel: f64) -> (f64, f64) {
     let mid: Vec<f64> = model
         .rows
         .iter()
-        .zip(&rest_positions(&rig))
+        .zip(&model.skin_mesh.positions)
         .filter(|(_, p)| p.x.abs() < 0.012 && p.y.abs() < 0.012)
         .map(|(row, _)| row.iter().map(|&(n, w)| w * u[3 * n]).sum::<f64>())
         .collect();
     (omega, mid.iter().sum::<f64>() / mid.len() as f64)
-}
-
-/// The loaded face's rest positions (m).
-fn rest_positions(rig: &furrow::io::load::Rig) -> Vec<Vector3<f64>> {
-    rig.face().positions.clone()
 }
 
 #[test]

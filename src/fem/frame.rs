@@ -29,15 +29,6 @@ pub struct FrameAcceleration {
 }
 
 impl FrameAcceleration {
-    /// A frame at rest.
-    pub fn zero() -> Self {
-        Self {
-            linear: Matrix3::zeros(),
-            offset: Vector3::zeros(),
-            spin: Matrix3::zeros(),
-        }
-    }
-
     /// The frame's acceleration over the time step that ends at `t` (s) of length `h` (s),
     /// from its affine motion `g` (world points of the frame at t = 0 to world points at t,
     /// metres): backward differences of G at t, t − h and t − 2h.
@@ -123,6 +114,8 @@ mod tests {
         let acc = FrameAcceleration::of_motion(g, 1.0, 0.01);
         assert!((acc.offset - Vector3::new(2.0, 0.0, 0.0)).norm() < 1e-9);
         assert!(acc.linear.norm() < 1e-9 && acc.spin.norm() < 1e-9);
-        assert!(FrameAcceleration::zero().is_zero());
+        assert!(!acc.is_zero());
+        let still = FrameAcceleration::of_motion(|_| Matrix4::identity(), 1.0, 0.01);
+        assert!(still.is_zero());
     }
 }

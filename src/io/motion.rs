@@ -3,11 +3,11 @@
 //! time. A capture rig's head turns and nods this way; the blend shapes act in the node's
 //! frame.
 
-use super::accessor::{usize_of, AccessorReader};
+use super::accessor::AccessorReader;
 use super::animation::{channel_track, Interpolation, WeightTrack};
 use super::error::{GltfError, GltfResult};
-use super::scene::local_matrix;
-use nalgebra::{Matrix4, Quaternion, UnitQuaternion, Vector3};
+use super::scene::{local_matrix, node_trs, parents, quaternion, trs_matrix};
+use nalgebra::{Matrix4, UnitQuaternion};
 use std::path::Path;
 
 /// The animated channels of one node of the face's ancestor chain.
@@ -26,55 +26,38 @@ impl NodeChannels {
         if self.translation.is_none() && self.rotation.is_none() && self.scale.is_none() {
             return local_matrix(&self.json);
         }
-        let nums = |k: &str, d: Vec<f64>| -> Vec<f64> {
-            self.json[k]
-                .as_array()
-                .filter(|a| a.len() == d.len())
-                .and_then(|a| a.iter().map(|v| v.as_f64()).collect())
-                .unwrap_or(d)
-        };
-        let tr = match &self.translation {
-            Some(tk) => tk.sample(t),
-            None => nums("translation", vec![0.0; 3]),
-        };
-        let sc = match &self.scale {
-            Some(tk) => tk.sample(t),
-            None => nums("scale", vec![1.0; 3]),
-        };
-        let rot = match &self.rotation {
-            Some(tk) => sample_rotation(tk, t),
-            None => {
-                let r = nums("rotation", vec![0.0, 0.0, 0.0, 1.0]);
-                UnitQuaternion::from_quaternion(Quaternion::new(r[3], r[0], r[1], r[2]))
-            }
-        };
-        let mut m = rot.to_homogeneous();
-        for c in 0..3 {
-            for row in 0..3 {
-                m[(row, c)] *= sc[c];
-            }
-            m[(c, 3)] = tr[c];
+        let (mut tr, mut rot, mut sc) = node_trs(&self.json);
+        if let Some(tk) = &self.translation {
+            tr = tk.sample(t);
         }
-        m
+        if let Some(tk) = &self.rotation {
+            rot = sample_rotation(tk, t);
+        }
+        if let Some(tk) = &self.scale {
+            sc = tk.sample(t);
+        }
+        trs_matrix(&tr, &rot, &sc)
     }
 }
 
 /// A rotation channel at time `t` (s): spherical linear interpolation between LINEAR keys (as
 /// glTF asks), the Hermite curve renormalised for CUBICSPLINE, the key held for STEP.
 fn sample_rotation(track: &WeightTrack, t: f64) -> UnitQuaternion<f64> {
-    let quat = |v: &[f64]| UnitQuaternion::from_quaternion(Quaternion::new(v[3], v[0], v[1], v[2]));
     let n = track.times.len();
     if track.interpolation != Interpolation::Linear
         || n < 2
         || t <= track.times[0]
         || t >= track.times[n - 1]
     {
-        return quat(&track.sample(t));
+        return quaternion(&track.sample(t));
     }
     let k = track.times.partition_point(|&x| x <= t) - 1;
     let (t0, t1) = (track.times[k], track.times[k + 1]);
     let s = if t1 > t0 { (t - t0) / (t1 - t0) } else { 0.0 };
-    let (a, mut b) = (quat(&track.values[k]), quat(&track.values[k + 1]));
+    let (a, mut b) = (
+        quaternion(&track.values[k]),
+        quaternion(&track.values[k + 1]),
+    );
     if a.coords.dot(&b.coords) < 0.0 {
         b = UnitQuaternion::new_unchecked(-b.into_inner());
     }
@@ -116,20 +99,6 @@ impl NodeMotion {
     }
 }
 
-/// The parent of every node (None for roots).
-fn parents(json: &serde_json::Value) -> Vec<Option<usize>> {
-    let nodes = json["nodes"].as_array().map_or(&[][..], |a| a.as_slice());
-    let mut parent = vec![None; nodes.len()];
-    for (i, node) in nodes.iter().enumerate() {
-        for c in node["children"].as_array().into_iter().flatten() {
-            if let Some(c) = usize_of(c).filter(|&c| c < nodes.len()) {
-                parent[c] = Some(i);
-            }
-        }
-    }
-    parent
-}
-
 /// The motion of `node` in animation `anim`: None when neither the node nor an ancestor has
 /// a translation, rotation or scale channel there.
 pub fn node_motion(
@@ -139,7 +108,7 @@ pub fn node_motion(
     anim: usize,
     node: usize,
 ) -> GltfResult<Option<NodeMotion>> {
-    let parent = parents(json);
+    let parent = parents(path, json)?;
     let mut ids = vec![node];
     while let Some(p) = parent[*ids.last().unwrap_or(&node)] {
         if ids.contains(&p) {
@@ -203,14 +172,11 @@ pub fn rotation_angle(g: &Matrix4<f64>) -> f64 {
     }
 }
 
-/// A point moved by an affine map.
-pub fn moved(g: &Matrix4<f64>, p: &Vector3<f64>) -> Vector3<f64> {
-    (g * p.push(1.0)).xyz()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::io::scene::transform_point;
+    use nalgebra::Vector3;
 
     fn rotation_track(times: Vec<f64>, angles: &[f64]) -> WeightTrack {
         let values = angles
@@ -268,7 +234,7 @@ mod tests {
         };
         assert!((m.at(0.0) - Matrix4::identity()).norm() < 1e-14);
         let p = Vector3::new(0.0, 1.0, 1.0); // the face's origin in the world
-        let q = moved(&m.at(1.0), &p);
+        let q = transform_point(&m.at(1.0), &p);
         let want = Vector3::new(angle.sin(), 1.0, angle.cos());
         assert!((q - want).norm() < 1e-12, "{q} vs {want}");
         assert!((rotation_angle(&m.at(1.0)) - angle).abs() < 1e-12);

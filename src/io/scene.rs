@@ -4,40 +4,52 @@ use super::error::{GltfError, GltfResult};
 use nalgebra::{Matrix4, Quaternion, UnitQuaternion, Vector3};
 use std::path::Path;
 
-/// The local transform of node `n` (column-major `matrix`, or translation·rotation·scale).
-pub fn local_matrix(node: &serde_json::Value) -> Matrix4<f64> {
-    let nums = |k: &str, n: usize| -> Option<Vec<f64>> {
-        let a = node[k].as_array()?;
-        if a.len() != n {
-            return None;
-        }
-        a.iter().map(|v| v.as_f64()).collect()
-    };
-    if let Some(m) = nums("matrix", 16) {
-        return Matrix4::from_column_slice(&m);
+/// `n` numbers under key `k` of a node, if it has exactly that many.
+fn node_numbers(node: &serde_json::Value, k: &str, n: usize) -> Option<Vec<f64>> {
+    let a = node[k].as_array()?;
+    if a.len() != n {
+        return None;
     }
-    let t = nums("translation", 3).unwrap_or(vec![0.0; 3]);
-    let r = nums("rotation", 4).unwrap_or(vec![0.0, 0.0, 0.0, 1.0]);
-    let s = nums("scale", 3).unwrap_or(vec![1.0; 3]);
-    let q = UnitQuaternion::from_quaternion(Quaternion::new(r[3], r[0], r[1], r[2]));
-    let mut m = q.to_homogeneous();
+    a.iter().map(|v| v.as_f64()).collect()
+}
+
+/// A node's static translation, rotation and scale (glTF defaults where absent).
+pub fn node_trs(node: &serde_json::Value) -> (Vec<f64>, UnitQuaternion<f64>, Vec<f64>) {
+    let t = node_numbers(node, "translation", 3).unwrap_or(vec![0.0; 3]);
+    let r = node_numbers(node, "rotation", 4).unwrap_or(vec![0.0, 0.0, 0.0, 1.0]);
+    let s = node_numbers(node, "scale", 3).unwrap_or(vec![1.0; 3]);
+    (t, quaternion(&r), s)
+}
+
+/// A glTF quaternion (x, y, z, w), normalised.
+pub fn quaternion(r: &[f64]) -> UnitQuaternion<f64> {
+    UnitQuaternion::from_quaternion(Quaternion::new(r[3], r[0], r[1], r[2]))
+}
+
+/// translation · rotation · scale as one 4×4 matrix.
+pub fn trs_matrix(t: &[f64], r: &UnitQuaternion<f64>, s: &[f64]) -> Matrix4<f64> {
+    let mut m = r.to_homogeneous();
     for c in 0..3 {
         for row in 0..3 {
             m[(row, c)] *= s[c];
         }
+        m[(c, 3)] = t[c];
     }
-    m[(0, 3)] = t[0];
-    m[(1, 3)] = t[1];
-    m[(2, 3)] = t[2];
     m
 }
 
-/// World matrices of every node (identity for nodes outside the displayed scene), and the
-/// list of nodes reachable from the displayed scene. Cycles and multiple parents are errors.
-pub fn world_matrices(
-    path: &Path,
-    json: &serde_json::Value,
-) -> GltfResult<(Vec<Matrix4<f64>>, Vec<usize>)> {
+/// The local transform of node `n` (column-major `matrix`, or translation·rotation·scale).
+pub fn local_matrix(node: &serde_json::Value) -> Matrix4<f64> {
+    if let Some(m) = node_numbers(node, "matrix", 16) {
+        return Matrix4::from_column_slice(&m);
+    }
+    let (t, r, s) = node_trs(node);
+    trs_matrix(&t, &r, &s)
+}
+
+/// The parent of every node (None for roots). A child that does not exist, or a node with
+/// more than one parent, is an error.
+pub fn parents(path: &Path, json: &serde_json::Value) -> GltfResult<Vec<Option<usize>>> {
     let nodes = json["nodes"]
         .as_array()
         .map(|a| a.as_slice())
@@ -64,6 +76,21 @@ pub fn world_matrices(
             }
         }
     }
+    Ok(parent)
+}
+
+/// World matrices of every node (identity for nodes outside the displayed scene), and the
+/// list of nodes reachable from the displayed scene. Cycles and multiple parents are errors.
+pub fn world_matrices(
+    path: &Path,
+    json: &serde_json::Value,
+) -> GltfResult<(Vec<Matrix4<f64>>, Vec<usize>)> {
+    let nodes = json["nodes"]
+        .as_array()
+        .map(|a| a.as_slice())
+        .unwrap_or(&[]);
+    let n = nodes.len();
+    let parent = parents(path, json)?;
     let scene_index = json["scene"].as_u64().unwrap_or(0) as usize;
     let roots: Vec<usize> = match json["scenes"]
         .get(scene_index)

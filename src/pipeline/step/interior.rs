@@ -147,8 +147,10 @@ fn solve_once(
         // start: F_x(q) = F_x(q_frame) − K_x (q − q_frame). The step's quadratic model is
         // about its own start, so a sub-step must not re-apply the frame's force.
         let dq: Vec<f64> = be.q.iter().zip(&load.frame_q).map(|(a, b)| b - a).collect();
-        for part in load.skin_parts.into_iter().flatten() {
-            crate::math::sparse::triplets_mul_add(part, &dq, &mut force);
+        if dq.iter().any(|&d| d != 0.0) {
+            for part in load.skin_parts.into_iter().flatten() {
+                crate::math::sparse::triplets_mul_add(part, &dq, &mut force);
+            }
         }
         for (f, g) in force.iter_mut().zip(fs) {
             *f += g;
@@ -159,10 +161,10 @@ fn solve_once(
         force: &force,
     };
     Ok(if dynamics {
-        let inertial = model.head_motion.as_ref().map(|m| {
+        let inertial = model.head_motion.as_ref().and_then(|m| {
             let end = load.interval.0 + at * load.interval.1;
             let acc = m.acceleration(end, state.interior.settings.dt);
-            state.interior.frame_force(&acc)
+            (!acc.is_zero()).then(|| state.interior.frame_force(&acc))
         });
         let f_ext = inertial.as_deref().unwrap_or(load.zero_force);
         state.interior.step(f_ext, Some(&extra))?
