@@ -36,14 +36,14 @@ fn no_regularization<T: faer::traits::RealField>() -> LdltRegularization<'static
 use super::gmres::{fgmres, GmresReport};
 use crate::math::energy::NO_SLOT;
 use crate::math::hash::Fnv1a;
-use crate::math::sparse::{mul_sym_lower_into, Pattern, SparseError};
+use crate::math::sparse::{mul_sym_lower_into, SparseError};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
 use faer::sparse::linalg::cholesky::{
     factorize_symbolic_cholesky, CholeskySymbolicParams, LdltRef, SymbolicCholesky,
     SymbolicCholeskyRaw, SymmetricOrdering,
 };
-use faer::sparse::SparseColMat;
+use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 use faer::{Conj, MatMut, Side};
 use rayon::prelude::*;
 
@@ -173,7 +173,8 @@ pub struct KktBlocks<'a> {
     pub delta: f64,
     /// A key the caller gives the layout (sizes, pinned set, constraint pattern and Hessian
     /// triplet indices): equal keys promise equal layouts, so the solver skips fingerprinting
-    /// them. `None`: the solver fingerprints the layout itself.
+    /// them (it must cover the Hessian's triplet count). `None`: the solver fingerprints the
+    /// layout itself. With a known key and scattered values, `hessian` may be empty.
     pub layout_key: Option<u64>,
 }
 
@@ -201,27 +202,45 @@ impl std::fmt::Debug for HessianValues<'_> {
     }
 }
 
-/// The KKT pattern of `blocks` (both triangles, zero diagonal slots included) with the
-/// Hessian and constraint values of the triplets.
+/// The KKT pattern of `blocks` (both triangles, zero diagonal slots included), its values
+/// zero ([`KktSolver::assemble`] sums them in). Built from the distinct (column, row) pairs,
+/// 8 bytes per triplet while sorting: the Hessian triplets of a refined head (16 million)
+/// made the set-up's peak memory when they were copied with their values to build it.
 fn kkt_pattern(blocks: &KktBlocks) -> Result<SparseColMat<usize, f64>, SparseError> {
     let (free_of, n_free) = (blocks.free_of, blocks.n_free);
     let n = n_free + blocks.n_cons;
+    if u32::try_from(n).is_err() {
+        return Err(SparseError::Build(format!("{n} KKT rows: more than 2³²")));
+    }
+    let key = |r: usize, col: usize| ((col as u64) << 32) | r as u64;
     let c = blocks.constraints;
-    let mut t = Vec::with_capacity(blocks.hessian.len() + 2 * c.len() + n);
-    for &(r, cc, v) in blocks.hessian {
+    let mut keys = Vec::with_capacity(blocks.hessian.len() + 2 * c.len() + n);
+    for &(r, cc, _) in blocks.hessian {
         let (fr, fc) = (free_of[r], free_of[cc]);
         if fr != usize::MAX && fc != usize::MAX {
-            t.push((fr, fc, v));
+            keys.push(key(fr, fc));
         }
     }
-    for i in 0..n {
-        t.push((i, i, 0.0));
+    keys.extend((0..n).map(|i| key(i, i)));
+    for &(r, j, _) in c {
+        keys.push(key(n_free + r, j));
+        keys.push(key(j, n_free + r));
     }
-    for &(r, j, v) in c {
-        t.push((n_free + r, j, v));
-        t.push((j, n_free + r, v));
+    keys.par_sort_unstable();
+    keys.dedup();
+    keys.shrink_to_fit();
+    let mut col_ptr = vec![0usize; n + 1];
+    for &k in &keys {
+        col_ptr[(k >> 32) as usize + 1] += 1;
     }
-    Pattern::new(n, &t)?.assemble(&t)
+    for j in 0..n {
+        col_ptr[j + 1] += col_ptr[j];
+    }
+    let row_idx: Vec<usize> = keys.iter().map(|&k| (k & 0xffff_ffff) as usize).collect();
+    drop(keys);
+    let nnz = row_idx.len();
+    let symbolic = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
+    Ok(SparseColMat::new(symbolic, vec![0.0; nnz]))
 }
 
 /// Value index of entry (r, col) of the compressed matrix `a`.
@@ -336,13 +355,18 @@ impl KktSolver {
         }
         let n = blocks.n_free + blocks.n_cons;
         let fp = match blocks.layout_key {
-            Some(key) => (n, k.len(), key),
+            Some(key) => (n, usize::MAX, key),
             None => layout_fingerprint(n, blocks.free_of, k, blocks.constraints),
         };
         let mut symbolic_s = 0.0;
         self.n_free = blocks.n_free;
         self.n_cons = blocks.n_cons;
         if self.fingerprint != Some(fp) || self.base.is_none() {
+            if k.is_empty() && matches!(blocks.hessian_values, HessianValues::Scatter(_)) {
+                return Err(SparseError::Build(
+                    "a new KKT layout needs the Hessian's triplets".into(),
+                ));
+            }
             let t0 = std::time::Instant::now();
             self.analyse(blocks)?;
             self.fingerprint = Some(fp);
@@ -787,6 +811,13 @@ impl KktSolver {
         self.krylov(rhs, true, max_solves, rel_tol)
     }
 
+    /// Whether the matrix was last analysed for the layout `key` (see
+    /// [`KktBlocks::layout_key`]) of `n` rows: an assembly with that key may then scatter
+    /// its values without the Hessian's triplets.
+    pub fn has_layout(&self, n: usize, key: u64) -> bool {
+        self.base.is_some() && self.fingerprint == Some((n, usize::MAX, key))
+    }
+
     /// GMRES on the factored (`assembled = false`) or the last assembled matrix with δ
     /// removed, preconditioned by the current factor. Only the lagged solve (on the
     /// assembled matrix) may give up early: a fresh factor is as good as it gets.
@@ -1207,6 +1238,51 @@ mod ordering_tests {
     /// A 3-dof-per-node grid "membrane" (graph Laplacian ⊗ I₃ plus a small mass) with one
     /// averaging constraint: the analysis keeps the ordering with fewer flops (never more
     /// than AMD's) and the solution solves the system to round-off.
+    /// The pattern built from the distinct index pairs is the one a triplet assembly of
+    /// the same blocks gives (pinned dofs left out, diagonal slots and both constraint
+    /// triangles in), with duplicates and unsorted triplets.
+    #[test]
+    fn the_kkt_pattern_is_the_triplet_assemblys() {
+        let free_of = vec![0, usize::MAX, 1, 2, 3];
+        let hessian = vec![
+            (4, 0, 1.0),
+            (0, 4, 1.0),
+            (0, 0, 2.0),
+            (1, 0, 5.0),
+            (0, 1, 5.0),
+            (3, 2, -1.0),
+            (2, 3, -1.0),
+            (4, 0, 3.0),
+            (3, 3, 1.0),
+        ];
+        let constraints = vec![(0, 1, 1.0), (1, 3, 2.0), (0, 2, 1.0)];
+        let blocks = KktBlocks {
+            free_of: &free_of,
+            n_free: 4,
+            n_cons: 2,
+            hessian: &hessian,
+            hessian_values: HessianValues::Triplets,
+            constraints: &constraints,
+            gamma: 1.0,
+            delta: 0.0,
+            layout_key: None,
+        };
+        let mut t: Vec<(usize, usize, f64)> = hessian
+            .iter()
+            .filter(|&&(r, c, _)| free_of[r] != usize::MAX && free_of[c] != usize::MAX)
+            .map(|&(r, c, v)| (free_of[r], free_of[c], v))
+            .collect();
+        t.extend((0..6).map(|i| (i, i, 0.0)));
+        for &(r, j, v) in &constraints {
+            t.extend([(4 + r, j, v), (j, 4 + r, v)]);
+        }
+        let reference = crate::math::sparse::assemble(6, 6, &t).unwrap();
+        let pattern = kkt_pattern(&blocks).unwrap();
+        assert_eq!(pattern.col_ptr(), reference.col_ptr());
+        assert_eq!(pattern.row_idx(), reference.row_idx());
+        assert!(pattern.val().iter().all(|&v| v == 0.0));
+    }
+
     #[test]
     fn a_grid_is_ordered_by_the_cheaper_ordering_and_solved() {
         let k = 24usize;

@@ -265,6 +265,9 @@ pub struct StaticSolver {
     /// Hash of the indices of `trip` (with the free set and constraint pattern, the KKT
     /// layout key).
     trip_key: u64,
+    /// The triplet count of the layout (`trip` is emptied once the KKT matrix holds the
+    /// layout and the energy scatters its values).
+    trip_len: usize,
     last_shift: f64,
     /// Final state of the previous solve and its pinned dofs (for the pinned-motion predictor).
     last_x: Vec<f64>,
@@ -272,6 +275,10 @@ pub struct StaticSolver {
     /// Layout of the current factorisation when it may precondition later directions (a
     /// lagged factor): it was of the exact, unshifted Hessian and passed the inertia test.
     lag_layout: Option<FactorLayout>,
+    /// The last lagged direction solved the exact Newton system but had non-positive
+    /// curvature: the Hessian at the iterate is not positive definite on the constraints'
+    /// null space, so the inertia correction starts at a shift.
+    seen_indefinite: bool,
     /// GMRES iterations of the last lagged direction (0 after a fresh factorisation).
     lag_last_iterations: usize,
     /// The patches of the current KKT layout (with `settings.patches`), and the count of
@@ -488,11 +495,18 @@ impl StaticSolver {
     fn assemble_at(&mut self, m: &Model, x: &[f64], project: bool) -> Result<f64, SolverError> {
         let e = m.e;
         let mut values = Vec::new();
+        let n = m.free() + m.rows();
+        let key = |trip_key: u64| m.s.key ^ trip_key.rotate_left(29);
+        let held = self.trip.len() == self.trip_len;
+        let scatters = e.triplet_count() == Some(self.trip_len);
         let source = if !self.trip_current {
             self.evaluate_layout(e, x, project);
             Source::Triplets
-        } else if e.triplet_count() == Some(self.trip.len()) {
+        } else if scatters && (held || self.kkt.has_layout(n, key(self.trip_key))) {
             Source::Scatter
+        } else if !held {
+            self.evaluate_layout(e, x, project);
+            Source::Triplets
         } else {
             e.hessian_values(x, &mut values, project);
             if values.len() == self.trip.len() {
@@ -508,7 +522,7 @@ impl StaticSolver {
             Source::Values => HessianValues::Values(&values),
             Source::Scatter => HessianValues::Scatter(&scatter),
         };
-        Ok(self.kkt.assemble(&KktBlocks {
+        let sym_s = self.kkt.assemble(&KktBlocks {
             free_of: &m.s.free_of,
             n_free: m.free(),
             n_cons: m.rows(),
@@ -517,8 +531,14 @@ impl StaticSolver {
             constraints: &m.s.cfree,
             gamma: m.gamma,
             delta: KKT_DELTA * m.gamma,
-            layout_key: Some(m.s.key ^ self.trip_key.rotate_left(29)),
-        })?)
+            layout_key: Some(key(self.trip_key)),
+        })?;
+        if e.triplet_count() == Some(self.trip_len) {
+            // The analysed matrix keeps the layout and the energy scatters its values: the
+            // triplets (24 bytes each, 16 million on a refined head) are not needed again.
+            self.trip = Vec::new();
+        }
+        Ok(sym_s)
     }
 
     /// Evaluate the energy's Hessian triplets at `x` (their indices are the layout) and the
@@ -526,6 +546,7 @@ impl StaticSolver {
     fn evaluate_layout(&mut self, e: &dyn Energy, x: &[f64], project: bool) {
         self.trip.clear();
         e.eval(x, None, Some(&mut self.trip), project);
+        self.trip_len = self.trip.len();
         self.trip_current = true;
         let mut h = Fnv1a::new();
         h.mix_usize(self.trip.len());
@@ -714,6 +735,7 @@ impl StaticSolver {
         rep.solve_s += t.elapsed().as_secs_f64();
         self.lag_last_iterations = g.iterations;
         let ok = accepted(&self.kkt, &g, &d, m.free());
+        self.seen_indefinite = !ok && g.converged && d.iter().all(|v| v.is_finite());
         if ok {
             rhs.copy_from_slice(&d);
             rep.lagged_directions += 1;
@@ -916,7 +938,9 @@ impl StaticSolver {
     }
 
     /// Hessians Newton tries for a direction, in order, as (element-projected, shift / γ):
-    /// the exact Hessian; if it is not positive definite on the constraint null space, the
+    /// the exact Hessian, unless the lagged direction just showed it indefinite (a converged
+    /// exact Newton direction with non-positive curvature: the factorisation at τ = 0 would
+    /// only confirm it); if it is not positive definite on the constraint null space, the
     /// exact Hessian shifted by τ I, up to γ, by the inertia correction of IPOPT (Wächter
     /// and Biegler 2006, §3.1): τ starts at a third of the last shift that worked and grows
     /// ×8, or, when no shift has been needed yet, starts at 1e-4 γ and grows ×100 (it keeps
@@ -936,9 +960,10 @@ impl StaticSolver {
             .collect();
         shifts.push(1.0);
         let mut modes: Vec<(bool, f64)> = Vec::new();
+        let exact = !self.seen_indefinite;
         match self.settings.hessian {
             HessianMode::Exact => {
-                modes.push((false, 0.0));
+                modes.extend(exact.then_some((false, 0.0)));
                 modes.extend(shifts.iter().map(|&t| (false, t)));
             }
             HessianMode::Projected => {
@@ -946,7 +971,7 @@ impl StaticSolver {
                 modes.extend(shifts.iter().map(|&t| (true, t)));
             }
             HessianMode::Auto => {
-                modes.push((false, 0.0));
+                modes.extend(exact.then_some((false, 0.0)));
                 modes.extend(shifts.iter().map(|&t| (false, t)));
                 modes.push((true, 0.0));
                 modes.push((true, 1e-6));
@@ -1303,6 +1328,7 @@ impl StaticNewton<'_, '_> {
     fn factor_with_inertia_control(&mut self) -> Result<bool, SolverError> {
         let (m, solver, rep) = (&self.model, &mut *self.solver, &mut *self.rep);
         let modes = solver.hessian_attempts();
+        solver.seen_indefinite = false;
         for (k, &(project, shift)) in modes.iter().enumerate() {
             let last = k + 1 == modes.len();
             solver.assemble_hessian(m, &self.at.x, project, &mut self.have_hessian, rep)?;
@@ -1502,6 +1528,76 @@ mod tests {
         for (i, xi) in x.iter().enumerate() {
             assert!((xi - 0.5 * i as f64).abs() < 1e-12, "{x:?}");
         }
+    }
+
+    /// The linear chain, saying its triplet count: the solver then scatters its Hessians.
+    struct ScatteringChain;
+    impl Energy for ScatteringChain {
+        fn dofs(&self) -> usize {
+            5
+        }
+        fn eval(
+            &self,
+            x: &[f64],
+            grad: Option<&mut [f64]>,
+            hess: Option<&mut Vec<(usize, usize, f64)>>,
+            p: bool,
+        ) -> f64 {
+            LINEAR_CHAIN.eval(x, grad, hess, p)
+        }
+        fn triplet_count(&self) -> Option<usize> {
+            Some(16)
+        }
+    }
+
+    /// An energy that scatters its Hessian: once the KKT matrix holds the layout the solver
+    /// lets its triplets go, and a solve with other pins (a new layout) evaluates them again;
+    /// every answer is the exact one, as a fresh solver's.
+    #[test]
+    fn a_scattering_energy_drops_its_triplets_and_lays_out_again_for_new_pins() {
+        let settings = StaticSettings {
+            tolerance: 1e-12,
+            gamma: Some(1.0),
+            ..Default::default()
+        };
+        let ends = StaticProblem {
+            pinned: vec![0, 4],
+            ..Default::default()
+        };
+        let middle = StaticProblem {
+            pinned: vec![0, 2, 4],
+            ..Default::default()
+        };
+        let mut solver = StaticSolver::new(settings).unwrap();
+        let cases: [(&StaticProblem, [f64; 5], [f64; 5]); 3] = [
+            (
+                &ends,
+                [0.0, 0.3, -0.2, 0.1, 1.0],
+                [0.0, 0.25, 0.5, 0.75, 1.0],
+            ),
+            (
+                &middle,
+                [0.0, 0.3, 1.0, 0.1, 0.0],
+                [0.0, 0.5, 1.0, 0.5, 0.0],
+            ),
+            (&ends, [0.0, 0.3, -0.2, 0.1, 2.0], [0.0, 0.5, 1.0, 1.5, 2.0]),
+        ];
+        for (p, start, exact) in cases {
+            let mut x = start.to_vec();
+            let rep = solver.solve(&ScatteringChain, p, &mut x).unwrap();
+            assert_eq!(rep.status, SolveStatus::Converged, "{rep:?}");
+            assert!(solver.trip.is_empty() && solver.trip_len == 16);
+            let mut fresh_x = start.to_vec();
+            let mut fresh = StaticSolver::new(settings).unwrap();
+            fresh.solve(&ScatteringChain, p, &mut fresh_x).unwrap();
+            for ((a, b), e) in x.iter().zip(&fresh_x).zip(exact) {
+                assert!(
+                    (a - e).abs() < 1e-12 && (a - b).abs() < 1e-12,
+                    "{x:?} {fresh_x:?}"
+                );
+            }
+        }
+        assert_eq!(solver.symbolic_analyses(), 3);
     }
 
     /// Load continuation on a chain of hardening springs (k = 1, 3, 0.5, 2), x0 pinned and
