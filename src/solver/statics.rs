@@ -1461,15 +1461,21 @@ mod tests {
     struct SpringChain {
         k: [f64; 4],
         quartic: f64,
+        /// Say the triplet count (16), so the solver scatters its Hessians.
+        scatters: bool,
     }
     /// Unit linear springs: E = Σ (x_{i+1} − x_i)² / 2.
     const LINEAR_CHAIN: SpringChain = SpringChain {
         k: [1.0; 4],
         quartic: 0.0,
+        scatters: false,
     };
     impl Energy for SpringChain {
         fn dofs(&self) -> usize {
             5
+        }
+        fn triplet_count(&self) -> Option<usize> {
+            self.scatters.then_some(16)
         }
         fn eval(
             &self,
@@ -1530,26 +1536,6 @@ mod tests {
         }
     }
 
-    /// The linear chain, saying its triplet count: the solver then scatters its Hessians.
-    struct ScatteringChain;
-    impl Energy for ScatteringChain {
-        fn dofs(&self) -> usize {
-            5
-        }
-        fn eval(
-            &self,
-            x: &[f64],
-            grad: Option<&mut [f64]>,
-            hess: Option<&mut Vec<(usize, usize, f64)>>,
-            p: bool,
-        ) -> f64 {
-            LINEAR_CHAIN.eval(x, grad, hess, p)
-        }
-        fn triplet_count(&self) -> Option<usize> {
-            Some(16)
-        }
-    }
-
     /// An energy that scatters its Hessian: once the KKT matrix holds the layout the solver
     /// lets its triplets go, and a solve with other pins (a new layout) evaluates them again;
     /// every answer is the exact one, as a fresh solver's.
@@ -1568,6 +1554,10 @@ mod tests {
             pinned: vec![0, 2, 4],
             ..Default::default()
         };
+        let chain = SpringChain {
+            scatters: true,
+            ..LINEAR_CHAIN
+        };
         let mut solver = StaticSolver::new(settings).unwrap();
         let cases: [(&StaticProblem, [f64; 5], [f64; 5]); 3] = [
             (
@@ -1584,12 +1574,12 @@ mod tests {
         ];
         for (p, start, exact) in cases {
             let mut x = start.to_vec();
-            let rep = solver.solve(&ScatteringChain, p, &mut x).unwrap();
+            let rep = solver.solve(&chain, p, &mut x).unwrap();
             assert_eq!(rep.status, SolveStatus::Converged, "{rep:?}");
             assert!(solver.trip.is_empty() && solver.trip_len == 16);
             let mut fresh_x = start.to_vec();
             let mut fresh = StaticSolver::new(settings).unwrap();
-            fresh.solve(&ScatteringChain, p, &mut fresh_x).unwrap();
+            fresh.solve(&chain, p, &mut fresh_x).unwrap();
             for ((a, b), e) in x.iter().zip(&fresh_x).zip(exact) {
                 assert!(
                     (a - e).abs() < 1e-12 && (a - b).abs() < 1e-12,
@@ -1609,7 +1599,11 @@ mod tests {
     #[test]
     fn load_increments_converge_where_the_direct_solve_does_not() {
         let k = [1.0, 3.0, 0.5, 2.0];
-        let chain = SpringChain { k, quartic: 1.0 };
+        let chain = SpringChain {
+            k,
+            quartic: 1.0,
+            scatters: false,
+        };
         let problem = |x4: f64| StaticProblem {
             pinned: vec![0],
             constraints: LinearConstraints {
