@@ -252,6 +252,13 @@ fn slot_of(a: &SparseColMat<usize, f64>, r: usize, col: usize) -> Result<usize, 
         .map_err(|_| SparseError::Build(format!("entry ({r}, {col}) missing from pattern")))
 }
 
+/// The fingerprint of a layout of `n` rows the caller keyed (see [`KktBlocks::layout_key`]):
+/// its triplet count is the key's to cover, so the count's place holds a marker no
+/// fingerprinted layout has.
+fn keyed_fingerprint(n: usize, key: u64) -> (usize, usize, u64) {
+    (n, usize::MAX, key)
+}
+
 fn layout_fingerprint(
     n: usize,
     free_of: &[usize],
@@ -355,7 +362,7 @@ impl KktSolver {
         }
         let n = blocks.n_free + blocks.n_cons;
         let fp = match blocks.layout_key {
-            Some(key) => (n, usize::MAX, key),
+            Some(key) => keyed_fingerprint(n, key),
             None => layout_fingerprint(n, blocks.free_of, k, blocks.constraints),
         };
         let mut symbolic_s = 0.0;
@@ -815,7 +822,7 @@ impl KktSolver {
     /// [`KktBlocks::layout_key`]) of `n` rows: an assembly with that key may then scatter
     /// its values without the Hessian's triplets.
     pub fn has_layout(&self, n: usize, key: u64) -> bool {
-        self.base.is_some() && self.fingerprint == Some((n, usize::MAX, key))
+        self.base.is_some() && self.fingerprint == Some(keyed_fingerprint(n, key))
     }
 
     /// GMRES on the factored (`assembled = false`) or the last assembled matrix with δ
@@ -1235,9 +1242,6 @@ mod tests {
 mod ordering_tests {
     use super::*;
 
-    /// A 3-dof-per-node grid "membrane" (graph Laplacian ⊗ I₃ plus a small mass) with one
-    /// averaging constraint: the analysis keeps the ordering with fewer flops (never more
-    /// than AMD's) and the solution solves the system to round-off.
     /// The pattern built from the distinct index pairs is the one a triplet assembly of
     /// the same blocks gives (pinned dofs left out, diagonal slots and both constraint
     /// triangles in), with duplicates and unsorted triplets.
@@ -1283,6 +1287,9 @@ mod ordering_tests {
         assert!(pattern.val().iter().all(|&v| v == 0.0));
     }
 
+    /// A 3-dof-per-node grid "membrane" (graph Laplacian ⊗ I₃ plus a small mass) with one
+    /// averaging constraint: the analysis keeps the ordering with fewer flops (never more
+    /// than AMD's) and the solution solves the system to round-off.
     #[test]
     fn a_grid_is_ordered_by_the_cheaper_ordering_and_solved() {
         let k = 24usize;
