@@ -34,6 +34,7 @@ fn no_regularization<T: faer::traits::RealField>() -> LdltRegularization<'static
 }
 
 use super::gmres::{fgmres, GmresReport};
+use super::tree::TreeSplit;
 use crate::math::energy::NO_SLOT;
 use crate::math::hash::Fnv1a;
 use crate::math::sparse::{mul_sym_lower_into, SparseError};
@@ -149,6 +150,9 @@ pub struct KktSolver {
     nested_dissection: bool,
     /// Number of symbolic analyses performed so far (to check reuse).
     pub symbolic_count: usize,
+    /// The elimination tree's split for solves on two cores, when the analysis is
+    /// supernodal and one pays ([`TreeSplit`]).
+    split: Option<TreeSplit>,
 }
 
 /// The blocks of a KKT system (free dofs only) for [`KktSolver::assemble`].
@@ -316,6 +320,7 @@ impl Default for KktSolver {
             flops: 0.0,
             nested_dissection: false,
             symbolic_count: 0,
+            split: None,
         }
     }
 }
@@ -404,6 +409,10 @@ impl KktSolver {
             .map(|j| slot_of(&a, j, j))
             .collect::<Result<_, _>>()?;
         self.build_gather(&a, blocks)?;
+        self.split = match sym.raw() {
+            SymbolicCholeskyRaw::Supernodal(s) => TreeSplit::new(s),
+            SymbolicCholeskyRaw::Simplicial(_) => None,
+        };
         self.symbolic = Some(sym);
         self.base = Some(a);
         self.matrix = None;
@@ -985,6 +994,26 @@ impl KktSolver {
 
     fn raw_solve(&mut self, rhs: &mut [f64]) {
         let sym = self.symbolic.as_ref().expect("symbolic");
+        if let (Some(split), SymbolicCholeskyRaw::Supernodal(s)) = (&self.split, sym.raw()) {
+            let (fwd, inv) = sym
+                .perm()
+                .expect("a supernodal analysis is ordered")
+                .arrays();
+            if self.factor_precision == FactorPrecision::Single {
+                let mut x: Vec<f32> = fwd.iter().map(|&i| rhs[i] as f32).collect();
+                split.solve(s, &self.values32, &mut x);
+                for (r, &k) in rhs.iter_mut().zip(inv) {
+                    *r = f64::from(x[k]);
+                }
+            } else {
+                let mut x: Vec<f64> = fwd.iter().map(|&i| rhs[i]).collect();
+                split.solve(s, &self.values, &mut x);
+                for (r, &k) in rhs.iter_mut().zip(inv) {
+                    *r = x[k];
+                }
+            }
+            return;
+        }
         let n = rhs.len();
         let par = self.par();
         let stack = MemStack::new(self.mem.as_mut().expect("memory"));
@@ -1357,6 +1386,87 @@ mod ordering_tests {
         let scale = rhs.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         for (a, b) in ax.iter().zip(&rhs) {
             assert!((a - b).abs() <= 1e-9 * scale, "{a} vs {b}");
+        }
+    }
+
+    /// (row, column, value) entries.
+    type Triplets = Vec<(usize, usize, f64)>;
+
+    /// A 3D lattice of n³ nodes, one dof each, each tied to its 6 neighbours (a shifted
+    /// graph Laplacian, supernodal when factorised), and one constraint row averaging a line
+    /// of nodes: (Hessian triplets, constraint triplets, free dofs).
+    fn lattice_kkt(n: usize) -> (Triplets, Triplets, usize) {
+        let id = |i: usize, j: usize, k: usize| (i * n + j) * n + k;
+        let mut t = Vec::new();
+        for i in 0..n {
+            for j in 0..n {
+                for k in 0..n {
+                    t.push((id(i, j, k), id(i, j, k), 6.01));
+                    let mut link = |a: usize, b: usize| t.extend([(a, b, -1.0), (b, a, -1.0)]);
+                    if i + 1 < n {
+                        link(id(i, j, k), id(i + 1, j, k));
+                    }
+                    if j + 1 < n {
+                        link(id(i, j, k), id(i, j + 1, k));
+                    }
+                    if k + 1 < n {
+                        link(id(i, j, k), id(i, j, k + 1));
+                    }
+                }
+            }
+        }
+        let c = (0..n)
+            .map(|k| (0, id(n / 2, n / 2, k), 1.0 / n as f64))
+            .collect();
+        (t, c, n * n * n)
+    }
+
+    /// The factor's solve across the elimination tree on two cores ([`TreeSplit`]) equals
+    /// faer's sequential solve to round-off in both precisions, and gives the same bits on
+    /// one thread and on two.
+    #[test]
+    fn the_two_core_tree_solve_is_fasers_solve_on_any_thread_count() {
+        let (t, c, n) = lattice_kkt(16);
+        let free_of: Vec<usize> = (0..n).collect();
+        let blocks = KktBlocks {
+            free_of: &free_of,
+            n_free: n,
+            n_cons: 1,
+            hessian: &t,
+            hessian_values: HessianValues::Triplets,
+            constraints: &c,
+            gamma: 1.0,
+            delta: 1e-8,
+            layout_key: None,
+        };
+        let rhs: Vec<f64> = (0..n + 1).map(|i| ((i * 7919) % 13) as f64 - 6.0).collect();
+        let pool = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+        };
+        for (precision, tol) in [
+            (FactorPrecision::Double, 1e-12),
+            (FactorPrecision::Single, 1e-5),
+        ] {
+            let mut s = KktSolver::new();
+            s.set_precision(precision);
+            s.assemble(&blocks).unwrap();
+            assert!(s.factor(0.0).inertia_ok);
+            assert!(s.split.is_some(), "a 16³ lattice splits");
+            let mut one = rhs.clone();
+            pool(1).install(|| s.apply_factor(&mut one));
+            let mut two = rhs.clone();
+            pool(2).install(|| s.apply_factor(&mut two));
+            assert_eq!(one, two, "{precision:?}: 1 and 2 threads differ");
+            s.split = None;
+            let mut faer = rhs.clone();
+            s.apply_factor(&mut faer);
+            let scale = faer.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            for (a, b) in one.iter().zip(&faer) {
+                assert!((a - b).abs() <= tol * scale, "{precision:?}: {a} vs {b}");
+            }
         }
     }
 }

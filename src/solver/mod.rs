@@ -8,6 +8,7 @@ pub mod ordering;
 pub mod patch;
 pub mod statics;
 pub mod status;
+pub mod tree;
 
 pub use statics::{
     HessianMode, LinearAlgebra, LinearConstraints, StaticProblem, StaticSettings, StaticSolver,
