@@ -34,7 +34,8 @@ fn no_regularization<T: faer::traits::RealField>() -> LdltRegularization<'static
 }
 
 use super::gmres::{fgmres, GmresReport};
-use super::tree::TreeSplit;
+use super::tree::{solve_cost, TreeSplit};
+use super::tree_factor::{self, FactorPlan};
 use crate::math::energy::NO_SLOT;
 use crate::math::hash::Fnv1a;
 use crate::math::sparse::{mul_sym_lower_into, SparseError};
@@ -153,6 +154,8 @@ pub struct KktSolver {
     /// The elimination tree's split for solves on two cores, when the analysis is
     /// supernodal and one pays ([`TreeSplit`]).
     split: Option<TreeSplit>,
+    /// The plan of a factorisation across that split ([`tree_factor`]).
+    plan: Option<FactorPlan>,
 }
 
 /// The blocks of a KKT system (free dofs only) for [`KktSolver::assemble`].
@@ -321,6 +324,7 @@ impl Default for KktSolver {
             nested_dissection: false,
             symbolic_count: 0,
             split: None,
+            plan: None,
         }
     }
 }
@@ -410,8 +414,14 @@ impl KktSolver {
             .collect::<Result<_, _>>()?;
         self.build_gather(&a, blocks)?;
         self.split = match sym.raw() {
-            SymbolicCholeskyRaw::Supernodal(s) => TreeSplit::new(s),
+            SymbolicCholeskyRaw::Supernodal(s) => TreeSplit::new(s, solve_cost),
             SymbolicCholeskyRaw::Simplicial(_) => None,
+        };
+        self.plan = match (sym.raw(), sym.perm()) {
+            (SymbolicCholeskyRaw::Supernodal(s), Some(perm)) => {
+                FactorPlan::new(s, perm.arrays(), &a, blocks.n_free)
+            }
+            _ => None,
         };
         self.symbolic = Some(sym);
         self.base = Some(a);
@@ -691,6 +701,9 @@ impl KktSolver {
     /// precision, into `values` (the matrix is read in place, or from a shifted copy);
     /// false on a zero pivot.
     fn factor_double(&mut self, shift: f64) -> bool {
+        if let Some(ok) = self.factor_across_tree(shift, FactorPrecision::Double) {
+            return ok;
+        }
         let par = self.par();
         let base = self.base.as_ref().expect("base set");
         let a = if shift == 0.0 {
@@ -726,6 +739,9 @@ impl KktSolver {
     /// diagonal, rounded to single precision, into `values32`; false on a zero or
     /// non-finite pivot.
     fn factor_single(&mut self, shift: f64) -> bool {
+        if let Some(ok) = self.factor_across_tree(shift, FactorPrecision::Single) {
+            return ok && self.values32.iter().all(|v| v.is_finite());
+        }
         let par = self.par();
         let base = self.base.as_ref().expect("base set");
         let (cp, diag, nf) = (base.col_ptr(), &self.diag_pos, self.n_free);
@@ -759,6 +775,28 @@ impl KktSolver {
             )
             .is_ok();
         ok && self.values32.iter().all(|v| v.is_finite())
+    }
+
+    /// [`Self::factor_double`] or [`Self::factor_single`] across the elimination tree on two
+    /// cores ([`tree_factor`]), when the analysis has a plan for it: whether it factorised.
+    fn factor_across_tree(&mut self, shift: f64, precision: FactorPrecision) -> Option<bool> {
+        let (Some(plan), Some(sym)) = (&self.plan, &self.symbolic) else {
+            return None;
+        };
+        let SymbolicCholeskyRaw::Supernodal(s) = sym.raw() else {
+            return None;
+        };
+        let a = self.base.as_ref().expect("base set").val();
+        Some(match precision {
+            FactorPrecision::Double => {
+                self.values.resize(sym.len_val(), 0.0);
+                tree_factor::factor(s, plan, (a, shift), &mut self.values)
+            }
+            FactorPrecision::Single => {
+                self.values32.resize(sym.len_val(), 0.0);
+                tree_factor::factor(s, plan, (a, shift), &mut self.values32)
+            }
+        })
     }
 
     /// The precision of the factorisations from now on (the default is double).
@@ -1421,11 +1459,12 @@ mod ordering_tests {
         (t, c, n * n * n)
     }
 
-    /// The factor's solve across the elimination tree on two cores ([`TreeSplit`]) equals
-    /// faer's sequential solve to round-off in both precisions, and gives the same bits on
+    /// The factorisation and solves across the elimination tree on two cores
+    /// ([`TreeSplit`], [`tree_factor`]) equal faer's sequential ones to round-off in both
+    /// precisions (values, inertia, solution), shifted or not, and give the same bits on
     /// one thread and on two.
     #[test]
-    fn the_two_core_tree_solve_is_fasers_solve_on_any_thread_count() {
+    fn the_two_core_tree_factor_and_solve_are_faers_on_any_thread_count() {
         let (t, c, n) = lattice_kkt(16);
         let free_of: Vec<usize> = (0..n).collect();
         let blocks = KktBlocks {
@@ -1446,26 +1485,52 @@ mod ordering_tests {
                 .build()
                 .unwrap()
         };
-        for (precision, tol) in [
-            (FactorPrecision::Double, 1e-12),
-            (FactorPrecision::Single, 1e-5),
-        ] {
+        let cases = [
+            (FactorPrecision::Double, 0.0, 1e-12),
+            (FactorPrecision::Double, -0.3, 1e-11),
+            (FactorPrecision::Single, 0.0, 1e-5),
+        ];
+        for (precision, shift, tol) in cases {
             let mut s = KktSolver::new();
             s.set_precision(precision);
             s.assemble(&blocks).unwrap();
-            assert!(s.factor(0.0).inertia_ok);
-            assert!(s.split.is_some(), "a 16³ lattice splits");
-            let mut one = rhs.clone();
-            pool(1).install(|| s.apply_factor(&mut one));
-            let mut two = rhs.clone();
-            pool(2).install(|| s.apply_factor(&mut two));
-            assert_eq!(one, two, "{precision:?}: 1 and 2 threads differ");
-            s.split = None;
-            let mut faer = rhs.clone();
-            s.apply_factor(&mut faer);
-            let scale = faer.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-            for (a, b) in one.iter().zip(&faer) {
-                assert!((a - b).abs() <= tol * scale, "{precision:?}: {a} vs {b}");
+            assert!(
+                s.split.is_some() && s.plan.is_some(),
+                "a 16³ lattice splits"
+            );
+            let run = |s: &mut KktSolver, threads: usize| {
+                pool(threads).install(|| {
+                    let info = s.factor(shift);
+                    let mut x = rhs.clone();
+                    s.apply_factor(&mut x);
+                    let v: Vec<f64> = match precision {
+                        FactorPrecision::Double => s.values.clone(),
+                        FactorPrecision::Single => s.values32.iter().map(|&v| v.into()).collect(),
+                    };
+                    (info.negative_pivots, v, x)
+                })
+            };
+            let one = run(&mut s, 1);
+            let two = run(&mut s, 2);
+            assert_eq!(
+                one, two,
+                "{precision:?}, shift {shift}: 1 and 2 threads differ"
+            );
+            (s.split, s.plan) = (None, None);
+            let faer = run(&mut s, 1);
+            assert_eq!(one.0, faer.0, "{precision:?}, shift {shift}: inertia");
+            assert!(
+                shift == 0.0 || one.0 > 1,
+                "the shift makes the lattice indefinite"
+            );
+            for (a, b) in [(&one.1, &faer.1), (&one.2, &faer.2)] {
+                let scale = b.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                for (x, y) in a.iter().zip(b) {
+                    assert!(
+                        (x - y).abs() <= tol * scale,
+                        "{precision:?}, shift {shift}: {x} vs {y}"
+                    );
+                }
             }
         }
     }

@@ -9,6 +9,7 @@ pub mod patch;
 pub mod statics;
 pub mod status;
 pub mod tree;
+pub mod tree_factor;
 
 pub use statics::{
     HessianMode, LinearAlgebra, LinearConstraints, StaticProblem, StaticSettings, StaticSolver,

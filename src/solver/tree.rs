@@ -20,6 +20,12 @@ use faer::sparse::linalg::cholesky::supernodal::SymbolicSupernodalCholesky;
 use faer::{Accum, Conj, MatMut, MatRef, Par};
 use std::ops::Range;
 
+/// Subtrees [`TreeSplit::new`] splits, one per step, looking for its best split.
+const SPLIT_STEPS: usize = 64;
+
+/// The heaviest subtrees [`TreeSplit::new`] tries splitting at each step.
+const SPLIT_CANDIDATES: usize = 8;
+
 /// A split of a supernodal factor's elimination tree for two tasks.
 #[derive(Debug, Clone)]
 pub struct TreeSplit {
@@ -34,9 +40,17 @@ pub struct TreeSplit {
 }
 
 /// The cost of a supernode in a solve: its factor entries.
-fn entries(sym: &SymbolicSupernodalCholesky<usize>, s: usize) -> f64 {
+pub fn solve_cost(sym: &SymbolicSupernodalCholesky<usize>, s: usize) -> f64 {
     let cp = sym.col_ptr_for_val();
     (cp[s + 1] - cp[s]) as f64
+}
+
+/// The cost of a supernode in a factorisation: the flops of its dense front and of the
+/// updates it sends its ancestors.
+pub fn factor_cost(sym: &SymbolicSupernodalCholesky<usize>, s: usize) -> f64 {
+    let cols = (sym.supernode_end()[s] - sym.supernode_begin()[s]) as f64;
+    let below = sym.supernode(s).pattern().len() as f64;
+    cols * cols * cols / 3.0 + cols * cols * below + cols * below * below
 }
 
 /// The parent of each supernode in the elimination tree (`usize::MAX` at a root), or
@@ -102,22 +116,28 @@ fn deal(subtrees: &[(usize, f64)]) -> ([Vec<usize>; 2], [f64; 2]) {
 }
 
 impl TreeSplit {
-    /// The split of `sym` whose estimated time (the top's entries plus the heavier task's)
-    /// is least, splitting the heaviest subtree into its children while that helps; `None`
+    /// The split of `sym` whose estimated time (the top's `cost` plus the heavier task's,
+    /// [`solve_cost`] or [`factor_cost`] per supernode) is least among those met by
+    /// splitting, [`SPLIT_STEPS`] times, the subtree among the heaviest whose split leaves
+    /// the least estimate into its children; `None`
     /// when it would save under a fifth of a sequential solve, or a supernode's parent
     /// comes before it.
-    pub fn new(sym: &SymbolicSupernodalCholesky<usize>) -> Option<Self> {
+    pub fn new(
+        sym: &SymbolicSupernodalCholesky<usize>,
+        cost_of: fn(&SymbolicSupernodalCholesky<usize>, usize) -> f64,
+    ) -> Option<Self> {
         let ns = sym.n_supernodes();
         let parent = supernode_parents(sym)?;
         let mut children = vec![Vec::new(); ns];
-        let mut cost: Vec<f64> = (0..ns).map(|s| entries(sym, s)).collect();
+        let own: Vec<f64> = (0..ns).map(|s| cost_of(sym, s)).collect();
+        let mut cost = own.clone();
         for s in 0..ns {
             if parent[s] != usize::MAX {
                 children[parent[s]].push(s);
                 cost[parent[s]] += cost[s];
             }
         }
-        let total: f64 = (0..ns).map(|s| entries(sym, s)).sum();
+        let total: f64 = own.iter().sum();
         let mut subtrees: Vec<(usize, f64)> = (0..ns)
             .filter(|&s| parent[s] == usize::MAX)
             .map(|s| (s, cost[s]))
@@ -128,29 +148,37 @@ impl TreeSplit {
             let (_, c) = deal(subtrees);
             top_cost + c[0].max(c[1])
         };
-        let mut best = estimate(&subtrees, top_cost);
-        for _ in 0..64 {
-            let Some(k) = (0..subtrees.len())
+        let mut best = (estimate(&subtrees, top_cost), subtrees.clone(), top.len());
+        for _ in 0..SPLIT_STEPS {
+            let mut splittable: Vec<usize> = (0..subtrees.len())
                 .filter(|&k| !children[subtrees[k].0].is_empty())
-                .max_by(|&a, &b| subtrees[a].1.total_cmp(&subtrees[b].1))
+                .collect();
+            splittable.sort_by(|&a, &b| subtrees[b].1.total_cmp(&subtrees[a].1));
+            let split_at = |k: usize| {
+                let mut next = subtrees.clone();
+                let root = next.swap_remove(k).0;
+                next.extend(children[root].iter().map(|&c| (c, cost[c])));
+                (next, root)
+            };
+            let Some((e, k)) = splittable
+                .iter()
+                .take(SPLIT_CANDIDATES)
+                .map(|&k| (estimate(&split_at(k).0, top_cost + own[subtrees[k].0]), k))
+                .min_by(|a, b| a.0.total_cmp(&b.0))
             else {
                 break;
             };
-            let root = subtrees[k].0;
-            let mut next = subtrees.clone();
-            next.swap_remove(k);
-            next.extend(children[root].iter().map(|&c| (c, cost[c])));
-            let next_top = top_cost + entries(sym, root);
-            let e = estimate(&next, next_top);
-            if e >= best && subtrees.len() >= 2 {
-                break;
-            }
-            best = best.min(e);
+            let (next, root) = split_at(k);
             subtrees = next;
             top.push(root);
-            top_cost = next_top;
+            top_cost += own[root];
+            if e < best.0 || best.1.len() < 2 {
+                best = (e, subtrees.clone(), top.len());
+            }
         }
-        if best > 0.8 * total {
+        let (time, subtrees, tops) = best;
+        top.truncate(tops);
+        if time > 0.8 * total {
             return None;
         }
         let (dealt, _) = deal(&subtrees);
@@ -165,6 +193,16 @@ impl TreeSplit {
             top,
             top_cols,
         })
+    }
+
+    /// The supernodes each task runs, in increasing order.
+    pub fn tasks(&self) -> &[Vec<usize>; 2] {
+        &self.tasks
+    }
+
+    /// The supernodes in no task's subtrees, in increasing order.
+    pub fn top(&self) -> &[usize] {
+        &self.top
     }
 
     /// Solve L D Lᵀ x = b in place (`x` holds b, in the factor's permuted order) with the
@@ -216,6 +254,8 @@ pub trait Scalar:
     + std::ops::Sub<Output = Self>
     + std::ops::Div<Output = Self>
     + std::ops::Neg<Output = Self>
+    + std::ops::Mul<Output = Self>
+    + std::ops::AddAssign
     + std::ops::SubAssign
     + std::ops::DivAssign
 {
@@ -223,16 +263,24 @@ pub trait Scalar:
     const ZERO: Self;
     /// One.
     const ONE: Self;
+    /// `v` rounded to this precision.
+    fn from_f64(v: f64) -> Self;
 }
 
 impl Scalar for f32 {
     const ZERO: Self = 0.0;
     const ONE: Self = 1.0;
+    fn from_f64(v: f64) -> Self {
+        v as f32
+    }
 }
 
 impl Scalar for f64 {
     const ZERO: Self = 0.0;
     const ONE: Self = 1.0;
+    fn from_f64(v: f64) -> Self {
+        v
+    }
 }
 
 /// A supernodal LDLᵀ factor (unit L, D on its diagonal).
