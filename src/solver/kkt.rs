@@ -811,14 +811,13 @@ impl KktSolver {
         self.full_storage = full;
     }
 
-    /// Parallelism for faer: sequential. faer parallelises inside the dense fronts; a shell's
-    /// fronts are small and many, and there the synchronisation costs more than it saves,
-    /// at every size measured since the METIS ordering and single-precision factors (one run
-    /// each way, 2 cores): the capture head's skin KKT (79k rows, 1.6·10¹⁰ flops) 0.73 s per
-    /// single-precision factorisation against 1.09 s with two faer tasks (frames 12–39:
-    /// skin 27.3 s against 32.4 s); `bench shell --faces 80000` warm solve 1.69 s against
-    /// 2.27 s (the double-precision reference 2.55 s against 3.90 s). Earlier, in double
-    /// precision with a coordinate-bisection order, two tasks had won above 10¹⁰ flops.
+    /// Parallelism for faer's own sparse factorisation and solves: sequential. faer
+    /// parallelises inside the dense fronts; a shell's fronts are small and many, and there
+    /// the synchronisation costs more than it saves (the capture head's skin KKT: 0.73 s
+    /// per single-precision factorisation against 1.09 s with two faer tasks). The two
+    /// cores go across the elimination tree instead ([`super::tree`] and
+    /// [`super::tree_factor`], 1.43× on the head's factorisations and 1.48× on its
+    /// solves); faer's sequential path serves analyses that do not split.
     fn par(&self) -> faer::Par {
         faer::Par::Seq
     }
@@ -1388,17 +1387,7 @@ mod ordering_tests {
         let free_of: Vec<usize> = (0..n).collect();
         let rhs: Vec<f64> = (0..n + 1).map(|i| ((i * 7919) % 13) as f64 - 6.0).collect();
         let mut s = KktSolver::new();
-        let blocks = KktBlocks {
-            free_of: &free_of,
-            n_free: n,
-            n_cons: 1,
-            hessian: &t,
-            hessian_values: HessianValues::Triplets,
-            constraints: &c,
-            gamma: 1.0,
-            delta: 1e-8,
-            layout_key: None,
-        };
+        let blocks = one_row_blocks(&free_of, &t, &c);
         s.assemble(&blocks).unwrap();
         assert!(s.factor(0.0).inertia_ok);
         let (flops, _) = s.analysis();
@@ -1424,6 +1413,26 @@ mod ordering_tests {
         let scale = rhs.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         for (a, b) in ax.iter().zip(&rhs) {
             assert!((a - b).abs() <= 1e-9 * scale, "{a} vs {b}");
+        }
+    }
+
+    /// The KKT blocks of Hessian triplets `t` over the dofs `free_of` (all free) with the
+    /// one constraint row `c`, γ = 1 and δ = 1e-8.
+    fn one_row_blocks<'a>(
+        free_of: &'a [usize],
+        t: &'a [(usize, usize, f64)],
+        c: &'a [(usize, usize, f64)],
+    ) -> KktBlocks<'a> {
+        KktBlocks {
+            free_of,
+            n_free: free_of.len(),
+            n_cons: 1,
+            hessian: t,
+            hessian_values: HessianValues::Triplets,
+            constraints: c,
+            gamma: 1.0,
+            delta: 1e-8,
+            layout_key: None,
         }
     }
 
@@ -1467,17 +1476,7 @@ mod ordering_tests {
     fn the_two_core_tree_factor_and_solve_are_faers_on_any_thread_count() {
         let (t, c, n) = lattice_kkt(16);
         let free_of: Vec<usize> = (0..n).collect();
-        let blocks = KktBlocks {
-            free_of: &free_of,
-            n_free: n,
-            n_cons: 1,
-            hessian: &t,
-            hessian_values: HessianValues::Triplets,
-            constraints: &c,
-            gamma: 1.0,
-            delta: 1e-8,
-            layout_key: None,
-        };
+        let blocks = one_row_blocks(&free_of, &t, &c);
         let rhs: Vec<f64> = (0..n + 1).map(|i| ((i * 7919) % 13) as f64 - 6.0).collect();
         let pool = |threads: usize| {
             rayon::ThreadPoolBuilder::new()
