@@ -372,3 +372,85 @@ impl<T: Scalar> Factor<'_, T> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use faer::sparse::linalg::cholesky::{
+        factorize_symbolic_cholesky, CholeskySymbolicParams, SymbolicCholesky, SymbolicCholeskyRaw,
+        SymmetricOrdering,
+    };
+    use faer::sparse::linalg::SupernodalThreshold;
+    use faer::sparse::{SparseColMat, Triplet};
+    use faer::Side;
+
+    /// The supernodal analysis (forced) of the graph on `n` nodes with edges `edges`, AMD
+    /// ordered.
+    fn analysis(n: usize, edges: &[(usize, usize)]) -> SymbolicCholesky<usize> {
+        let mut t: Vec<Triplet<usize, usize, f64>> =
+            (0..n).map(|i| Triplet::new(i, i, 4.0)).collect();
+        for &(a, b) in edges {
+            t.extend([Triplet::new(a, b, -1.0), Triplet::new(b, a, -1.0)]);
+        }
+        let a = SparseColMat::try_new_from_triplets(n, n, &t).unwrap();
+        let params = CholeskySymbolicParams {
+            supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
+            ..Default::default()
+        };
+        factorize_symbolic_cholesky(a.symbolic(), Side::Lower, SymmetricOrdering::Amd, params)
+            .unwrap()
+    }
+
+    /// The supernodal structure of `sym`.
+    fn supernodal(sym: &SymbolicCholesky<usize>) -> &SymbolicSupernodalCholesky<usize> {
+        match sym.raw() {
+            SymbolicCholeskyRaw::Supernodal(s) => s,
+            SymbolicCholeskyRaw::Simplicial(_) => panic!("supernodal was forced"),
+        }
+    }
+
+    /// A grid's tree splits into two tasks that share no supernode, hold every supernode's
+    /// descendants with it, and leave the rest to the top; a chain (one path, nothing to run
+    /// at once) does not split.
+    #[test]
+    fn a_grid_splits_into_closed_disjoint_tasks_and_a_chain_does_not() {
+        let k = 40;
+        let mut edges = Vec::new();
+        for i in 0..k {
+            for j in 0..k {
+                if i + 1 < k {
+                    edges.push((i * k + j, (i + 1) * k + j));
+                }
+                if j + 1 < k {
+                    edges.push((i * k + j, i * k + j + 1));
+                }
+            }
+        }
+        let analysed = analysis(k * k, &edges);
+        let sym = supernodal(&analysed);
+        let split = TreeSplit::new(sym, factor_cost).expect("a grid splits");
+        let parent = supernode_parents(sym).unwrap();
+        let mut task = vec![usize::MAX; sym.n_supernodes()];
+        for (t, list) in split.tasks().iter().enumerate() {
+            assert!(!list.is_empty(), "task {t} has work");
+            for &s in list {
+                assert_eq!(task[s], usize::MAX, "supernode {s} in two tasks");
+                task[s] = t;
+            }
+        }
+        for &s in split.top() {
+            assert_eq!(task[s], usize::MAX, "top supernode {s} in a task");
+            task[s] = 2;
+        }
+        for s in 0..sym.n_supernodes() {
+            assert_ne!(task[s], usize::MAX, "supernode {s} nowhere");
+            let p = parent[s];
+            if p != usize::MAX && task[p] < 2 {
+                assert_eq!(task[p], task[s], "supernode {s}'s parent in another task");
+            }
+        }
+        let chain: Vec<(usize, usize)> = (0..199).map(|i| (i, i + 1)).collect();
+        let analysed = analysis(200, &chain);
+        assert!(TreeSplit::new(supernodal(&analysed), factor_cost).is_none());
+    }
+}
