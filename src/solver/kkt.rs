@@ -1437,18 +1437,19 @@ mod ordering_tests {
     }
 
     /// (row, column, value) entries.
-    type Triplets = Vec<(usize, usize, f64)>;
+    pub(super) type Triplets = Vec<(usize, usize, f64)>;
 
-    /// A 3D lattice of n³ nodes, one dof each, each tied to its 6 neighbours (a shifted
-    /// graph Laplacian, supernodal when factorised), and one constraint row averaging a line
+    /// A 3D lattice of n³ nodes, one dof each, each tied to its 6 neighbours with `diagonal`
+    /// on the diagonal (a shifted graph Laplacian, supernodal when factorised), and one
+    /// constraint row averaging a line
     /// of nodes: (Hessian triplets, constraint triplets, free dofs).
-    fn lattice_kkt(n: usize) -> (Triplets, Triplets, usize) {
+    pub(super) fn lattice_kkt(n: usize, diagonal: f64) -> (Triplets, Triplets, usize) {
         let id = |i: usize, j: usize, k: usize| (i * n + j) * n + k;
         let mut t = Vec::new();
         for i in 0..n {
             for j in 0..n {
                 for k in 0..n {
-                    t.push((id(i, j, k), id(i, j, k), 6.01));
+                    t.push((id(i, j, k), id(i, j, k), diagonal));
                     let mut link = |a: usize, b: usize| t.extend([(a, b, -1.0), (b, a, -1.0)]);
                     if i + 1 < n {
                         link(id(i, j, k), id(i + 1, j, k));
@@ -1474,7 +1475,7 @@ mod ordering_tests {
     /// one thread and on two.
     #[test]
     fn the_two_core_tree_factor_and_solve_are_faers_on_any_thread_count() {
-        let (t, c, n) = lattice_kkt(16);
+        let (t, c, n) = lattice_kkt(16, 6.01);
         let free_of: Vec<usize> = (0..n).collect();
         let blocks = one_row_blocks(&free_of, &t, &c);
         let rhs: Vec<f64> = (0..n + 1).map(|i| ((i * 7919) % 13) as f64 - 6.0).collect();
@@ -1537,6 +1538,7 @@ mod ordering_tests {
 
 #[cfg(test)]
 mod inertia_tests {
+    use super::ordering_tests::lattice_kkt;
     use super::*;
 
     /// 3D Dirichlet Laplacian on an N³ grid minus σ I: the number of negative pivots must
@@ -1544,28 +1546,7 @@ mod inertia_tests {
     #[test]
     fn negative_pivots_count_eigenvalues_below_shift_on_a_large_supernodal_matrix() {
         let nn = 16usize;
-        let id = |i: usize, j: usize, k: usize| (i * nn + j) * nn + k;
-        let mut t = Vec::new();
-        for i in 0..nn {
-            for j in 0..nn {
-                for k in 0..nn {
-                    t.push((id(i, j, k), id(i, j, k), 6.0));
-                    let mut link = |a: usize, b: usize| {
-                        t.push((a, b, -1.0));
-                        t.push((b, a, -1.0));
-                    };
-                    if i + 1 < nn {
-                        link(id(i, j, k), id(i + 1, j, k));
-                    }
-                    if j + 1 < nn {
-                        link(id(i, j, k), id(i, j + 1, k));
-                    }
-                    if k + 1 < nn {
-                        link(id(i, j, k), id(i, j, k + 1));
-                    }
-                }
-            }
-        }
+        let (t, _, _) = lattice_kkt(nn, 6.0);
         let ev: Vec<f64> = (1..=nn)
             .map(|k| {
                 let s = (k as f64 * std::f64::consts::PI / (2.0 * (nn as f64 + 1.0))).sin();
