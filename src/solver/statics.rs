@@ -281,9 +281,6 @@ pub struct StaticSolver {
     seen_indefinite: bool,
     /// GMRES iterations of the last lagged direction (0 after a fresh factorisation).
     lag_last_iterations: usize,
-    /// Negative pivots beyond the constraints' at the last exact (τ = 0) factorisation of
-    /// this solve, and the directions since then that skipped the exact factorisation.
-    exact_negatives: (usize, usize),
     /// The patches of the current KKT layout (with `settings.patches`), and the count of
     /// symbolic analyses when they were built (a new analysis is a new layout).
     patches: Option<(PatchSet, usize)>,
@@ -963,7 +960,7 @@ impl StaticSolver {
             .collect();
         shifts.push(1.0);
         let mut modes: Vec<(bool, f64)> = Vec::new();
-        let exact = !self.seen_indefinite && !self.still_indefinite();
+        let exact = !self.seen_indefinite;
         match self.settings.hessian {
             HessianMode::Exact => {
                 modes.extend(exact.then_some((false, 0.0)));
@@ -982,16 +979,6 @@ impl StaticSolver {
             }
         }
         modes
-    }
-
-    /// Whether the exact Hessian is expected to be indefinite still: the last exact
-    /// factorisation of this solve found k ≥ 2 negative pivots beyond the constraints' and
-    /// fewer than k − 1 directions have passed since (a buckling frame loses about one
-    /// negative direction per Newton iteration: on the capture head's frames 56–68 the
-    /// counts ran 6, 5, 5, 4, 4, 3, 0), so its factorisation would only confirm it.
-    fn still_indefinite(&self) -> bool {
-        let (negatives, since) = self.exact_negatives;
-        negatives.saturating_sub(since) >= 2
     }
 
     /// Evaluate the Hessian's triplets at `x` for γ when neither the settings nor an
@@ -1087,7 +1074,6 @@ impl StaticSolver {
         self.trip_current = self.trip_current && self.trip_owner == owner;
         self.trip_owner = owner;
         let mut rep = empty_report();
-        self.exact_negatives = (0, 0);
         if self.multipliers.len() != p.constraints.rows {
             self.multipliers = vec![0.0; p.constraints.rows];
         }
@@ -1343,19 +1329,12 @@ impl StaticNewton<'_, '_> {
         let (m, solver, rep) = (&self.model, &mut *self.solver, &mut *self.rep);
         let modes = solver.hessian_attempts();
         solver.seen_indefinite = false;
-        if modes.first() != Some(&(false, 0.0)) {
-            solver.exact_negatives.1 += 1;
-        }
         for (k, &(project, shift)) in modes.iter().enumerate() {
             let last = k + 1 == modes.len();
             solver.assemble_hessian(m, &self.at.x, project, &mut self.have_hessian, rep)?;
             let info = solver.factor_fresh(shift * m.gamma, project, m);
             rep.factor_s += info.numeric_s;
             rep.factorizations += 1;
-            if (project, shift) == (false, 0.0) && info.negative_pivots != usize::MAX {
-                let extra = info.negative_pivots.saturating_sub(m.rows());
-                solver.exact_negatives = (extra, 0);
-            }
             if info.inertia_ok || (last && solver.kkt.is_factored()) {
                 if k > 0 {
                     rep.modified_hessian_steps += 1;
@@ -1446,29 +1425,6 @@ impl NewtonProblem for StaticNewton<'_, '_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// After an exact factorisation showed k ≥ 2 negative directions beyond the
-    /// constraints', the inertia correction starts at a shift for the next k − 2 directions,
-    /// then tries the exact Hessian again; after a lagged direction showed it indefinite it
-    /// starts at a shift too.
-    #[test]
-    fn the_inertia_correction_skips_the_exact_hessian_while_it_is_expected_indefinite() {
-        let mut solver = StaticSolver::default();
-        let first = |s: &StaticSolver| s.hessian_attempts()[0];
-        assert_eq!(first(&solver), (false, 0.0));
-        for (since, skips) in [(0, true), (1, true), (2, true), (3, false), (4, false)] {
-            solver.exact_negatives = (4, since);
-            assert_eq!(
-                first(&solver) != (false, 0.0),
-                skips,
-                "4 negatives, {since} since"
-            );
-        }
-        solver.exact_negatives = (1, 0);
-        assert_eq!(first(&solver), (false, 0.0));
-        solver.seen_indefinite = true;
-        assert_ne!(first(&solver), (false, 0.0));
-    }
 
     /// E = k Σ x_i⁴ / 4 over 6 dofs.
     struct ScaledQuartic(f64);
