@@ -34,13 +34,14 @@ fn no_regularization<T: faer::traits::RealField>() -> LdltRegularization<'static
 }
 
 use super::gmres::{fgmres, GmresReport};
-use super::tree::{solve_cost, TreeSplit};
+use super::tree::{solve_cost, Scalar, TreeSplit};
 use super::tree_factor::{self, FactorPlan};
 use crate::math::energy::NO_SLOT;
 use crate::math::hash::Fnv1a;
 use crate::math::sparse::{mul_sym_lower_into, SparseError};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
+use faer::sparse::linalg::cholesky::supernodal::SymbolicSupernodalCholesky;
 use faer::sparse::linalg::cholesky::{
     factorize_symbolic_cholesky, CholeskySymbolicParams, LdltRef, SymbolicCholesky,
     SymbolicCholeskyRaw, SymmetricOrdering,
@@ -1032,22 +1033,13 @@ impl KktSolver {
     fn raw_solve(&mut self, rhs: &mut [f64]) {
         let sym = self.symbolic.as_ref().expect("symbolic");
         if let (Some(split), SymbolicCholeskyRaw::Supernodal(s)) = (&self.split, sym.raw()) {
-            let (fwd, inv) = sym
+            let perm = sym
                 .perm()
                 .expect("a supernodal analysis is ordered")
                 .arrays();
-            if self.factor_precision == FactorPrecision::Single {
-                let mut x: Vec<f32> = fwd.iter().map(|&i| rhs[i] as f32).collect();
-                split.solve(s, &self.values32, &mut x);
-                for (r, &k) in rhs.iter_mut().zip(inv) {
-                    *r = f64::from(x[k]);
-                }
-            } else {
-                let mut x: Vec<f64> = fwd.iter().map(|&i| rhs[i]).collect();
-                split.solve(s, &self.values, &mut x);
-                for (r, &k) in rhs.iter_mut().zip(inv) {
-                    *r = x[k];
-                }
+            match self.factor_precision {
+                FactorPrecision::Single => tree_solve(split, s, &self.values32, perm, rhs),
+                FactorPrecision::Double => tree_solve(split, s, &self.values, perm, rhs),
             }
             return;
         }
@@ -1077,6 +1069,22 @@ impl KktSolver {
             full_storage: self.full_storage,
             ..Self::default()
         };
+    }
+}
+
+/// Solve with the supernodal factor `values` of `sym` (ordering `(fwd, inv)`) for `rhs` in
+/// place, on two cores across the elimination tree by `split`, in the factor's precision.
+fn tree_solve<T: Scalar + Into<f64>>(
+    split: &TreeSplit,
+    sym: &SymbolicSupernodalCholesky<usize>,
+    values: &[T],
+    (fwd, inv): (&[usize], &[usize]),
+    rhs: &mut [f64],
+) {
+    let mut x: Vec<T> = fwd.iter().map(|&i| T::from_f64(rhs[i])).collect();
+    split.solve(sym, values, &mut x);
+    for (r, &k) in rhs.iter_mut().zip(inv) {
+        *r = x[k].into();
     }
 }
 

@@ -57,11 +57,7 @@ pub fn factor_cost(sym: &SymbolicSupernodalCholesky<usize>, s: usize) -> f64 {
 /// `None` when a parent comes before its child (the solves' order would break).
 fn supernode_parents(sym: &SymbolicSupernodalCholesky<usize>) -> Option<Vec<usize>> {
     let ns = sym.n_supernodes();
-    let (begin, end) = (sym.supernode_begin(), sym.supernode_end());
-    let mut owner = vec![0usize; sym.nrows()];
-    for s in 0..ns {
-        owner[begin[s]..end[s]].fill(s);
-    }
+    let owner = column_owners(sym);
     let mut parent = vec![usize::MAX; ns];
     for s in 0..ns {
         if let Some(&row) = sym.supernode(s).pattern().first() {
@@ -72,6 +68,16 @@ fn supernode_parents(sym: &SymbolicSupernodalCholesky<usize>) -> Option<Vec<usiz
         }
     }
     Some(parent)
+}
+
+/// The supernode of each column of the factor.
+pub fn column_owners(sym: &SymbolicSupernodalCholesky<usize>) -> Vec<usize> {
+    let (begin, end) = (sym.supernode_begin(), sym.supernode_end());
+    let mut owner = vec![0usize; sym.nrows()];
+    for s in 0..sym.n_supernodes() {
+        owner[begin[s]..end[s]].fill(s);
+    }
+    owner
 }
 
 /// The supernodes of the subtrees rooted at `roots`, in increasing order (each after its
@@ -205,6 +211,15 @@ impl TreeSplit {
         &self.top
     }
 
+    /// Copy each task's own columns from its copy of the vector into `x`.
+    fn take_task_columns<T: Copy>(&self, x: &mut [T], copies: [&[T]; 2]) {
+        for (cols, y) in self.task_cols.iter().zip(copies) {
+            for r in cols {
+                x[r.clone()].copy_from_slice(&y[r.clone()]);
+            }
+        }
+    }
+
     /// Solve L D Lᵀ x = b in place (`x` holds b, in the factor's permuted order) with the
     /// supernodal LDLᵀ `values` of `sym`, the two tasks on two cores when rayon has them.
     pub fn solve<T: Scalar>(
@@ -219,11 +234,7 @@ impl TreeSplit {
             || f.forward(&self.tasks[0], &mut a),
             || f.forward(&self.tasks[1], &mut b),
         );
-        for (t, y) in [&a, &b].into_iter().enumerate() {
-            for r in &self.task_cols[t] {
-                x[r.clone()].copy_from_slice(&y[r.clone()]);
-            }
-        }
+        self.take_task_columns(x, [&a, &b]);
         for &c in &self.top_cols {
             x[c] = x[c] + (a[c] - x[c]) + (b[c] - x[c]);
         }
@@ -236,11 +247,7 @@ impl TreeSplit {
             || f.backward(&self.tasks[0], &mut a),
             || f.backward(&self.tasks[1], &mut b),
         );
-        for (t, y) in [&a, &b].into_iter().enumerate() {
-            for r in &self.task_cols[t] {
-                x[r.clone()].copy_from_slice(&y[r.clone()]);
-            }
-        }
+        self.take_task_columns(x, [&a, &b]);
     }
 }
 

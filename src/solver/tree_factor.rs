@@ -10,7 +10,7 @@
 //! with two tasks. The layout of the values is faer's, so faer's solves and inertia count
 //! read the result.
 
-use super::tree::{factor_cost, Scalar, TreeSplit};
+use super::tree::{column_owners, factor_cost, Scalar, TreeSplit};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::ldlt::factor::{
     cholesky_in_place, cholesky_in_place_scratch, LdltRegularization,
@@ -94,8 +94,8 @@ fn compress<T: Copy + Default>(n: usize, pairs: &[(usize, T)]) -> (Vec<usize>, V
 impl FactorPlan {
     /// The plan for `sym`, whose ordering is `(fwd, inv)`, factorising the lower triangle of
     /// the assembled matrix `a` (its first `n_free` columns take the shift). `None` when
-    /// the tree does not split ([`TreeSplit::new`]) or the factor is too large for 32-bit
-    /// indices.
+    /// the tree does not split ([`TreeSplit::new`]), a task's supernode would be updated from
+    /// outside its task, or the factor is too large for 32-bit indices.
     pub fn new(
         sym: &SymbolicSupernodalCholesky<usize>,
         (fwd, inv): (&[usize], &[usize]),
@@ -114,11 +114,7 @@ impl FactorPlan {
                 owner[s] = t as u8;
             }
         }
-        let mut col_owner = vec![0usize; sym.nrows()];
-        for s in 0..ns {
-            let b = block(sym, s);
-            col_owner[b.start..b.start + b.ncols].fill(s);
-        }
+        let col_owner = column_owners(sym);
         let mut pairs = Vec::new();
         for d in 0..ns {
             let mut last = usize::MAX;
@@ -131,6 +127,17 @@ impl FactorPlan {
             }
         }
         let (updater_ptr, updaters) = compress(ns, &pairs);
+        // A task's supernode must have every descendant in its task (the tasks hold whole
+        // subtrees): it gathers only those.
+        let closed = (0..ns).all(|s| {
+            owner[s] == TOP
+                || updaters[updater_ptr[s]..updater_ptr[s + 1]]
+                    .iter()
+                    .all(|&d| owner[d as usize] == owner[s])
+        });
+        if !closed {
+            return None;
+        }
         let (cp, ri) = (a.col_ptr(), a.row_idx());
         let mut pairs = Vec::with_capacity(a.val().len() / 2 + a.ncols());
         for c in 0..a.ncols() {
@@ -197,6 +204,23 @@ impl<T: Scalar> Scratch<T> {
     fn target(&mut self, b: &Block) {
         for (k, &r) in b.pattern.iter().enumerate() {
             self.local[r] = b.ncols + k;
+        }
+    }
+
+    /// Subtract from block `c` of supernode `s` (geometry `b`) the updates of its
+    /// descendants in task `from` (0, 1 or [`TOP`]), whose finished blocks are in `blocks`.
+    fn gather(
+        &mut self,
+        (sym, plan): (&SymbolicSupernodalCholesky<usize>, &FactorPlan),
+        (s, b): (usize, &Block),
+        from: u8,
+        blocks: &[Option<&mut [T]>],
+        c: &mut [T],
+    ) {
+        self.target(b);
+        for d in plan.updaters_of(s).filter(|&d| plan.owner[d] == from) {
+            let ld = blocks[d].as_deref().expect("a finished descendant");
+            self.update(&block(sym, d), ld, b, c);
         }
     }
 
@@ -337,11 +361,8 @@ fn run_task<T: Scalar>(
         let b = block(sym, s);
         let c = own[s].take().expect("a task's block");
         load(plan, s, cpv[s], a, shift, c, &b);
-        scratch.target(&b);
-        for d in plan.updaters_of(s) {
-            let ld = own[d].as_deref().expect("a descendant in the same task");
-            scratch.update(&block(sym, d), ld, &b, c);
-        }
+        // A task's supernode has all its descendants in the task.
+        scratch.gather((sym, plan), (s, &b), t as u8, own, c);
         let ok = scratch.finish(&b, c);
         own[s] = Some(c);
         if !ok {
@@ -352,11 +373,7 @@ fn run_task<T: Scalar>(
     for &s in split.top() {
         let b = block(sym, s);
         let mut c = vec![T::ZERO; cpv[s + 1] - cpv[s]];
-        scratch.target(&b);
-        for d in plan.updaters_of(s).filter(|&d| plan.owner[d] == t as u8) {
-            let ld = own[d].as_deref().expect("a descendant in this task");
-            scratch.update(&block(sym, d), ld, &b, &mut c);
-        }
+        scratch.gather((sym, plan), (s, &b), t as u8, own, &mut c);
         copies.push(c);
     }
     Some(copies)
@@ -405,17 +422,12 @@ pub fn factor<T: Scalar>(
         for ((x, &u0), &u1) in c.iter_mut().zip(&c0[k]).zip(&c1[k]) {
             *x = *x + u0 + u1;
         }
-        scratch.target(&b);
-        for d in plan.updaters_of(s).filter(|&d| plan.owner[d] == TOP) {
-            let ld = all[d].as_deref().expect("a top descendant");
-            scratch.update(&block(sym, d), ld, &b, c);
-        }
+        scratch.gather((sym, plan), (s, &b), TOP, &all, c);
         let ok = scratch.finish(&b, c);
         all[s] = Some(c);
         if !ok {
             return false;
         }
     }
-    drop(all);
     true
 }
