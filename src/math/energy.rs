@@ -43,6 +43,14 @@ pub trait Energy: Sync {
         None
     }
 
+    /// A shorter form of the slot map `slot` (one slot per triplet) that
+    /// [`Energy::hessian_scatter`] also takes, made once per layout: energies of symmetric
+    /// element blocks keep one slot per pair of an element's dofs. `None` (the default) to
+    /// be given `slot` itself.
+    fn pack_slot_map(&self, _slot: &[u32]) -> Option<Vec<u32>> {
+        None
+    }
+
     /// Add the Hessian's values (J/m², at `x`, element-projected with `project_psd`) into
     /// the values of a sparse matrix: the value of triplet i (in `eval`'s order) goes to
     /// `out[slot[i]]`, nowhere when `slot[i]` is [`NO_SLOT`]. `slot` must be a *slot map*:
@@ -50,6 +58,8 @@ pub trait Energy: Sync {
     /// energy may rely on this to add element blocks in parallel). The default evaluates
     /// [`Energy::hessian_values`] and adds them in order; energies with many elements
     /// scatter their element blocks straight into `out` (no triplet buffer).
+    ///
+    /// `slot` may instead be what [`Energy::pack_slot_map`] made of the slot map.
     fn hessian_scatter(&self, x: &[f64], slot: &[u32], out: &mut [f64], project_psd: bool) {
         let mut v = Vec::new();
         self.hessian_values(x, &mut v, project_psd);

@@ -4,6 +4,7 @@
 use super::bending::BendingEnergy;
 use super::material::ShellMaterial;
 use super::membrane::MembraneEnergy;
+use super::scatter::pack_symmetric_slots;
 use crate::math::Energy;
 use crate::mesh::topology::Topology;
 use crate::mesh::TriMesh;
@@ -103,8 +104,22 @@ impl Energy for Shell {
         Some(Shell::triplet_count(self))
     }
 
+    /// The membrane's and the hinges' slots packed to one per pair of an element's dofs
+    /// ([`pack_symmetric_slots`]): 45 of 81 per triangle, 78 of 144 per hinge.
+    fn pack_slot_map(&self, slot: &[u32]) -> Option<Vec<u32>> {
+        let (sm, sb) = slot.split_at_checked(self.membrane.triplet_count())?;
+        let mut packed = pack_symmetric_slots(sm, 9)?;
+        packed.extend(pack_symmetric_slots(sb, 12)?);
+        Some(packed)
+    }
+
     fn hessian_scatter(&self, x: &[f64], slot: &[u32], out: &mut [f64], project_psd: bool) {
-        let (sm, sb) = slot.split_at(self.membrane.triplet_count());
+        let membrane = if slot.len() == Shell::triplet_count(self) {
+            self.membrane.triplet_count()
+        } else {
+            self.membrane.triplet_count() / 81 * 45
+        };
+        let (sm, sb) = slot.split_at(membrane);
         self.membrane.hessian_scatter_into(x, sm, out, project_psd);
         self.bending.hessian_scatter_into(x, sb, out, project_psd);
     }

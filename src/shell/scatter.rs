@@ -66,6 +66,44 @@ fn set(bits: &mut Vec<u64>, c: usize) {
     bits[c / 64] |= 1 << (c % 64);
 }
 
+/// The flag of a packed slot ([`pack_symmetric_slots`]) whose value is the block's
+/// transposed entry: element pair (a, b), a ≤ b, is stored at the Hessian's (b, a).
+const TRANSPOSED: u32 = 1 << 31;
+
+/// Pack the slot map of symmetric `dim × dim` element blocks (row-major, `dim²` slots per
+/// element) to one slot per pair of local dofs a ≤ b: the slot of (a, b), or that of (b, a)
+/// flagged [`TRANSPOSED`] when only that one is stored ([`NO_SLOT`] when neither is). A
+/// lower-triangle matrix stores one of the two for every pair (a pinned dof's row stores
+/// neither), so the scatter reads `dim(dim+1)/2` slots per element instead of `dim²` (78
+/// of 144 for a hinge) and adds the same values. `None` when a pair has both slots (the
+/// map is not of one triangle) or a slot needs the flag's bit.
+pub fn pack_symmetric_slots(slot: &[u32], dim: usize) -> Option<Vec<u32>> {
+    let len = dim * dim;
+    if dim == 0 || slot.len() % len != 0 {
+        return None;
+    }
+    let pairs = dim * (dim + 1) / 2;
+    let mut packed = Vec::with_capacity(slot.len() / len * pairs);
+    for block in slot.chunks_exact(len) {
+        for a in 0..dim {
+            for b in a..dim {
+                let (v, w) = (block[a * dim + b], block[b * dim + a]);
+                if [v, w].iter().any(|&s| s != NO_SLOT && s >= TRANSPOSED) {
+                    return None;
+                }
+                let s = match (v, w) {
+                    (v, _) if a == b => v,
+                    (v, NO_SLOT) => v,
+                    (NO_SLOT, w) => w | TRANSPOSED,
+                    _ => return None,
+                };
+                packed.push(s);
+            }
+        }
+    }
+    Some(packed)
+}
+
 /// A pointer to the values being written, shared by the threads of one colour.
 #[derive(Clone, Copy)]
 struct Values(*mut f64);
@@ -78,7 +116,9 @@ unsafe impl Sync for Values {}
 /// `e·dim² .. (e+1)·dim²` of `slot`) into `out`, colour by colour: `block(e, h)` writes
 /// element e's block into `h`, projected to PSD when `project` is set. The elements of
 /// `colouring` must share no vertex within a colour and `slot` must be a slot map
-/// ([`crate::math::Energy::hessian_scatter`]); slots out of range panic.
+/// ([`crate::math::Energy::hessian_scatter`]), or its packed form of `dim(dim+1)/2` slots
+/// per element ([`pack_symmetric_slots`], told apart by its length), which adds the same
+/// values to the same slots; slots out of range panic.
 pub fn scatter_element_hessians(
     out: &mut [f64],
     slot: &[u32],
@@ -89,11 +129,18 @@ pub fn scatter_element_hessians(
 ) {
     let len = dim * dim;
     assert!(len <= 144, "element blocks of at most 12 × 12");
-    assert_eq!(
-        slot.len(),
-        colouring.elements() * len,
-        "one slot per triplet"
-    );
+    let elements = colouring.elements();
+    let pairs = dim * (dim + 1) / 2;
+    // Per slot of an element, the index of its value in the block.
+    let index: Vec<(usize, usize)> = if slot.len() == elements * pairs {
+        (0..dim)
+            .flat_map(|a| (a..dim).map(move |b| (a * dim + b, b * dim + a)))
+            .collect()
+    } else {
+        assert_eq!(slot.len(), elements * len, "one slot per triplet");
+        (0..len).map(|k| (k, k)).collect()
+    };
+    let per = index.len();
     let (ptr, n) = (Values(out.as_mut_ptr()), out.len());
     for colour in &colouring.colours {
         colour.par_iter().with_min_len(64).for_each(|&e| {
@@ -104,9 +151,13 @@ pub fn scatter_element_hessians(
                 project_psd(&mut h[..len], dim);
             }
             let p = ptr;
-            for (k, &s) in slot[e * len..(e + 1) * len].iter().enumerate() {
+            for (&s, &(k, kt)) in slot[e * per..(e + 1) * per].iter().zip(&index) {
                 if s != NO_SLOT {
-                    let s = s as usize;
+                    let (s, k) = if s & TRANSPOSED != 0 && per != len {
+                        ((s & !TRANSPOSED) as usize, kt)
+                    } else {
+                        (s as usize, k)
+                    };
                     assert!(s < n, "slot {s} past the {n} values");
                     // SAFETY: `s` is in bounds (checked above); the elements of this colour
                     // share no vertex, so their triplets have different (row, column) pairs
@@ -180,5 +231,59 @@ mod tests {
             expect[s as usize] += value(i / (dim * dim), i % (dim * dim));
         }
         assert_eq!(out, expect);
+    }
+
+    /// A lower-triangle slot map (upper entries and a pinned vertex's rows left out) packed
+    /// to one slot per pair of an element's dofs scatters the same values as the full map,
+    /// bit for bit, with blocks that are not exactly symmetric (the packed map reads the
+    /// stored triangle's own entry); a map of both triangles does not pack.
+    #[test]
+    fn a_packed_lower_slot_map_scatters_the_same_bits() {
+        let elems: Vec<[usize; 4]> = (0..30)
+            .map(|i| {
+                [
+                    i % 13,
+                    (i * 5 + 1) % 13,
+                    (i * 7 + 2) % 13,
+                    (i * 11 + 3) % 13,
+                ]
+            })
+            .filter(|e| (0..4).all(|a| (a + 1..4).all(|b| e[a] != e[b])))
+            .collect();
+        let c = Colouring::greedy(elems.iter().copied());
+        let (dim, n, pinned) = (12, 13 * 3, 4);
+        let dof = |e: &[usize; 4], k: usize| 3 * e[k / 3] + k % 3;
+        let full = |lower_only: bool| -> Vec<u32> {
+            elems
+                .iter()
+                .flat_map(|e| {
+                    (0..dim * dim).map(move |k| {
+                        let (r, col) = (dof(e, k / dim), dof(e, k % dim));
+                        let stored = !lower_only || r >= col;
+                        if stored && r / 3 != pinned {
+                            (r * n + col) as u32
+                        } else {
+                            NO_SLOT
+                        }
+                    })
+                })
+                .collect()
+        };
+        let slot = full(true);
+        let packed = pack_symmetric_slots(&slot, dim).expect("a lower map packs");
+        assert_eq!(packed.len(), elems.len() * 78);
+        let value = |e: usize, k: usize| ((e * 31 + k) as f64).sqrt() + (k / dim) as f64 * 1e-3;
+        let mut outs = [vec![0.0; n * n], vec![0.0; n * n]];
+        for (out, map) in outs.iter_mut().zip([&slot, &packed]) {
+            scatter_element_hessians(out, map, dim, false, &c, |e, h| {
+                for (k, v) in h.iter_mut().enumerate() {
+                    *v = value(e, k);
+                }
+            });
+        }
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&outs[0]), bits(&outs[1]));
+        assert!(outs[0].iter().filter(|v| **v != 0.0).count() > 100);
+        assert_eq!(pack_symmetric_slots(&full(false), dim), None);
     }
 }

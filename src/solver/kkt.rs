@@ -103,6 +103,9 @@ pub struct KktSolver {
     /// lower-triangle free–free triplet's value slot in the matrix, a (free row, pinned
     /// column) triplet's slot `nnz + k` (its pair is `coupling[k]`), the rest `NO_SLOT`.
     slot: Vec<u32>,
+    /// The energy's packed form of `slot` ([`crate::math::Energy::pack_slot_map`]): `None`
+    /// until the first scatter of the layout asks for it, then what the energy made.
+    packed_slot: Option<Option<Vec<u32>>>,
     /// (free row, pinned dof) of each coupling slot.
     coupling: Vec<(usize, usize)>,
     /// The Hessian's coupling values K_fp (N/m) of the last assembly, one per `coupling` pair.
@@ -196,16 +199,21 @@ pub enum HessianValues<'a> {
     Values(&'a [f64]),
     /// A function that adds the Hessian into matrix values by a slot map, as
     /// [`Energy::hessian_scatter`](crate::math::Energy::hessian_scatter) does (the
-    /// triplets then give only the layout).
-    Scatter(&'a (dyn Fn(&[u32], &mut [f64]) + Sync)),
+    /// triplets then give only the layout), and the function that packs the slot map for
+    /// it once per layout, as [`Energy::pack_slot_map`](crate::math::Energy::pack_slot_map)
+    /// does.
+    Scatter(&'a (dyn Fn(&[u32], &mut [f64]) + Sync), &'a SlotPacker<'a>),
 }
+
+/// Packs a slot map once per layout (see [`HessianValues::Scatter`]).
+pub type SlotPacker<'a> = dyn Fn(&[u32]) -> Option<Vec<u32>> + Sync + 'a;
 
 impl std::fmt::Debug for HessianValues<'_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Self::Triplets => write!(f, "Triplets"),
             Self::Values(v) => write!(f, "Values({} values)", v.len()),
-            Self::Scatter(_) => write!(f, "Scatter"),
+            Self::Scatter(..) => write!(f, "Scatter"),
         }
     }
 }
@@ -299,6 +307,7 @@ impl Default for KktSolver {
             mirror: Vec::new(),
             cmap: Vec::new(),
             slot: Vec::new(),
+            packed_slot: None,
             coupling: Vec::new(),
             coupling_values: Vec::new(),
             symbolic: None,
@@ -379,7 +388,7 @@ impl KktSolver {
         self.n_free = blocks.n_free;
         self.n_cons = blocks.n_cons;
         if self.fingerprint != Some(fp) || self.base.is_none() {
-            if k.is_empty() && matches!(blocks.hessian_values, HessianValues::Scatter(_)) {
+            if k.is_empty() && matches!(blocks.hessian_values, HessianValues::Scatter(..)) {
                 return Err(SparseError::Build(
                     "a new KKT layout needs the Hessian's triplets".into(),
                 ));
@@ -534,6 +543,7 @@ impl KktSolver {
         let mut pair_slot: std::collections::HashMap<(usize, usize), u32> = Default::default();
         self.coupling = Vec::new();
         self.slot = Vec::with_capacity(lower_slot.len());
+        self.packed_slot = None;
         for (&(r, c, _), &q) in blocks.hessian.iter().zip(lower_slot) {
             let (fr, fc) = (blocks.free_of[r], blocks.free_of[c]);
             let s = if q != usize::MAX {
@@ -568,7 +578,7 @@ impl KktSolver {
     fn sum_values(&mut self, blocks: &KktBlocks) {
         self.keep_factored_matrix();
         match blocks.hessian_values {
-            HessianValues::Scatter(scatter) => self.scatter_hessian(scatter),
+            HessianValues::Scatter(scatter, pack) => self.scatter_hessian(scatter, pack),
             HessianValues::Values(v) => self.gather_hessian(blocks.hessian, Some(v)),
             HessianValues::Triplets => self.gather_hessian(blocks.hessian, None),
         }
@@ -629,15 +639,20 @@ impl KktSolver {
     }
 
     /// The Hessian's values into the matrix's lower triangle (and the coupling values) by
-    /// the energy's own scatter through the slot map.
-    fn scatter_hessian(&mut self, scatter: &(dyn Fn(&[u32], &mut [f64]) + Sync)) {
+    /// the energy's own scatter through the slot map, packed by `pack` the first time.
+    fn scatter_hessian(
+        &mut self,
+        scatter: &(dyn Fn(&[u32], &mut [f64]) + Sync),
+        pack: &SlotPacker,
+    ) {
         let (sym, mut vals) = self.base.take().expect("base set").into_parts();
         let nnz = vals.len();
         vals.par_iter_mut()
             .with_min_len(1 << 14)
             .for_each(|v| *v = 0.0);
         vals.resize(nnz + self.coupling.len(), 0.0);
-        scatter(&self.slot, &mut vals);
+        let packed = self.packed_slot.get_or_insert_with(|| pack(&self.slot));
+        scatter(packed.as_deref().unwrap_or(&self.slot), &mut vals);
         self.coupling_values.clear();
         self.coupling_values.extend_from_slice(&vals[nnz..]);
         vals.truncate(nnz);
