@@ -1464,11 +1464,15 @@ mod tests {
         assert!(close(forcing(1e-2, 1e-9, 1.0, None), 1e-2));
     }
 
-    /// E = k Σ x_i⁴ / 4 over 6 dofs.
-    struct ScaledQuartic(f64);
-    /// k = 1.
-    const QUARTIC: ScaledQuartic = ScaledQuartic(1.0);
-    impl Energy for ScaledQuartic {
+    /// E = k Σ (x_i² − w)² / 4 over 6 dofs: a quartic for w = 0; for w > 0 every dof is a
+    /// double well, its curvature k (3 x_i² − w) negative for |x_i| < √(w/3).
+    struct Wells {
+        k: f64,
+        w: f64,
+    }
+    /// E = Σ x_i⁴ / 4.
+    const QUARTIC: Wells = Wells { k: 1.0, w: 0.0 };
+    impl Energy for Wells {
         fn dofs(&self) -> usize {
             6
         }
@@ -1479,18 +1483,18 @@ mod tests {
             hess: Option<&mut Vec<(usize, usize, f64)>>,
             _p: bool,
         ) -> f64 {
-            let k = self.0;
+            let (k, w) = (self.k, self.w);
             if let Some(g) = grad {
                 for (gi, xi) in g.iter_mut().zip(x) {
-                    *gi += k * xi.powi(3);
+                    *gi += k * xi * (xi * xi - w);
                 }
             }
             if let Some(h) = hess {
                 for (i, xi) in x.iter().enumerate() {
-                    h.push((i, i, 3.0 * k * xi * xi));
+                    h.push((i, i, k * (3.0 * xi * xi - w)));
                 }
             }
-            k * x.iter().map(|v| v.powi(4) / 4.0).sum::<f64>()
+            k * x.iter().map(|v| (v * v - w).powi(2) / 4.0).sum::<f64>()
         }
     }
 
@@ -1726,38 +1730,10 @@ mod tests {
             .is_err());
     }
 
-    /// E = Σ (x_i² − 1)² / 4: every dof is a double well, its curvature 3 x_i² − 1 negative
-    /// for |x_i| < 1/√3.
-    struct DoubleWells;
-    impl Energy for DoubleWells {
-        fn dofs(&self) -> usize {
-            6
-        }
-        fn eval(
-            &self,
-            x: &[f64],
-            grad: Option<&mut [f64]>,
-            hess: Option<&mut Vec<(usize, usize, f64)>>,
-            _p: bool,
-        ) -> f64 {
-            if let Some(g) = grad {
-                for (gi, xi) in g.iter_mut().zip(x) {
-                    *gi += xi * (xi * xi - 1.0);
-                }
-            }
-            if let Some(h) = hess {
-                for (i, xi) in x.iter().enumerate() {
-                    h.push((i, i, 3.0 * xi * xi - 1.0));
-                }
-            }
-            x.iter().map(|v| (v * v - 1.0).powi(2) / 4.0).sum()
-        }
-    }
-
-    /// Six double wells started on their hills, where the exact Hessian has six negative
-    /// directions: after an exact factorisation
-    /// with two or more, the next direction starts at a shift without factorising the exact
-    /// Hessian again, and the solve still ends in a minimum (every x_i = ±1).
+    /// Six double wells (E = Σ (x_i² − 1)² / 4) started on their hills, where the exact
+    /// Hessian has six negative directions: after an exact factorisation with two or more,
+    /// the next direction starts at a shift without factorising the exact Hessian again, and
+    /// the solve still ends in a minimum (every x_i = ±1).
     #[test]
     fn the_inertia_correction_skips_an_exact_hessian_expected_indefinite() {
         let mut solver = StaticSolver::new(StaticSettings {
@@ -1770,7 +1746,7 @@ mod tests {
         .unwrap();
         let mut x = vec![0.05, 0.1, 0.15, 0.2, 0.25, 0.3];
         let rep = solver
-            .solve(&DoubleWells, &StaticProblem::default(), &mut x)
+            .solve(&Wells { k: 1.0, w: 1.0 }, &StaticProblem::default(), &mut x)
             .unwrap();
         assert_eq!(rep.status, SolveStatus::Converged, "{rep:?}");
         assert!(x.iter().all(|v| (v.abs() - 1.0).abs() < 1e-9), "{x:?}");
@@ -1863,7 +1839,7 @@ mod tests {
                 true,
             ),
             (
-                Box::new(ScaledQuartic(100.0)),
+                Box::new(Wells { k: 100.0, w: 0.0 }),
                 base.clone(),
                 [
                     0.5,
