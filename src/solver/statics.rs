@@ -28,6 +28,7 @@ use super::status::{SolveReport, SolveStatus};
 use crate::math::hash::Fnv1a;
 use crate::math::sparse::SparseError;
 use crate::math::Energy;
+use std::sync::Arc;
 use std::time::Instant;
 
 /// Linear equality constraints C x = d over the flat dofs (c rows × 3n columns).
@@ -288,6 +289,8 @@ pub struct StaticSolver {
     /// The patches of the current KKT layout (with `settings.patches`), and the count of
     /// symbolic analyses when they were built (a new analysis is a new layout).
     patches: Option<(PatchSet, usize)>,
+    /// The set-up of the last solve and what it was built from.
+    last_setup: Option<(SetupInput, Arc<Setup>)>,
 }
 
 /// Whether a Newton direction `d` that GMRES left as `g` may be taken: GMRES converged, `d`
@@ -314,6 +317,76 @@ struct Setup {
     /// Hash of the free set and the constraint pattern (with the Hessian's layout, the KKT
     /// matrix's layout key).
     key: u64,
+}
+
+/// What a [`Setup`] was built from: the dof count, the pinned dofs and the constraint rows
+/// and entries (values as bits).
+struct SetupInput {
+    dofs: usize,
+    rows: usize,
+    pinned: Vec<usize>,
+    entries: Vec<(usize, usize, u64)>,
+}
+
+impl SetupInput {
+    fn of(dofs: usize, p: &StaticProblem) -> Self {
+        let c = &p.constraints;
+        Self {
+            dofs,
+            rows: c.rows,
+            pinned: p.pinned.clone(),
+            entries: c
+                .entries
+                .iter()
+                .map(|&(r, d, v)| (r, d, v.to_bits()))
+                .collect(),
+        }
+    }
+
+    /// Whether `p` for `dofs` dofs is what this was made from.
+    fn is_of(&self, dofs: usize, p: &StaticProblem) -> bool {
+        let c = &p.constraints;
+        self.dofs == dofs
+            && self.rows == c.rows
+            && self.pinned == p.pinned
+            && self.entries.len() == c.entries.len()
+            && self
+                .entries
+                .iter()
+                .zip(&c.entries)
+                .all(|(a, b)| (a.0, a.1, a.2) == (b.0, b.1, b.2.to_bits()))
+    }
+}
+
+/// Check the sizes of `p`'s forces and constraint right-hand side and the start `x` for
+/// `n` dofs (its length, all finite).
+fn check_start(n: usize, p: &StaticProblem, x: &[f64]) -> Result<(), SolverError> {
+    if x.len() != n {
+        return Err(SolverError::Problem(format!(
+            "x has {} values, the energy has {n} dofs",
+            x.len()
+        )));
+    }
+    if !p.forces.is_empty() && p.forces.len() != n {
+        return Err(SolverError::Problem(format!(
+            "forces has {} values, expected {n} (or none)",
+            p.forces.len()
+        )));
+    }
+    let c = &p.constraints;
+    if c.rhs.len() != c.rows {
+        return Err(SolverError::Problem(format!(
+            "constraint rhs has {} values for {} rows",
+            c.rhs.len(),
+            c.rows
+        )));
+    }
+    if x.iter().any(|v| !v.is_finite()) {
+        return Err(SolverError::Problem(
+            "start state x contains NaN or infinity".into(),
+        ));
+    }
+    Ok(())
 }
 
 /// FNV-1a hash of the free set `free_of` and the pattern of the constraint entries `cfree`.
@@ -572,28 +645,31 @@ impl StaticSolver {
         self.trip_key = h.finish();
     }
 
-    fn setup(&self, e: &dyn Energy, p: &StaticProblem, x: &[f64]) -> Result<Setup, SolverError> {
+    /// The free-dof set-up of `p` for energy `e`, after checking `p` and the start `x`: the
+    /// last one when the dof count, pinned dofs and constraint entries are those of the last
+    /// solve (the skin's cluster rows keep their entries from frame to frame, and hashing
+    /// them took 5 ms of a held head frame's 13 ms), else built anew.
+    fn setup(
+        &mut self,
+        e: &dyn Energy,
+        p: &StaticProblem,
+        x: &[f64],
+    ) -> Result<Arc<Setup>, SolverError> {
         let n = e.dofs();
-        if x.len() != n {
-            return Err(SolverError::Problem(format!(
-                "x has {} values, the energy has {n} dofs",
-                x.len()
-            )));
+        check_start(n, p, x)?;
+        if let Some((input, s)) = &self.last_setup {
+            if input.is_of(n, p) {
+                return Ok(Arc::clone(s));
+            }
         }
-        if !p.forces.is_empty() && p.forces.len() != n {
-            return Err(SolverError::Problem(format!(
-                "forces has {} values, expected {n} (or none)",
-                p.forces.len()
-            )));
-        }
+        let s = Arc::new(self.build_setup(n, p)?);
+        self.last_setup = Some((SetupInput::of(n, p), Arc::clone(&s)));
+        Ok(s)
+    }
+
+    /// [`Self::setup`] built anew for `n` dofs (the start already checked).
+    fn build_setup(&self, n: usize, p: &StaticProblem) -> Result<Setup, SolverError> {
         let c = &p.constraints;
-        if c.rhs.len() != c.rows {
-            return Err(SolverError::Problem(format!(
-                "constraint rhs has {} values for {} rows",
-                c.rhs.len(),
-                c.rows
-            )));
-        }
         let mut free_of = vec![0usize; n];
         for &d in &p.pinned {
             if d >= n {
@@ -621,11 +697,6 @@ impl StaticSolver {
             if free_of[d] != PINNED {
                 cfree.push((r, free_of[d], v));
             }
-        }
-        if x.iter().any(|v| !v.is_finite()) {
-            return Err(SolverError::Problem(
-                "start state x contains NaN or infinity".into(),
-            ));
         }
         let key = setup_key(&free_of, &cfree);
         Ok(Setup {
@@ -1450,6 +1521,31 @@ impl NewtonProblem for StaticNewton<'_, '_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The set-up is reused while the dofs, pinned dofs and constraint entries are the last
+    /// solve's (a frame's new right-hand side keeps it), built anew when any changes, and
+    /// the start is checked either way.
+    #[test]
+    fn the_set_up_is_reused_while_the_problem_keeps_its_entries() {
+        let mut solver = StaticSolver::default();
+        let mut p = quartic_problem();
+        let x = vec![0.5, 1.0, 1.0, 0.0, 0.0, 0.0];
+        let first = solver.setup(&QUARTIC, &p, &x).unwrap();
+        p.constraints.rhs[0] = 3.0;
+        assert!(Arc::ptr_eq(
+            &first,
+            &solver.setup(&QUARTIC, &p, &x).unwrap()
+        ));
+        p.constraints.entries[1].2 = 2.0;
+        let scaled = solver.setup(&QUARTIC, &p, &x).unwrap();
+        assert!(!Arc::ptr_eq(&first, &scaled));
+        assert_eq!(scaled.cfree[1].2, 2.0);
+        p.pinned = vec![0, 5];
+        let pinned = solver.setup(&QUARTIC, &p, &x).unwrap();
+        assert_eq!(pinned.free, vec![1, 2, 3, 4]);
+        let nan = vec![f64::NAN; 6];
+        assert!(solver.setup(&QUARTIC, &p, &nan).is_err());
+    }
 
     /// The forcing term: 1e-3 on a first step, Eisenstat–Walker's 0.9 (rn/rn_prev)² below
     /// that, loosened to land 10× below the target near it (up to 0.1), never under the floor.
