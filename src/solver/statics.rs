@@ -1031,7 +1031,8 @@ impl StaticSolver {
     /// buckling frame loses about one negative direction per Newton iteration: 6, 5, 5, 4,
     /// 4, 3, 0 on the capture head's frames 56–68, so the next exact factorisation would
     /// most likely only confirm it; skipping one direction in two keeps the cost of a wrong
-    /// guess, a shifted step where an exact one would do, to one step); if it is not positive definite on the constraint null space, the
+    /// guess, a shifted step where an exact one would do, to one step); if it is not
+    /// positive definite on the constraint null space, the
     /// exact Hessian shifted by τ I, up to γ, by the inertia correction of IPOPT (Wächter
     /// and Biegler 2006, §3.1): τ starts at a third of the last shift that worked and grows
     /// ×8, or, when no shift has been needed yet, starts at 1e-4 γ and grows ×100 (it keeps
