@@ -686,10 +686,17 @@ impl KktSolver {
     /// [`Self::factor`] in `precision`, without the retry.
     fn factor_in(&mut self, precision: FactorPrecision, shift: f64) -> KktFactorInfo {
         assert!(self.base.is_some(), "KktSolver::factor before assemble");
-        let res = match precision {
-            FactorPrecision::Double => self.factor_double(shift),
-            FactorPrecision::Single => self.factor_single(shift),
-        };
+        // Across the elimination tree when the analysis has a plan, else faer's sequential
+        // factorisation; a single-precision factor must also have stayed finite (f32
+        // overflows where f64 would not).
+        let res = match self.factor_across_tree(shift, precision) {
+            Some(ok) => ok,
+            None => match precision {
+                FactorPrecision::Double => self.faer_factor_double(shift),
+                FactorPrecision::Single => self.faer_factor_single(shift),
+            },
+        } && (precision == FactorPrecision::Double
+            || self.values32.iter().all(|v| v.is_finite()));
         self.shift = shift;
         self.factor_delta = self.delta;
         self.base_is_factored = true;
@@ -713,13 +720,10 @@ impl KktSolver {
         info
     }
 
-    /// Numeric LDLᵀ of the assembled matrix plus `shift` on the free diagonal, in double
-    /// precision, into `values` (the matrix is read in place, or from a shifted copy);
-    /// false on a zero pivot.
-    fn factor_double(&mut self, shift: f64) -> bool {
-        if let Some(ok) = self.factor_across_tree(shift, FactorPrecision::Double) {
-            return ok;
-        }
+    /// faer's numeric LDLᵀ of the assembled matrix plus `shift` on the free diagonal, in
+    /// double precision, into `values` (the matrix is read in place, or from a shifted
+    /// copy); false on a zero pivot.
+    fn faer_factor_double(&mut self, shift: f64) -> bool {
         let par = self.par();
         let base = self.base.as_ref().expect("base set");
         let a = if shift == 0.0 {
@@ -738,26 +742,14 @@ impl KktSolver {
         };
         let sym = self.symbolic.as_ref().expect("symbolic set");
         self.values.resize(sym.len_val(), 0.0);
-        let stack = MemStack::new(self.mem.as_mut().expect("memory set"));
-        sym.factorize_numeric_ldlt(
-            &mut self.values,
-            a.as_ref(),
-            Side::Lower,
-            no_regularization(),
-            par,
-            stack,
-            Default::default(),
-        )
-        .is_ok()
+        let mem = self.mem.as_mut().expect("memory set");
+        faer_ldlt(sym, &mut self.values, a.as_ref(), par, mem)
     }
 
-    /// Numeric LDLᵀ of the lower triangle of the assembled matrix plus `shift` on the free
-    /// diagonal, rounded to single precision, into `values32`; false on a zero or
-    /// non-finite pivot.
-    fn factor_single(&mut self, shift: f64) -> bool {
-        if let Some(ok) = self.factor_across_tree(shift, FactorPrecision::Single) {
-            return ok && self.values32.iter().all(|v| v.is_finite());
-        }
+    /// faer's numeric LDLᵀ of the lower triangle of the assembled matrix plus `shift` on
+    /// the free diagonal, rounded to single precision, into `values32`; false on a zero
+    /// pivot.
+    fn faer_factor_single(&mut self, shift: f64) -> bool {
         let par = self.par();
         let base = self.base.as_ref().expect("base set");
         let (cp, diag, nf) = (base.col_ptr(), &self.diag_pos, self.n_free);
@@ -778,23 +770,13 @@ impl KktSolver {
         }
         let sym = self.symbolic.as_ref().expect("symbolic set");
         self.values32.resize(sym.len_val(), 0.0);
-        let stack = MemStack::new(self.mem.as_mut().expect("memory set"));
-        let ok = sym
-            .factorize_numeric_ldlt(
-                &mut self.values32,
-                m32.as_ref(),
-                Side::Lower,
-                no_regularization(),
-                par,
-                stack,
-                Default::default(),
-            )
-            .is_ok();
-        ok && self.values32.iter().all(|v| v.is_finite())
+        let mem = self.mem.as_mut().expect("memory set");
+        faer_ldlt(sym, &mut self.values32, m32.as_ref(), par, mem)
     }
 
-    /// [`Self::factor_double`] or [`Self::factor_single`] across the elimination tree on two
-    /// cores ([`tree_factor`]), when the analysis has a plan for it: whether it factorised.
+    /// The factorisation of [`Self::faer_factor_double`] or [`Self::faer_factor_single`]
+    /// across the elimination tree on two cores ([`tree_factor`]), when the analysis has a
+    /// plan for it: whether it factorised.
     fn factor_across_tree(&mut self, shift: f64, precision: FactorPrecision) -> Option<bool> {
         let (Some(plan), Some(sym)) = (&self.plan, &self.symbolic) else {
             return None;
@@ -1085,6 +1067,27 @@ impl KktSolver {
             ..Self::default()
         };
     }
+}
+
+/// faer's numeric LDLᵀ (no regularisation) of the lower triangle of `a` into `values`
+/// (sized for `sym`), with `mem` as its workspace; false on a zero pivot.
+fn faer_ldlt<T: faer::traits::RealField>(
+    sym: &SymbolicCholesky<usize>,
+    values: &mut [T],
+    a: faer::sparse::SparseColMatRef<'_, usize, T>,
+    par: faer::Par,
+    mem: &mut MemBuffer,
+) -> bool {
+    sym.factorize_numeric_ldlt(
+        values,
+        a,
+        Side::Lower,
+        no_regularization(),
+        par,
+        MemStack::new(mem),
+        Default::default(),
+    )
+    .is_ok()
 }
 
 /// Solve with the supernodal factor `values` of `sym` (ordering `(fwd, inv)`) for `rhs` in
