@@ -462,6 +462,27 @@ impl EmbeddedShell {
         self.continuation_levels = levels;
     }
 
+    /// The skin's force on the lattice nodes, Bᵀ F_x (flat over node dofs, N), with
+    /// F_x = −∇E_x at the current x: the force part of [`Self::coupling_terms`] alone.
+    pub fn coupling_force(&self) -> Vec<f64> {
+        let mut grad = vec![0.0; self.x.len()];
+        self.shell.eval(&self.x, Some(&mut grad), None, false);
+        self.node_force(&grad)
+    }
+
+    /// −Bᵀ g over the node dofs (N) of a skin gradient `g` (flat per vertex, N).
+    fn node_force(&self, grad: &[f64]) -> Vec<f64> {
+        let mut force = vec![0.0; 3 * self.nodes];
+        for (v, r) in self.rows.iter().enumerate() {
+            for &(node, w) in r {
+                for a in 0..3 {
+                    force[3 * node + a] -= w * grad[3 * v + a];
+                }
+            }
+        }
+        force
+    }
+
     /// The skin's terms for the interior step: (Bᵀ K_x B as triplets over node dofs, both
     /// triangles, N/m; Bᵀ F_x flat over node dofs, N), with K_x the element-projected PSD
     /// shell Hessian and F_x = −∇E_x, both at the current x. The triplet layout is the same
@@ -473,14 +494,7 @@ impl EmbeddedShell {
         let mut trip = Vec::with_capacity(self.shell.triplet_count());
         self.shell
             .eval(&self.x, Some(&mut grad), Some(&mut trip), true);
-        let mut force = vec![0.0; nd];
-        for (v, r) in self.rows.iter().enumerate() {
-            for &(node, w) in r {
-                for a in 0..3 {
-                    force[3 * node + a] -= w * grad[3 * v + a];
-                }
-            }
-        }
+        let force = self.node_force(&grad);
         // K_x compressed (pattern reused).
         let k = {
             let mut guard = self.hessian_pattern.lock().expect("pattern lock");
@@ -578,6 +592,12 @@ impl EmbeddedShell {
             .collect();
         let stiffness = columns.into_iter().flatten().collect();
         (stiffness, force)
+    }
+
+    /// Set the statics' convergence tolerance on the residual norm (N); returns the one it
+    /// replaces.
+    pub fn replace_tolerance(&mut self, tolerance: f64) -> f64 {
+        std::mem::replace(&mut self.solver.settings.tolerance, tolerance)
     }
 
     /// Shell energy E_x (J) at the current state.

@@ -12,11 +12,15 @@
 //! K_int⁻¹ (K_int + K_t) (u_m − (q* − q₀)) until the surface misses the fit by little against
 //! the lattice's own projection residual ([`ActuationSettings::tolerance`]).
 //!
-//! The skin is left out of this fit. Measured on the demo's frames 0–23 (`furrow bench
-//! muscles`): with the skin's rest stiffness Bᵀ K_x B in the fit the muscle-driven wrinkles are
-//! 126 % off the tracking-driven ones (the muscles fight compressions the skin relieves by
-//! wrinkling), with a relaxed (tension-field) skin force the corrections diverge on the brow
-//! raise and the jaw, and without the skin they are 27.5 % off.
+//! The skin is left out of this fit unless its force at the shape is given
+//! ([`Plant::fit`]'s `skin_load`, the pipeline's `muscles.skin_in_fit`): the skin solved at
+//! the shape's lattice fit pulls on the nodes with a force the actuation must then hold, so
+//! the muscle makes its shape against the skin. Measured on the demo's frames 0–23 (`furrow
+//! bench muscles`): without the skin the muscle-driven interior misses the artist's surface by
+//! 46 % of its motion (RMS), with the skin's force held by 12 % (tracking at κ = 10: 33 %).
+//! The skin's rest stiffness Bᵀ K_x B in the fit instead overshot (the muscles fought
+//! compressions the skin relieves by wrinkling), and a relaxed (tension-field) skin force made
+//! the corrections diverge on the brow raise and the jaw.
 
 use super::forward::{embed_flat, Coupling, Forward, ForwardStatus};
 use super::model::{Muscle, DEFAULT_MAX_CONTRACTION};
@@ -136,18 +140,25 @@ impl<'a> Plant<'a> {
     }
 
     /// Fit the actuation that makes node displacements `u` (the shape's lattice fit, flat, m)
-    /// with the tracking pulling towards surface displacements `delta` (flat, m); `moved`
-    /// lists the vertices the miss is measured on.
+    /// with the tracking pulling towards surface displacements `delta` (flat, m) and, when
+    /// given, the skin's force on the nodes at the shape (`skin_load`, flat, N) held as a
+    /// constant load; `moved` lists the vertices the miss is measured on. The response
+    /// (the fitter's J column) leaves out what the tracking's pull alone makes, not the skin's.
     pub fn fit(
         &self,
         u: &[f64],
         delta: &[f64],
         moved: &[usize],
         settings: &ActuationSettings,
+        skin_load: Option<&[f64]>,
     ) -> Result<FittedActuation, MuscleError> {
         let rest = self.lattice.rest_flat();
         let nodes = self.lattice.node_count();
-        let load = self.coupling.tracking_load(&self.embed, delta, nodes);
+        let tracking_load = self.coupling.tracking_load(&self.embed, delta, nodes);
+        let mut load = tracking_load.clone();
+        if let Some(s) = skin_load {
+            load.iter_mut().zip(s).for_each(|(a, b)| *a += b);
+        }
         let mut f = self.stiffness_times(u, true);
         f.iter_mut().zip(&load).for_each(|(a, b)| *a -= b);
         let mut shift = self.passive.solve_at_rest_factored(&f);
@@ -219,7 +230,7 @@ impl<'a> Plant<'a> {
         if let Some((b, _, _)) = best {
             fitted = b;
         }
-        let tracked = one.solve_at_rest(&load)?;
+        let tracked = one.solve_at_rest(&tracking_load)?;
         fitted
             .response
             .iter_mut()

@@ -195,8 +195,31 @@ pub fn generate_muscles(
     coupling: Option<&Coupling>,
     settings: &GenerateSettings,
 ) -> Result<Generated, MuscleError> {
+    generate_muscles_with_skin(lattice, interior, targets, coupling, settings, None)
+}
+
+/// The skin's force on the lattice nodes (flat, N) when the interior stands at node
+/// displacements `u` (flat, m) from rest.
+pub type SkinForce<'s> = &'s mut dyn FnMut(&[f64]) -> Result<Vec<f64>, MuscleError>;
+
+/// [`generate_muscles`], with the skin's force at each shape held by the actuation.
+pub fn generate_muscles_with_skin(
+    lattice: &Lattice,
+    interior: &Interior,
+    targets: &[MorphTarget],
+    coupling: Option<&Coupling>,
+    settings: &GenerateSettings,
+    skin_force: Option<SkinForce>,
+) -> Result<Generated, MuscleError> {
     settings.validate()?;
     let u = fit_node_displacements(lattice, interior, targets, settings.regulariser)?;
+    let skin_loads: Vec<Option<Vec<f64>>> = match skin_force {
+        Some(f) => u
+            .iter()
+            .map(|ut| f(ut).map(Some))
+            .collect::<Result<_, _>>()?,
+        None => vec![None; u.len()],
+    };
     let plant = Plant::new(lattice, interior, coupling)?;
     let fit_settings = ActuationSettings {
         corrections: settings.corrections,
@@ -213,14 +236,17 @@ pub fn generate_muscles(
     let fits: Vec<Result<Option<FittedActuation>, MuscleError>> = targets
         .par_iter()
         .zip(&u)
-        .map(|(t, ut)| {
+        .zip(&skin_loads)
+        .map(|((t, ut), skin)| {
             let strain = ut.iter().fold(0.0f64, |m, v| m.max(v.abs())) / lattice.cell_size;
             if strain.is_nan() || strain <= settings.min_strain {
                 return Ok(None);
             }
             let delta: Vec<f64> = t.positions.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
             let moved = moved_vertices(&delta, 0.1);
-            plant.fit(ut, &delta, &moved, &fit_settings).map(Some)
+            plant
+                .fit(ut, &delta, &moved, &fit_settings, skin.as_deref())
+                .map(Some)
         })
         .collect();
     let mut used: Vec<String> = Vec::new();

@@ -125,6 +125,15 @@ pub struct FrameRecord {
     pub shell: Option<StageRecord>,
     /// Largest wrinkle depth: distance of the skin from the smooth embedded surface (m).
     pub wrinkle_depth_max_m: f64,
+    /// How far the interior is from the artist's shape: RMS over the surface's vertices of
+    /// the embedded surface B q from the blend-shape target (m). It is what the driver
+    /// (tracking or muscles) leaves undone against the skin's resistance, plus the lattice's
+    /// projection residual; the default export adds the wrinkles to the target, so this miss
+    /// is not in it, but the wrinkles form at the interior's compression, not the target's.
+    pub shape_miss_m: f64,
+    /// RMS over the surface's vertices of the blend-shape target's displacement from rest
+    /// (m): the scale of [`Self::shape_miss_m`].
+    pub shape_motion_m: f64,
 }
 
 /// Totals over the run.

@@ -164,6 +164,12 @@ pub struct MuscleSection {
     /// (muscles generated from the blend shapes, activations fitted per frame), or the path of
     /// a muscle TOML file.
     pub source: Option<String>,
+    /// Fit each generated muscle's actuation with the skin in the loop (default false): the
+    /// skin is solved once at each blend shape (quasi-statically from rest, its clusters on
+    /// the shape's lattice fit) and the actuation holds the force it then puts on the
+    /// lattice, so that the muscle makes its shape against the skin's resistance. Costs one
+    /// skin solve per shape at set-up.
+    pub skin_in_fit: Option<bool>,
 }
 
 /// The values of `solver.skin_solver`.

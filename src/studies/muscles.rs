@@ -28,6 +28,11 @@ pub struct DriverRun {
     pub frames_not_converged: usize,
     /// Largest wrinkle depth over the frames (m).
     pub depth_max_m: f64,
+    /// Mean over the frames of the interior's RMS miss of the artist's shape (m,
+    /// [`crate::pipeline::record::FrameRecord::shape_miss_m`]).
+    pub shape_miss_mean_m: f64,
+    /// Mean over the frames of the target's RMS displacement from rest (m): the miss's scale.
+    pub shape_motion_mean_m: f64,
 }
 
 /// The comparison: both runs and the wrinkles' agreement.
@@ -56,6 +61,10 @@ fn run_with(rig: &Rig, opts: &RunOptions, source: &str) -> anyhow::Result<(Drive
         .filter_map(|f| f.fit.as_ref().map(|s| (s.ms, s.residual)))
         .collect();
     let n = fits.len().max(1) as f64;
+    let frames = r.per_frame.len().max(1) as f64;
+    let mean = |f: fn(&crate::pipeline::record::FrameRecord) -> f64| {
+        r.per_frame.iter().map(f).sum::<f64>() / frames
+    };
     let muscles_setup_ms = r
         .stages
         .iter()
@@ -83,6 +92,8 @@ fn run_with(rig: &Rig, opts: &RunOptions, source: &str) -> anyhow::Result<(Drive
             .iter()
             .map(|f| f.wrinkle_depth_max_m)
             .fold(0.0, f64::max),
+        shape_miss_mean_m: mean(|f| f.shape_miss_m),
+        shape_motion_mean_m: mean(|f| f.shape_motion_m),
     };
     Ok((run, out))
 }

@@ -143,7 +143,7 @@ pub fn set_up(
         path: &path,
     };
     let compressed = selection.is_none_or(|sel| sel.simulated.contains(&true));
-    let (simulated, left_out) = simulated_skin(&input, region.as_deref(), compressed, log)?;
+    let (mut simulated, left_out) = simulated_skin(&input, region.as_deref(), compressed, log)?;
     progress("setup", 3, 4);
     let stepper = interior::stepper(&lattice, scene, plan)?;
     let young = scene.interior.material()?.young;
@@ -174,7 +174,10 @@ pub fn set_up(
                 &lattice,
                 &welded.loaded_of,
                 source,
-                coupling,
+                muscles::Beside {
+                    coupling,
+                    skin: simulated.as_mut().map(|s| &mut s.shell),
+                },
             )?;
             log.stages.extend(records);
             Some(m)
@@ -219,7 +222,8 @@ pub fn set_up(
 }
 
 /// What the interior carries besides its elasticity, as the muscles' fit sees it: the
-/// tracking (the skin is left out of the fit, see [`crate::muscle::actuation`]).
+/// tracking (the skin's force at each shape joins it with `muscles.skin_in_fit`, see
+/// [`crate::muscle::actuation`]).
 fn muscle_coupling(tracking: &Tracking) -> crate::muscle::Coupling {
     crate::muscle::Coupling {
         stiffness: tracking.stiffness.clone(),
@@ -357,6 +361,15 @@ pub(crate) mod test_support {
         driver: Driver,
         substeps: usize,
     ) -> (super::Model, super::State, MeshInstance) {
+        small_model_with(driver, substeps, |_| {})
+    }
+
+    /// [`small_model`] with its scene changed by `tweak` first.
+    pub fn small_model_with(
+        driver: Driver,
+        substeps: usize,
+        tweak: impl Fn(&mut crate::scene::Scene),
+    ) -> (super::Model, super::State, MeshInstance) {
         use super::*;
         let face = face_of(bump_sheet(7));
         let mesh = TriMesh::new(face.positions.clone(), face.triangles.clone());
@@ -373,6 +386,7 @@ pub(crate) mod test_support {
         if let Driver::Muscles { source } = &driver {
             scene.muscles.source = Some(source.clone());
         }
+        tweak(&mut scene);
         let opts = crate::pipeline::RunOptions {
             scene: scene.clone(),
             scene_path: None,

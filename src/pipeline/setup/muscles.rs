@@ -3,15 +3,17 @@
 //! target into their activations (a clarabel QP on the muscles' responses in the pipeline's
 //! interior).
 
+use crate::coupling::embedded::EmbeddedShell;
 use crate::fem::Interior;
 use crate::io::mesh::MeshInstance;
 use crate::io::model::MorphTarget;
 use crate::lattice::Lattice;
 use crate::mesh::TriMesh;
 use crate::muscle::fit::Calibration;
-use crate::muscle::{generate_muscles, Coupling, FitSettings, Fitter, GenerateSettings, Generated};
+use crate::muscle::{Coupling, FitSettings, Fitter, GenerateSettings, Generated, MuscleError};
 use crate::pipeline::record::StagePlan;
 use crate::scene::Scene;
+use crate::solver::SolveStatus;
 use anyhow::bail;
 use std::path::Path;
 use std::time::Instant;
@@ -52,11 +54,20 @@ pub struct MuscleMade {
     pub corrections: usize,
 }
 
+/// What the muscles' fit sees in the interior besides the flesh.
+pub struct Beside<'s> {
+    /// The tracking's stiffness and pull.
+    pub coupling: Coupling,
+    /// The simulated skin, solved at each shape when `muscles.skin_in_fit` asks for it.
+    pub skin: Option<&'s mut EmbeddedShell>,
+}
+
 /// The muscles from `source` (`auto`: generated from the blend shapes of `face` (from the rig
 /// at `path`) on the welded skin,
 /// whose vertex `i` is loaded vertex `welded_loaded[i]`; otherwise a muscle TOML file), with
 /// their fitter and the `muscles` and `fit` records. Actuations and the fitter's J see the
-/// interior the pipeline runs: its elasticity with the tracking's `coupling`.
+/// interior the pipeline runs: its elasticity with the tracking's coupling and, with
+/// `muscles.skin_in_fit`, the skin's force at each shape (`beside`).
 pub fn build_muscles(
     face: &MeshInstance,
     path: &str,
@@ -64,8 +75,9 @@ pub fn build_muscles(
     lattice: &Lattice,
     welded_loaded: &[usize],
     source: &str,
-    coupling: Coupling,
+    beside: Beside,
 ) -> anyhow::Result<(MuscleDrive, [StagePlan; 2])> {
+    let Beside { coupling, skin } = beside;
     let t = Instant::now();
     let material = scene.interior.material()?;
     let mut made = String::new();
@@ -82,13 +94,22 @@ pub fn build_muscles(
             })
             .collect();
         let interior = Interior::new(lattice, &material)?;
-        let g = generate_muscles(
+        let skin = skin.filter(|_| scene.muscles.skin_in_fit == Some(true));
+        let mut at_shapes = skin.map(|shell| SkinAtShapes::new(shell, lattice.rest_flat()));
+        let mut force = at_shapes.as_mut().map(|a| move |u: &[f64]| a.force(u));
+        let g = crate::muscle::generate::generate_muscles_with_skin(
             lattice,
             &interior,
             &targets,
             Some(&coupling),
             &GenerateSettings::default(),
+            force
+                .as_mut()
+                .map(|f| f as crate::muscle::generate::SkinForce),
         )?;
+        if let Some(a) = &at_shapes {
+            made.push_str(&a.summary());
+        }
         made = shape_errors(&g);
         made_by = g
             .muscles
@@ -153,6 +174,85 @@ pub fn build_muscles(
         ),
     ];
     Ok((drive, records))
+}
+
+/// Statics' tolerance of a skin solved at a blend shape, over the frames' tolerance: the
+/// force it gives is held by an actuation, and at 100× the frames' (about 0.03 N on the demo
+/// face, whose shapes' skin forces are 2–30 N) the muscles' shape error and wrinkles were
+/// those of the frames' tolerance to 0.1 %, in two-thirds of the time.
+const SHAPE_SKIN_LOOSENING: f64 = 100.0;
+
+/// The skin solved at each blend shape, for the actuation fit (`muscles.skin_in_fit`).
+struct SkinAtShapes<'s> {
+    shell: &'s mut EmbeddedShell,
+    /// Lattice node positions at rest (flat, m).
+    rest_q: Vec<f64>,
+    /// The skin's state at rest (flat, m), restored after each shape.
+    rest_x: Vec<f64>,
+    solves: usize,
+    failed: usize,
+    seconds: f64,
+}
+
+impl<'s> SkinAtShapes<'s> {
+    fn new(shell: &'s mut EmbeddedShell, rest_q: Vec<f64>) -> Self {
+        let rest_x = shell.x().to_vec();
+        Self {
+            shell,
+            rest_q,
+            rest_x,
+            solves: 0,
+            failed: 0,
+            seconds: 0.0,
+        }
+    }
+
+    /// The skin's force on the nodes (flat, N) with the lattice at node displacements `u`
+    /// (flat, m) from rest: solved from rest; zero when the solve does not converge (the
+    /// muscle is then fitted without it, and the summary counts it).
+    fn force(&mut self, u: &[f64]) -> Result<Vec<f64>, MuscleError> {
+        let t = Instant::now();
+        let q: Vec<f64> = self.rest_q.iter().zip(u).map(|(a, b)| a + b).collect();
+        let skin_error = |e: String| MuscleError::Input(format!("skin at a blend shape: {e}"));
+        self.shell
+            .set_x(&self.rest_x)
+            .map_err(|e| skin_error(e.to_string()))?;
+        let tolerance = self.shell.replace_tolerance(f64::NAN);
+        self.shell
+            .replace_tolerance(tolerance * SHAPE_SKIN_LOOSENING);
+        let report = self.shell.solve(&q);
+        self.shell.replace_tolerance(tolerance);
+        let converged =
+            report.map_err(|e| skin_error(e.to_string()))?.status == SolveStatus::Converged;
+        let force = if converged {
+            self.shell.coupling_force()
+        } else {
+            self.failed += 1;
+            vec![0.0; q.len()]
+        };
+        self.shell
+            .set_x(&self.rest_x)
+            .map_err(|e| skin_error(e.to_string()))?;
+        self.solves += 1;
+        self.seconds += t.elapsed().as_secs_f64();
+        Ok(force)
+    }
+
+    /// What the skin in the fit did, for the `muscles` record.
+    fn summary(&self) -> String {
+        let failed = if self.failed > 0 {
+            format!(
+                "; {} did not converge, and their muscles were fitted without the skin",
+                self.failed
+            )
+        } else {
+            String::new()
+        };
+        format!(
+            "; the skin in the fit: solved at each of {} shapes in {:.1} s, each actuation holds its force{failed}",
+            self.solves, self.seconds
+        )
+    }
 }
 
 /// How well the generated actuations make their shapes at activation 1 in the pipeline's

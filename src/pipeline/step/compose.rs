@@ -15,6 +15,8 @@ pub struct Composed {
     pub target: Vec<Vector3<f64>>,
     /// Largest wrinkle displacement ‖x − B q‖ over the skin (m).
     pub depth_max: f64,
+    /// RMS of the embedded surface B q from the target over the export vertices (m).
+    pub shape_miss: f64,
 }
 
 /// How the export vertices follow the lattice, the target and the skin.
@@ -40,6 +42,7 @@ pub fn compose(
 ) -> anyhow::Result<Composed> {
     let embedded = embed_rows(maps.rows, q);
     let target = carry(maps.target_of, welded_target);
+    let shape_miss = rms_distance(&embedded, &target);
     let mut out = if simulated_surface {
         embedded.clone()
     } else {
@@ -65,7 +68,14 @@ pub fn compose(
         wrinkled: out,
         target,
         depth_max,
+        shape_miss,
     })
+}
+
+/// RMS distance between two point lists of the same length (m); 0 for empty lists.
+pub fn rms_distance(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> f64 {
+    let sum: f64 = a.iter().zip(b).map(|(p, q)| (p - q).norm_squared()).sum();
+    (sum / a.len().max(1) as f64).sqrt()
 }
 
 /// Welded-skin values (positions or deltas, m) carried to the refined skin by the
