@@ -76,6 +76,29 @@ pub struct StageRecord {
     pub time: Option<SolveTime>,
 }
 
+impl StageRecord {
+    /// Fold a later solve of the same stage in the same frame into this record: counts and
+    /// times add up; the status and residual are the later solve's.
+    pub fn then(&mut self, later: StageRecord) {
+        self.iterations += later.iterations;
+        self.ms += later.ms;
+        self.halvings += later.halvings;
+        self.load_steps += later.load_steps;
+        self.factorizations += later.factorizations;
+        self.patch_factorizations += later.patch_factorizations;
+        self.linear_solves += later.linear_solves;
+        self.time = match (self.time, later.time) {
+            (Some(mut a), Some(b)) => {
+                a.add(&b);
+                Some(a)
+            }
+            (a, b) => a.or(b),
+        };
+        self.status = later.status;
+        self.residual = later.residual;
+    }
+}
+
 /// Where a skin solve's wall time went (ms): the rest of `ms` is the solve's own bookkeeping
 /// and the self-intersection check.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]

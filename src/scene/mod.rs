@@ -168,7 +168,7 @@ pub struct MuscleSection {
     /// skin is solved once at each blend shape (quasi-statically from rest, its clusters on
     /// the shape's lattice fit) and the actuation holds the force it then puts on the
     /// lattice, so that the muscle makes its shape against the skin's resistance. Costs one
-    /// skin solve per shape at set-up.
+    /// skin solve per shape at set-up; makes `solver.coupling_iterations` default to 3.
     pub skin_in_fit: Option<bool>,
 }
 
@@ -196,6 +196,13 @@ pub struct SolverSection {
     /// When the skin's stiffness Bᵀ K_x B seen by the interior is recomputed: `once` (at
     /// rest; default, the force Bᵀ F_x is always current) or `every_frame` (the paper).
     pub skin_stiffness: Option<String>,
+    /// Most solves of the interior and the skin per frame (default 1, or 3 with
+    /// `muscles.skin_in_fit`): the staggered coupling (interior with the skin's force
+    /// linearised, then the skin on the interior) is repeated from the frame's start, each
+    /// time linearised about the last skin, until the interior moves by less than a
+    /// thousandth of the frame's motion. 1 is the paper's one pass per frame, whose coupling
+    /// settles over the next frames.
+    pub coupling_iterations: Option<usize>,
     /// How the skin's Newton directions are solved: `lagged` (default: GMRES preconditioned
     /// with a single-precision factor of the whole skin, kept across iterations and frames
     /// while it converges within 10 solves), `patches` (the same, corrected by fresh factors
@@ -444,6 +451,11 @@ impl Scene {
         if let Some(m) = &self.solver.skin_stiffness {
             if m != "once" && m != "every_frame" {
                 bail!("`solver.skin_stiffness` must be \"once\" or \"every_frame\", got \"{m}\"");
+            }
+        }
+        if let Some(n) = self.solver.coupling_iterations {
+            if !(1..=10).contains(&n) {
+                bail!("`solver.coupling_iterations` must be 1 to 10, got {n}");
             }
         }
         if let Some(m) = &self.solver.skin_solver {

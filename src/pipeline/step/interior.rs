@@ -23,6 +23,8 @@ pub struct InteriorSchedule {
     pub every_frame_stiffness: bool,
     /// Time between frames (s): frame k is at time k · `frame_interval`.
     pub frame_interval: f64,
+    /// Most interior–skin passes per frame (≥ 1; `solver.coupling_iterations`).
+    pub coupling_iterations: usize,
 }
 
 /// Halvings of one sub-step at most: a backward Euler step whose Newton solve does not
@@ -30,7 +32,9 @@ pub struct InteriorSchedule {
 /// sub-step; the record counts the halvings.
 pub const MAX_HALVINGS: usize = 4;
 
-/// Advance the interior over frame `k` towards the welded `target` (m) and record it.
+/// Advance the interior over frame `k` towards the welded `target` (m) and record it, with
+/// the skin's force linearised about node positions `about` (flat, m: where the skin's
+/// current state was solved; default the interior's current positions).
 pub fn advance(
     model: &Model,
     state: &mut State,
@@ -38,6 +42,7 @@ pub fn advance(
     schedule: InteriorSchedule,
     target: &[Vector3<f64>],
     k: usize,
+    about: Option<&[f64]>,
 ) -> anyhow::Result<StageRecord> {
     let t = Instant::now();
     let mut record = StageRecord {
@@ -49,8 +54,10 @@ pub fn advance(
         load_steps: 0,
         ..Default::default()
     };
-    let q = &state.interior.q;
-    let skin_force = coupling_terms(model, state.skin.as_ref(), q, scratch, schedule);
+    let q = about.unwrap_or(&state.interior.q);
+    // A later coupling pass of the frame (`about` given) keeps the frame's first tangent.
+    let refresh = about.is_none();
+    let skin_force = coupling_terms(model, state.skin.as_ref(), q, scratch, schedule, refresh);
     let from = state.last_target.take().unwrap_or_else(|| target.to_vec());
     let skin_parts = [
         scratch
@@ -60,7 +67,7 @@ pub fn advance(
         model.left_out.as_ref().map(|(_, k)| k.as_slice()),
     ];
     let mut load = StepLoad {
-        frame_q: state.interior.q.clone(),
+        frame_q: q.to_vec(),
         skin_parts,
         stiffness: scratch.combined.clone().unwrap_or_default(),
         base_len: 0,
@@ -224,16 +231,18 @@ fn note(record: &mut StageRecord, rep: &SolveReport) {
 }
 
 /// The skin's pull on the interior: its force Bᵀ F_x now (returned; the left-out skin's at
-/// x = B q), and the combined stiffness of tracking and skin in `scratch`. The skin's stiffness Bᵀ K_x B (element
-/// projected, the expensive part) is the model's, taken at the rest state, or re-taken every frame when asked.
+/// x = B q), and the combined stiffness of tracking and skin in `scratch`. The skin's
+/// stiffness Bᵀ K_x B (element projected, the expensive part) is the model's, taken at the
+/// rest state, or re-taken at each frame's first coupling pass (`refresh`) when asked.
 fn coupling_terms(
     model: &Model,
     skin: Option<&EmbeddedShell>,
     q: &[f64],
     scratch: &mut Scratch,
     schedule: InteriorSchedule,
+    refresh: bool,
 ) -> Option<Vec<f64>> {
-    let every = schedule.every_frame_stiffness;
+    let every = schedule.every_frame_stiffness && refresh;
     if let Some(skin) = skin {
         if every {
             scratch.skin_stiffness = Some(skin.coupling_terms().0);
