@@ -79,6 +79,15 @@ pub struct Generated {
     pub skipped: Vec<(String, String)>,
     /// For each muscle, how well its actuation makes its shape, and its measured response.
     pub fits: Vec<FittedActuation>,
+    /// (shape name, why) of the shapes fitted without the skin's force although it was
+    /// given: their fit holding it did not converge or missed the shape beyond the goal.
+    pub without_skin: Vec<(String, String)>,
+}
+
+/// The shape error a generated muscle is held to (dimensionless): 5 % of the shape's RMS
+/// displacement, or 1.2× the lattice's own projection residual when that is larger.
+pub fn shape_goal(projection: f64) -> f64 {
+    0.05f64.max(1.2 * projection)
 }
 
 /// Lattice node displacements (flat, m) fitted to each target (see the module notes, step
@@ -230,10 +239,12 @@ pub fn generate_muscles_with_skin(
         source: Vec::new(),
         skipped: Vec::new(),
         fits: Vec::new(),
+        without_skin: Vec::new(),
     };
     // Shapes are fitted in parallel, each with its own equilibrium solver; the results are
     // taken in shape order, so the muscles do not depend on the thread count.
-    let fits: Vec<Result<Option<FittedActuation>, MuscleError>> = targets
+    type Fit = (FittedActuation, Option<String>);
+    let fits: Vec<Result<Option<Fit>, MuscleError>> = targets
         .par_iter()
         .zip(&u)
         .zip(&skin_loads)
@@ -244,9 +255,27 @@ pub fn generate_muscles_with_skin(
             }
             let delta: Vec<f64> = t.positions.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
             let moved = moved_vertices(&delta, 0.1);
-            plant
-                .fit(ut, &delta, &moved, &fit_settings, skin.as_deref())
-                .map(Some)
+            let free = |why: Option<String>| {
+                plant
+                    .fit(ut, &delta, &moved, &fit_settings, None)
+                    .map(|f| Some((f, why)))
+            };
+            let Some(load) = skin else {
+                return free(None);
+            };
+            let held = plant.fit(ut, &delta, &moved, &fit_settings, Some(load))?;
+            if !held.converged {
+                free(Some(
+                    "its equilibrium holding the skin's force did not converge".into(),
+                ))
+            } else if held.shape_error > shape_goal(held.projection) {
+                free(Some(format!(
+                    "holding the skin's force it missed the shape by {:.1} %",
+                    100.0 * held.shape_error
+                )))
+            } else {
+                Ok(Some((held, None)))
+            }
         })
         .collect();
     let mut used: Vec<String> = Vec::new();
@@ -259,10 +288,13 @@ pub fn generate_muscles_with_skin(
                     settings.min_strain
                 ),
             )),
-            Some(f) if f.elements.is_empty() => out
+            Some((f, _)) if f.elements.is_empty() => out
                 .skipped
                 .push((t.name.clone(), "no element deforms".into())),
-            Some(f) => {
+            Some((f, why)) => {
+                if let Some(why) = why {
+                    out.without_skin.push((t.name.clone(), why));
+                }
                 let name = unique_name(&t.name, out.source.len(), &mut used);
                 out.muscles
                     .push(actuation_muscle(&name, &f.elements, &f.offsets));

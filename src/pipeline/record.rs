@@ -260,3 +260,47 @@ pub struct RunReport {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub export: Option<super::layer::LayerReport>,
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A frame's second coupling pass folds into its record: counts and times add up, the
+    /// status and residual are the last pass's.
+    #[test]
+    fn a_later_pass_folds_into_the_frame_record() {
+        let time = |ms: f64| SolveTime {
+            assembly_ms: ms,
+            factor_ms: 2.0 * ms,
+            ..Default::default()
+        };
+        let mut first = StageRecord {
+            status: "iteration_limit".into(),
+            iterations: 3,
+            residual: 1.0,
+            ms: 10.0,
+            factorizations: 1,
+            linear_solves: 4,
+            time: Some(time(1.0)),
+            ..Default::default()
+        };
+        first.then(StageRecord {
+            status: "converged".into(),
+            iterations: 2,
+            residual: 1e-6,
+            ms: 5.0,
+            load_steps: 2,
+            linear_solves: 3,
+            time: Some(time(0.5)),
+            ..Default::default()
+        });
+        assert_eq!(first.status, "converged");
+        assert_eq!((first.iterations, first.factorizations), (5, 1));
+        assert_eq!((first.linear_solves, first.load_steps), (7, 2));
+        assert_eq!((first.ms, first.residual), (15.0, 1e-6));
+        assert_eq!(first.time, Some(time(1.5)));
+        // A pass that solved nothing keeps the earlier times.
+        first.then(StageRecord::default());
+        assert_eq!(first.time, Some(time(1.5)));
+    }
+}

@@ -107,10 +107,10 @@ pub fn build_muscles(
                 .as_mut()
                 .map(|f| f as crate::muscle::generate::SkinForce),
         )?;
-        if let Some(a) = &at_shapes {
-            made.push_str(&a.summary());
-        }
         made = shape_errors(&g);
+        if let Some(a) = &at_shapes {
+            made.push_str(&a.summary(&g.without_skin));
+        }
         made_by = g
             .muscles
             .iter()
@@ -238,16 +238,20 @@ impl<'s> SkinAtShapes<'s> {
         Ok(force)
     }
 
-    /// What the skin in the fit did, for the `muscles` record.
-    fn summary(&self) -> String {
-        let failed = if self.failed > 0 {
+    /// What the skin in the fit did, for the `muscles` record, with the shapes whose muscle
+    /// was fitted `without` the skin's force (name, why).
+    fn summary(&self, without: &[(String, String)]) -> String {
+        let mut failed = if self.failed > 0 {
             format!(
-                "; {} did not converge, and their muscles were fitted without the skin",
+                "; {} skin solves did not converge, and their muscles were fitted without the skin",
                 self.failed
             )
         } else {
             String::new()
         };
+        for (name, why) in without {
+            failed.push_str(&format!("; {name} fitted without the skin ({why})"));
+        }
         format!(
             "; the skin in the fit: solved at each of {} shapes in {:.1} s, each actuation holds its force{failed}",
             self.solves, self.seconds

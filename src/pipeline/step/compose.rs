@@ -120,6 +120,8 @@ mod tests {
         assert_eq!(c.target, vec![welded[0], Vector3::new(1.0, 0.0, 0.0)]);
         assert_eq!(c.wrinkled, vec![welded[0], Vector3::new(1.0, 0.0, 0.003)]);
         assert!((c.depth_max - 0.003).abs() < 1e-15);
+        // B q stands at x = 0.5 for both: 0.5 m from the first target, 0.5 m from the second.
+        assert!((c.shape_miss - 0.5).abs() < 1e-15, "{}", c.shape_miss);
         let s = compose(maps, &welded, &q, Some(&x), true, 0).unwrap();
         assert_eq!(
             s.wrinkled,
