@@ -181,13 +181,7 @@ fn advance_coupled(
     let mut interior = interior::advance(model, state, scratch, schedule, target, k, None)?;
     let mut shell = solve_skin_on_interior(state)?;
     let (q0, v0, t0, last) = &start;
-    let mut residual: Vec<f64> = state
-        .interior
-        .q
-        .iter()
-        .zip(q0)
-        .map(|(a, b)| a - b)
-        .collect();
+    let mut residual = minus(&state.interior.q, q0);
     let mut omega = 1.0;
     for _ in 1..schedule.coupling_iterations.max(1) {
         let (x, xv) = (state.interior.q.clone(), state.interior.v.clone());
@@ -196,43 +190,32 @@ fn advance_coupled(
         state.last_target = last.clone();
         let pass = interior::advance(model, state, scratch, schedule, target, k, Some(&x))?;
         interior.then(pass);
-        let r: Vec<f64> = state
-            .interior
-            .q
-            .iter()
-            .zip(&x)
-            .map(|(a, b)| a - b)
-            .collect();
+        let r = minus(&state.interior.q, &x);
         omega = aitken(omega, &residual, &r);
         let be = &mut state.interior;
-        for (((q, v), (xq, xv)), rq) in
-            be.q.iter_mut()
-                .zip(be.v.iter_mut())
-                .zip(x.iter().zip(&xv))
-                .zip(&r)
-        {
-            *v = xv + omega * (*v - xv);
-            *q = xq + omega * rq;
+        for i in 0..x.len() {
+            be.v[i] = xv[i] + omega * (be.v[i] - xv[i]);
+            be.q[i] = x[i] + omega * r[i];
         }
         if let (Some(s), Some(p)) = (shell.as_mut(), solve_skin_on_interior(state)?) {
             s.then(p);
         }
-        let norm = |v: &[f64]| v.iter().map(|a| a * a).sum::<f64>().sqrt();
-        let motion = norm(
-            &state
-                .interior
-                .q
-                .iter()
-                .zip(q0)
-                .map(|(a, b)| a - b)
-                .collect::<Vec<_>>(),
-        );
-        if norm(&r) <= COUPLING_SETTLED * motion {
+        if norm(&r) <= COUPLING_SETTLED * norm(&minus(&state.interior.q, q0)) {
             break;
         }
         residual = r;
     }
     Ok((interior, shell))
+}
+
+/// a − b, entry by entry.
+fn minus(a: &[f64], b: &[f64]) -> Vec<f64> {
+    a.iter().zip(b).map(|(x, y)| x - y).collect()
+}
+
+/// Euclidean norm.
+fn norm(a: &[f64]) -> f64 {
+    a.iter().map(|x| x * x).sum::<f64>().sqrt()
 }
 
 /// Aitken's relaxation factor after `omega` from the last two fixed-point residuals,
