@@ -335,6 +335,8 @@ fn absurd_settings_are_refused_with_the_flag_named() {
         (vec!["demo", "--fps", "0"], "--fps"),
         (vec!["demo", "--fps", "NaN"], "--fps"),
         (vec!["bench", "shell", "--faces", "0"], "--faces"),
+        (vec!["bench", "muscles", "--tracking=-1"], "--tracking"),
+        (vec!["bench", "muscles", "--tracking", "NaN"], "--tracking"),
     ] {
         let o = Command::new(bin)
             .args(&args)

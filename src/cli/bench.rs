@@ -79,11 +79,15 @@ pub enum BenchCommand {
     /// fitted per frame) and by tracking, in one process: fit residuals and times, and the
     /// phase-free wrinkle amplitude difference per 2λ.
     #[command(
-        after_help = "Example:\n  furrow bench muscles --rig rigs/face.glb --frames 0:40\n  furrow bench muscles --rig rigs/head.glb --frames 0:10 --json"
+        after_help = "Example:\n  furrow bench muscles --rig rigs/face.glb --frames 0:40\n  furrow bench muscles --rig rigs/head.glb --frames 0:10 --json\n  furrow bench muscles --rig rigs/face.glb --frames 0:24 --scene S --tracking 1000   (S: [muscles] skin_in_fit = true; the reference tracking at κ = 1000)"
     )]
     Muscles {
         #[command(flatten)]
         on: RigFrames,
+        /// Tracking factor κ of the tracking-driven reference run (dimensionless, ≥ 0);
+        /// default: the scene's `interior.tracking`, or 10. The muscle run keeps its own.
+        #[arg(long)]
+        tracking: Option<f64>,
     },
     /// Activation fit: 52 muscles on a face lattice of about N cells, a 335-frame clip.
     #[command(after_help = "Example:\n  furrow bench fit\n  furrow bench fit --cells 2000 --json")]
@@ -157,9 +161,15 @@ pub fn run(c: BenchCommand, out: &Output) -> anyhow::Result<()> {
         } => suite(&dir, faces, elements, cells, !no_demo, force, out)?,
         BenchCommand::Select { on } => select(&on, out)?,
         BenchCommand::Skin { on } => skin(&on, out)?,
-        BenchCommand::Muscles { on } => {
+        BenchCommand::Muscles { on, tracking } => {
+            if let Some(k) = tracking {
+                anyhow::ensure!(
+                    k.is_finite() && k >= 0.0,
+                    "--tracking must be a finite number ≥ 0, got {k}"
+                );
+            }
             let (loaded, opts) = bench_rig(&on)?;
-            let c = crate::studies::muscles::compare_drivers(&loaded, &opts)?;
+            let c = crate::studies::muscles::compare_drivers(&loaded, &opts, tracking)?;
             print(out, "bench muscles", &serde_json::to_value(&c)?);
         }
         BenchCommand::Fit { cells, gn_frames } => {

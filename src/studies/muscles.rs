@@ -38,6 +38,9 @@ pub struct DriverRun {
 /// The comparison: both runs and the wrinkles' agreement.
 #[derive(Debug, Clone, Serialize)]
 pub struct DriverComparison {
+    /// Tracking factor κ of the reference run when set by `--tracking` (else the scene's).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reference_tracking: Option<f64>,
     /// Tracking (the reference) and muscles.
     pub runs: Vec<DriverRun>,
     /// Phase-free relative difference of the muscle-driven wrinkle amplitude per region from
@@ -50,9 +53,17 @@ pub struct DriverComparison {
     pub region_m: f64,
 }
 
-fn run_with(rig: &Rig, opts: &RunOptions, source: &str) -> anyhow::Result<(DriverRun, RunOutput)> {
+fn run_with(
+    rig: &Rig,
+    opts: &RunOptions,
+    source: &str,
+    tracking: Option<f64>,
+) -> anyhow::Result<(DriverRun, RunOutput)> {
     let mut o = opts.clone();
     o.scene.muscles.source = Some(source.to_string());
+    if tracking.is_some() {
+        o.scene.interior.tracking = tracking;
+    }
     let out = pipeline::run(rig, &o, &|_, _, _| {})?;
     let r = &out.report;
     let fits: Vec<(f64, f64)> = r
@@ -98,16 +109,22 @@ fn run_with(rig: &Rig, opts: &RunOptions, source: &str) -> anyhow::Result<(Drive
     Ok((run, out))
 }
 
-/// Run `opts` on `rig` driven by tracking and by the generated muscles.
-pub fn compare_drivers(rig: &Rig, opts: &RunOptions) -> anyhow::Result<DriverComparison> {
-    let (tracking, reference) = run_with(rig, opts, "none")?;
-    let (muscles, driven) = run_with(rig, opts, "auto")?;
+/// Run `opts` on `rig` driven by tracking (at tracking factor `reference_tracking` when
+/// given, else the scene's) and by the generated muscles.
+pub fn compare_drivers(
+    rig: &Rig,
+    opts: &RunOptions,
+    reference_tracking: Option<f64>,
+) -> anyhow::Result<DriverComparison> {
+    let (tracking, reference) = run_with(rig, opts, "none", reference_tracking)?;
+    let (muscles, driven) = run_with(rig, opts, "auto", None)?;
     let region = region_size(&reference);
     let (a_ref, a_run) = (
         amplitude_map(&reference, region),
         amplitude_map(&driven, region),
     );
     Ok(DriverComparison {
+        reference_tracking,
         runs: vec![tracking, muscles],
         amplitude_error: amplitude_error(&a_run, &a_ref),
         shared_regions: [shared(&a_ref, &a_run), shared(&a_run, &a_ref)],
