@@ -5,6 +5,7 @@
 
 use super::energy::Energy;
 use super::sparse::dense_from_triplets;
+use super::vector::norm;
 
 /// Result of a finite-difference comparison: the best relative error over the step sweep and
 /// the step (in the units of `x`) at which it was reached.
@@ -25,8 +26,7 @@ fn rel(a: &[f64], b: &[f64]) -> f64 {
         .map(|(x, y)| (x - y).powi(2))
         .sum::<f64>()
         .sqrt();
-    let na: f64 = a.iter().map(|x| x * x).sum::<f64>().sqrt();
-    let nb: f64 = b.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let (na, nb) = (norm(a), norm(b));
     diff / na.max(nb).max(1e-300)
 }
 

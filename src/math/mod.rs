@@ -7,5 +7,6 @@ pub mod hash;
 pub mod modes;
 pub mod rng;
 pub mod sparse;
+pub mod vector;
 
 pub use energy::Energy;

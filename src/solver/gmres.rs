@@ -15,6 +15,8 @@
 //! ships conjugate gradients, BiCGSTAB (two factor solves per iteration) and LSMR, not
 //! GMRES, hence this small implementation.
 
+use crate::math::vector::{dot, norm};
+
 /// How a GMRES solve ended.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GmresReport {
@@ -130,14 +132,6 @@ pub fn fgmres(
         relative_residual: res,
         converged: res <= rel_tol,
     }
-}
-
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
-}
-
-fn norm(a: &[f64]) -> f64 {
-    dot(a, a).sqrt()
 }
 
 fn axpy(alpha: f64, x: &[f64], y: &mut [f64]) {

@@ -27,6 +27,7 @@ use super::patch::{PatchSet, PatchSettings};
 use super::status::{SolveReport, SolveStatus};
 use crate::math::hash::Fnv1a;
 use crate::math::sparse::SparseError;
+use crate::math::vector::norm;
 use crate::math::Energy;
 use std::sync::Arc;
 use std::time::Instant;
@@ -468,11 +469,6 @@ struct Point {
     r: Vec<f64>,
     energy: f64,
     rn: f64,
-}
-
-/// Euclidean norm.
-fn norm(v: &[f64]) -> f64 {
-    v.iter().map(|a| a * a).sum::<f64>().sqrt()
 }
 
 impl Model<'_> {

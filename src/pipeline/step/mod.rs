@@ -13,6 +13,7 @@ pub mod skin;
 use super::record::{FrameRecord, StageRecord};
 use super::setup::{Model, State};
 use crate::io::load::Rig;
+use crate::math::vector::norm;
 use compose::{Composed, SurfaceMaps};
 use interior::InteriorSchedule;
 
@@ -211,11 +212,6 @@ fn advance_coupled(
 /// a − b, entry by entry.
 fn minus(a: &[f64], b: &[f64]) -> Vec<f64> {
     a.iter().zip(b).map(|(x, y)| x - y).collect()
-}
-
-/// Euclidean norm.
-fn norm(a: &[f64]) -> f64 {
-    a.iter().map(|x| x * x).sum::<f64>().sqrt()
 }
 
 /// Aitken's relaxation factor after `omega` from the last two fixed-point residuals,
