@@ -594,10 +594,14 @@ impl EmbeddedShell {
         (stiffness, force)
     }
 
-    /// Set the statics' convergence tolerance on the residual norm (N); returns the one it
-    /// replaces.
-    pub fn replace_tolerance(&mut self, tolerance: f64) -> f64 {
-        std::mem::replace(&mut self.solver.settings.tolerance, tolerance)
+    /// The statics' convergence tolerance on the residual norm (N).
+    pub fn tolerance(&self) -> f64 {
+        self.solver.settings.tolerance
+    }
+
+    /// Set the statics' convergence tolerance on the residual norm (N).
+    pub fn set_tolerance(&mut self, tolerance: f64) {
+        self.solver.settings.tolerance = tolerance;
     }
 
     /// Shell energy E_x (J) at the current state.

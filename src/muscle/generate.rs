@@ -222,10 +222,21 @@ pub fn generate_muscles_with_skin(
 ) -> Result<Generated, MuscleError> {
     settings.validate()?;
     let u = fit_node_displacements(lattice, interior, targets, settings.regulariser)?;
+    // Only shapes strained enough to make a muscle get a (costly) skin solve.
+    let strained = |ut: &[f64]| {
+        let strain = ut.iter().fold(0.0f64, |m, v| m.max(v.abs())) / lattice.cell_size;
+        !strain.is_nan() && strain > settings.min_strain
+    };
     let skin_loads: Vec<Option<Vec<f64>>> = match skin_force {
         Some(f) => u
             .iter()
-            .map(|ut| f(ut).map(Some))
+            .map(|ut| {
+                if strained(ut) {
+                    f(ut).map(Some)
+                } else {
+                    Ok(None)
+                }
+            })
             .collect::<Result<_, _>>()?,
         None => vec![None; u.len()],
     };
@@ -249,8 +260,7 @@ pub fn generate_muscles_with_skin(
         .zip(&u)
         .zip(&skin_loads)
         .map(|((t, ut), skin)| {
-            let strain = ut.iter().fold(0.0f64, |m, v| m.max(v.abs())) / lattice.cell_size;
-            if strain.is_nan() || strain <= settings.min_strain {
+            if !strained(ut) {
                 return Ok(None);
             }
             let delta: Vec<f64> = t.positions.iter().flat_map(|p| [p.x, p.y, p.z]).collect();

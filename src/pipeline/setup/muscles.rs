@@ -187,7 +187,7 @@ struct SkinAtShapes<'s> {
     shell: &'s mut EmbeddedShell,
     /// Lattice node positions at rest (flat, m).
     rest_q: Vec<f64>,
-    /// The skin's state at rest (flat, m), restored after each shape.
+    /// The skin's state at rest (flat, m): where each shape's solve starts, restored after it.
     rest_x: Vec<f64>,
     solves: usize,
     failed: usize,
@@ -214,14 +214,10 @@ impl<'s> SkinAtShapes<'s> {
         let t = Instant::now();
         let q: Vec<f64> = self.rest_q.iter().zip(u).map(|(a, b)| a + b).collect();
         let skin_error = |e: String| MuscleError::Input(format!("skin at a blend shape: {e}"));
-        self.shell
-            .set_x(&self.rest_x)
-            .map_err(|e| skin_error(e.to_string()))?;
-        let tolerance = self.shell.replace_tolerance(f64::NAN);
-        self.shell
-            .replace_tolerance(tolerance * SHAPE_SKIN_LOOSENING);
+        let tolerance = self.shell.tolerance();
+        self.shell.set_tolerance(tolerance * SHAPE_SKIN_LOOSENING);
         let report = self.shell.solve(&q);
-        self.shell.replace_tolerance(tolerance);
+        self.shell.set_tolerance(tolerance);
         let converged =
             report.map_err(|e| skin_error(e.to_string()))?.status == SolveStatus::Converged;
         let force = if converged {

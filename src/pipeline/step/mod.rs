@@ -170,7 +170,9 @@ fn advance_coupled(
     target: &[nalgebra::Vector3<f64>],
     k: usize,
 ) -> anyhow::Result<(StageRecord, Option<StageRecord>)> {
-    let start = {
+    let passes = schedule.coupling_iterations.max(1);
+    // The frame's start, kept only when a second pass may run.
+    let start = (passes > 1).then(|| {
         let be = &state.interior;
         (
             be.q.clone(),
@@ -178,13 +180,15 @@ fn advance_coupled(
             be.time,
             state.last_target.clone(),
         )
-    };
+    });
     let mut interior = interior::advance(model, state, scratch, schedule, target, k, None)?;
     let mut shell = solve_skin_on_interior(state)?;
-    let (q0, v0, t0, last) = &start;
+    let Some((q0, v0, t0, last)) = &start else {
+        return Ok((interior, shell));
+    };
     let mut residual = minus(&state.interior.q, q0);
     let mut omega = 1.0;
-    for _ in 1..schedule.coupling_iterations.max(1) {
+    for _ in 1..passes {
         let (x, xv) = (state.interior.q.clone(), state.interior.v.clone());
         let be = &mut state.interior;
         (be.q, be.v, be.time) = (q0.clone(), v0.clone(), *t0);
