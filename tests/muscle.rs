@@ -969,9 +969,9 @@ fn every_muscle_makes_its_shape_on_the_face_rig() {
 }
 
 /// The same with the skin in the loop: each actuation holds the skin's force at its shape
-/// (the skin solved there) and still makes the shape within the goal; a shape whose fit
-/// holding it fails (the jaw: the stretched skin's 30 N) is fitted without it, as the
-/// record says.
+/// (the tension-field skin's, the default way) and still makes the shape within the goal; a
+/// shape whose fit holding it fails (the jaw: the stretched skin's 30 N) is fitted without
+/// it, as the record says.
 #[test]
 fn every_muscle_makes_its_shape_against_the_skin_on_the_face_rig() {
     muscles_make_their_shapes("rigs/face.glb", true);

@@ -79,7 +79,7 @@ pub enum BenchCommand {
     /// fitted per frame) and by tracking, in one process: fit residuals and times, and the
     /// phase-free wrinkle amplitude difference per 2λ.
     #[command(
-        after_help = "Example:\n  furrow bench muscles --rig rigs/face.glb --frames 0:40\n  furrow bench muscles --rig rigs/head.glb --frames 0:10 --json\n  furrow bench muscles --rig rigs/face.glb --frames 0:24 --scene S --tracking 1000   (S: [muscles] skin_in_fit = true; the reference tracking at κ = 1000)"
+        after_help = "Example:\n  furrow bench muscles --rig rigs/face.glb --frames 0:40\n  furrow bench muscles --rig rigs/head.glb --frames 0:10 --json\n  furrow bench muscles --rig rigs/face.glb --frames 0:24 --tracking 1000   (the reference tracking at κ = 1000)"
     )]
     Muscles {
         #[command(flatten)]

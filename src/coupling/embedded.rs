@@ -441,6 +441,20 @@ impl EmbeddedShell {
         Ok(rep)
     }
 
+    /// [`EmbeddedShell::solve`] with the statics' tolerance `loosening` times its own for
+    /// this solve only (an intermediate solve whose force feeds a later, exact one).
+    pub fn solve_loosened(
+        &mut self,
+        q: &[f64],
+        loosening: f64,
+    ) -> Result<SolveReport, SolverError> {
+        let tolerance = self.tolerance();
+        self.set_tolerance(tolerance * loosening);
+        let report = self.solve(q);
+        self.set_tolerance(tolerance);
+        report
+    }
+
     /// The residual norm of the current state against node positions `q` (N), as the
     /// statics' convergence test sees it, and that test's tolerance (N): the state is an
     /// equilibrium when the first is at most the second.
@@ -592,6 +606,40 @@ impl EmbeddedShell {
             .collect();
         let stiffness = columns.into_iter().flatten().collect();
         (stiffness, force)
+    }
+
+    /// The force (flat over node dofs, N) the skin puts on the lattice at node positions `q`
+    /// (flat, m) without solving for its wrinkles: Bᵀ F of the membrane relaxed over
+    /// wrinkles ([`crate::shell::tension_field`]) at x = B q, each triangle wrinkling at
+    /// `wavelength` (m, the thinnest skin's) scaled by its thickness (λ ∝ h, as the
+    /// clusters are: [`EmbeddedShell::set_thickness`]). Bending is left out: at B q it is
+    /// the smooth face's, a small part of the skin's pull.
+    pub fn tension_field_force(&self, q: &[f64], wavelength: f64) -> Vec<f64> {
+        let material = &self.shell.material;
+        let h_min = self.shell.thickness_range().0;
+        let critical: Vec<f64> = self
+            .shell
+            .thickness
+            .iter()
+            .map(|&h| {
+                let lambda = wavelength * h / h_min;
+                crate::shell::tension_field::critical_force(
+                    material.young,
+                    material.poisson,
+                    h,
+                    lambda,
+                )
+            })
+            .collect();
+        let x = self.embedded_flat(q);
+        let mut grad = vec![0.0; x.len()];
+        crate::shell::tension_field::relaxed_energy(
+            &self.shell.membrane,
+            &critical,
+            &x,
+            Some(&mut grad),
+        );
+        self.node_force(&grad)
     }
 
     /// The statics' convergence tolerance on the residual norm (N).

@@ -13,14 +13,15 @@
 //! the lattice's own projection residual ([`ActuationSettings::tolerance`]).
 //!
 //! The skin is left out of this fit unless its force at the shape is given
-//! ([`Plant::fit`]'s `skin_load`, the pipeline's `muscles.skin_in_fit`): the skin solved at
-//! the shape's lattice fit pulls on the nodes with a force the actuation must then hold, so
-//! the muscle makes its shape against the skin. Measured on the demo's frames 0–23 (`furrow
-//! bench muscles`): without the skin the muscle-driven interior misses the artist's surface by
-//! 46 % of its motion (RMS), with the skin's force held by 12 % (tracking at κ = 10: 33 %).
-//! The skin's rest stiffness Bᵀ K_x B in the fit instead overshot (the muscles fought
-//! compressions the skin relieves by wrinkling), and a relaxed (tension-field) skin force made
-//! the corrections diverge on the brow raise and the jaw.
+//! ([`Plant::fit`]'s `skin_load`, the pipeline's `muscles.skin_in_fit`): the skin at the
+//! shape's lattice fit pulls on the nodes with a force the actuation must then hold, so the
+//! muscle makes its shape against the skin. Measured on the demo's frames 0–23 (`furrow
+//! bench muscles`, three coupling passes): without the skin the muscle-driven interior misses
+//! the artist's surface by 46 % of its motion (RMS); holding the solved skin's force by 5.8 %,
+//! holding the tension-field skin's ([`crate::shell::tension_field`], no solve) by 10.0 %
+//! (tracking at κ = 10: 33 %). The skin's rest stiffness Bᵀ K_x B, or its unrelaxed force
+//! at the smooth shape, instead overshot (85 % miss): the muscles fought compressions the
+//! skin relieves by wrinkling.
 
 use super::forward::{embed_flat, Coupling, Forward, ForwardStatus};
 use super::model::{Muscle, DEFAULT_MAX_CONTRACTION};

@@ -164,13 +164,30 @@ pub struct MuscleSection {
     /// (muscles generated from the blend shapes, activations fitted per frame), or the path of
     /// a muscle TOML file.
     pub source: Option<String>,
-    /// Fit each generated muscle's actuation with the skin in the loop (default false): the
-    /// skin is solved once at each blend shape (quasi-statically from rest, its clusters on
-    /// the shape's lattice fit) and the actuation holds the force it then puts on the
-    /// lattice, so that the muscle makes its shape against the skin's resistance. Costs one
-    /// skin solve per shape at set-up; makes `solver.coupling_iterations` default to 3.
+    /// Fit each generated muscle's actuation with the skin in the loop (default true with
+    /// `source = "auto"`; false fits the muscles against the flesh alone): the actuation
+    /// holds the force the skin puts on the lattice at the blend shape (`skin_at_shapes` says
+    /// how it is found), so that the muscle makes its shape against the skin's resistance.
+    /// Makes `solver.coupling_iterations` default to 3.
     pub skin_in_fit: Option<bool>,
+    /// How the skin's force at each blend shape is found for `skin_in_fit`:
+    /// `tension_field` (default: the membrane relaxed over wrinkles at the shape's smooth
+    /// surface, each wrinkled direction carrying the wrinkles' critical force D (2π/λ)²;
+    /// milliseconds per shape) or `solved` (the reference: the skin solved quasi-statically
+    /// from rest with its clusters on the shape's lattice fit; seconds per shape).
+    pub skin_at_shapes: Option<String>,
 }
+
+impl MuscleSection {
+    /// Whether generated muscles are fitted with the skin in the loop: `skin_in_fit`, true
+    /// unless turned off, for muscles generated from the blend shapes (`source = "auto"`).
+    pub fn skin_in_fit(&self) -> bool {
+        self.source.as_deref() == Some("auto") && self.skin_in_fit != Some(false)
+    }
+}
+
+/// The values of `muscles.skin_at_shapes`.
+pub const SKIN_AT_SHAPES: [&str; 2] = ["tension_field", "solved"];
 
 /// The values of `solver.skin_solver`.
 pub const SKIN_SOLVERS: [&str; 3] = ["lagged", "patches", "global"];
@@ -482,6 +499,13 @@ impl Scene {
                 bail!("`muscles.source` is empty: use \"auto\", \"none\" or a file path");
             }
         }
+        if let Some(m) = &self.muscles.skin_at_shapes {
+            if !SKIN_AT_SHAPES.contains(&m.as_str()) {
+                bail!(
+                    "`muscles.skin_at_shapes` must be \"tension_field\" or \"solved\", got \"{m}\""
+                );
+            }
+        }
         if let Some(t) = &self.solver.interior_tangent {
             if t != "consistent" && t != "frozen" {
                 bail!(
@@ -609,5 +633,12 @@ mod tests {
         assert!(e.contains("not both"), "{e}");
         let e = err("[load]\nframes = 3\n");
         assert!(e.contains("geometry"), "{e}");
+        let e = err("[muscles]\nskin_at_shapes = \"exact\"\n");
+        assert!(
+            e.contains("muscles.skin_at_shapes") && e.contains("exact"),
+            "{e}"
+        );
+        let ok = Scene::parse("[muscles]\nskin_at_shapes = \"solved\"\n", "t").unwrap();
+        assert_eq!(ok.muscles.skin_at_shapes.as_deref(), Some("solved"));
     }
 }

@@ -8,6 +8,7 @@ pub mod model;
 pub mod psd;
 pub mod scatter;
 pub mod sheet;
+pub mod tension_field;
 
 pub use material::ShellMaterial;
 pub use model::Shell;

@@ -177,6 +177,7 @@ pub fn set_up(
                 muscles::Beside {
                     coupling,
                     skin: simulated.as_mut().map(|s| &mut s.shell),
+                    wavelength: plan.skin.lambda,
                 },
             )?;
             log.stages.extend(records);
