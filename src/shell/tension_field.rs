@@ -64,7 +64,12 @@ pub fn principal_density(
 /// `from` and grows past it further on (bisection).
 fn relaxed_stretch(from: f64, critical: f64, f: impl Fn(f64) -> f64) -> f64 {
     let (mut lo, mut hi) = (from, from.max(1.0) + 1.0);
-    while f(hi) < -critical {
+    // A law with positive moduli gets there within a few doublings; the bound keeps a
+    // degenerate one (no stiffness) from looping.
+    for _ in 0..BISECTIONS {
+        if f(hi) >= -critical {
+            break;
+        }
         lo = hi;
         hi *= 2.0;
     }

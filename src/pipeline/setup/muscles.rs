@@ -91,15 +91,7 @@ pub fn build_muscles(
     let mut calibration = None;
     let mut made_by = Vec::new();
     let (muscles, origin) = if source == "auto" {
-        let targets: Vec<MorphTarget> = face
-            .targets
-            .iter()
-            .map(|t| MorphTarget {
-                name: t.name.clone(),
-                positions: welded_loaded.iter().map(|&i| t.positions[i]).collect(),
-                normals: None,
-            })
-            .collect();
+        let targets = welded_targets(face, welded_loaded);
         let interior = Interior::new(lattice, &material)?;
         let skin = skin.filter(|_| scene.muscles.skin_in_fit());
         let way = match scene.muscles.skin_at_shapes.as_deref() {
@@ -185,6 +177,19 @@ pub fn build_muscles(
         ),
     ];
     Ok((drive, records))
+}
+
+/// The blend shapes of `face` on the welded skin, whose vertex `i` is loaded vertex
+/// `welded_loaded[i]` (offsets from rest, m).
+fn welded_targets(face: &MeshInstance, welded_loaded: &[usize]) -> Vec<MorphTarget> {
+    face.targets
+        .iter()
+        .map(|t| MorphTarget {
+            name: t.name.clone(),
+            positions: welded_loaded.iter().map(|&i| t.positions[i]).collect(),
+            normals: None,
+        })
+        .collect()
 }
 
 /// Statics' tolerance of a skin solved at a blend shape, over the frames' tolerance: the
@@ -356,20 +361,7 @@ mod tests {
         let plan = Plan::new(&rig, &opts).unwrap();
         let (model, mut state) =
             set_up(&rig, &opts.scene, &plan, &mut Log::default(), &|_, _, _| {}).unwrap();
-        let face = rig.face();
-        let targets: Vec<MorphTarget> = face
-            .targets
-            .iter()
-            .map(|t| MorphTarget {
-                name: t.name.clone(),
-                positions: model
-                    .welded_loaded
-                    .iter()
-                    .map(|&i| t.positions[i])
-                    .collect(),
-                normals: None,
-            })
-            .collect();
+        let targets = welded_targets(rig.face(), &model.welded_loaded);
         let interior =
             Interior::new(&model.lattice, &opts.scene.interior.material().unwrap()).unwrap();
         let regulariser = GenerateSettings::default().regulariser;
