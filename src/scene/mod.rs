@@ -168,7 +168,7 @@ pub struct MuscleSection {
     /// `source = "auto"`; false fits the muscles against the flesh alone): the actuation
     /// holds the force the skin puts on the lattice at the blend shape (`skin_at_shapes` says
     /// how it is found), so that the muscle makes its shape against the skin's resistance.
-    /// Makes `solver.coupling_iterations` default to 3.
+    /// Makes `solver.coupling_iterations` default to 2.
     pub skin_in_fit: Option<bool>,
     /// How the skin's force at each blend shape is found for `skin_in_fit`:
     /// `tension_field` (default: the membrane relaxed over wrinkles at the shape's smooth
@@ -213,7 +213,7 @@ pub struct SolverSection {
     /// When the skin's stiffness Bᵀ K_x B seen by the interior is recomputed: `once` (at
     /// rest; default, the force Bᵀ F_x is always current) or `every_frame` (the paper).
     pub skin_stiffness: Option<String>,
-    /// Most solves of the interior and the skin per frame (default 1, or 3 with
+    /// Most solves of the interior and the skin per frame (default 1, or 2 with
     /// `muscles.skin_in_fit`): the staggered coupling (interior with the skin's force
     /// linearised, then the skin on the interior) is repeated from the frame's start, each
     /// time linearised about the last skin, until the interior moves by less than a
