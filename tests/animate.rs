@@ -466,7 +466,7 @@ fn muscles_fitted_per_frame_drive_the_interior_and_the_skin_wrinkles() {
         "one muscle for the one blend shape"
     );
     for s in ["muscles", "fit"] {
-        let st = out.report.stages.iter().find(|x| x.stage == s).unwrap();
+        let st = out.report.stage(s).unwrap();
         assert!(st.is_ran(), "{s}: {st:?}");
     }
     let last = out.report.per_frame.last().unwrap();

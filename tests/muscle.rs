@@ -939,12 +939,7 @@ fn muscles_make_their_shapes(rig: &str, skin_in_fit: bool) {
         );
     }
     assert_eq!(out.report.totals.frames_not_converged, 0);
-    let record = out
-        .report
-        .stages
-        .iter()
-        .find(|s| s.stage == "muscles")
-        .unwrap();
+    let record = out.report.stage("muscles").unwrap();
     println!("{}", record.why);
     assert_eq!(
         record.why.contains("the skin in the fit"),

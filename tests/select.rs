@@ -35,7 +35,7 @@ fn the_stretched_half_is_left_out_and_equals_the_blend_shapes_bit_for_bit() {
     let rig = sheet();
     let out = pipeline::run(&rig, &options(compressed()), &|_, _, _| {}).unwrap();
     let r = &out.report;
-    let select = r.stages.iter().find(|s| s.stage == "select").unwrap();
+    let select = r.stage("select").unwrap();
     assert!(select.is_ran(), "{}", select.why);
     let simulated = r.sizes["simulated_vertices"].as_u64().unwrap() as usize;
     let skin = r.sizes["skin_vertices"].as_u64().unwrap() as usize;
@@ -68,7 +68,7 @@ fn the_stretched_half_is_left_out_and_equals_the_blend_shapes_bit_for_bit() {
     // whole sheet refined.
     let coarse = r.sizes["loaded_vertices"].as_u64().unwrap() as usize;
     let band = 0.05 + r.wavelength_m + 2.0 * 0.1 / 24.0 + 1e-9;
-    let refine = r.stages.iter().find(|s| s.stage == "refine").unwrap();
+    let refine = r.stage("refine").unwrap();
     println!("refine: {}", refine.why);
     assert!(
         refine.is_ran() && refine.why.contains("green"),
@@ -158,12 +158,7 @@ fn simulate_all_turns_the_selection_off_and_a_bad_key_is_refused() {
     let mut scene = Scene::default();
     scene.skin.simulate = Some("all".into());
     let out = pipeline::run(&rig, &options(scene.clone()), &|_, _, _| {}).unwrap();
-    let select = out
-        .report
-        .stages
-        .iter()
-        .find(|s| s.stage == "select")
-        .unwrap();
+    let select = out.report.stage("select").unwrap();
     assert!(!select.is_ran());
     assert_eq!(
         out.report.sizes["simulated_vertices"],

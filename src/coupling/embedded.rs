@@ -367,7 +367,7 @@ impl EmbeddedShell {
     }
 
     /// B q flat (3n, m).
-    fn embedded_flat(&self, q: &[f64]) -> Vec<f64> {
+    pub fn embedded_flat(&self, q: &[f64]) -> Vec<f64> {
         self.embedded_positions(q)
             .iter()
             .flat_map(|p| [p.x, p.y, p.z])

@@ -261,6 +261,13 @@ pub struct RunReport {
     pub export: Option<super::layer::LayerReport>,
 }
 
+impl RunReport {
+    /// The record of the set-up stage named `name` (`load`, `weld`, …, `shell`), if planned.
+    pub fn stage(&self, name: &str) -> Option<&StagePlan> {
+        self.stages.iter().find(|s| s.stage == name)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -77,9 +77,8 @@ fn run_with(
         r.per_frame.iter().map(f).sum::<f64>() / frames
     };
     let muscles_setup_ms = r
-        .stages
-        .iter()
-        .find(|s| s.stage == "muscles" && s.is_ran())
+        .stage("muscles")
+        .filter(|s| s.is_ran())
         .map_or(0.0, |s| s.ms);
     let run = DriverRun {
         driver: if source == "none" {

@@ -390,12 +390,7 @@ mod tests {
                 .unwrap();
             let q: Vec<f64> = rest.iter().zip(u).map(|(a, b)| a + b).collect();
             let at_rest = shell.x().to_vec();
-            let bq: Vec<f64> = shell
-                .embedded_positions(&q)
-                .iter()
-                .flat_map(|p| [p.x, p.y, p.z])
-                .collect();
-            shell.set_x(&bq).unwrap();
+            shell.set_x(&shell.embedded_flat(&q)).unwrap();
             let unrelaxed = shell.coupling_force();
             shell.set_x(&at_rest).unwrap();
             let off = |f: &[f64]| {

@@ -13,7 +13,7 @@ pub mod skin;
 use super::record::{FrameRecord, StageRecord};
 use super::setup::{Model, State};
 use crate::io::load::Rig;
-use crate::math::vector::norm;
+use crate::math::vector::{dot, norm};
 use compose::{Composed, SurfaceMaps};
 use interior::InteriorSchedule;
 
@@ -58,10 +58,13 @@ impl StepOptions {
                 substeps,
                 every_frame_stiffness: scene.solver.skin_stiffness.as_deref()
                     == Some("every_frame"),
-                coupling_iterations: scene
-                    .solver
-                    .coupling_iterations
-                    .unwrap_or(if skin_in_fit(scene) { 2 } else { 1 }),
+                coupling_iterations: scene.solver.coupling_iterations.unwrap_or(
+                    if scene.muscles.skin_in_fit() {
+                        SKIN_IN_FIT_PASSES
+                    } else {
+                        1
+                    },
+                ),
                 frame_interval: 1.0 / fps,
             },
             simulated_surface: scene.export.surface.as_deref() == Some("simulated"),
@@ -70,15 +73,13 @@ impl StepOptions {
     }
 }
 
-/// Whether generated muscles are fitted with the skin in the loop: the skin then stands
-/// pre-tensioned against them, and one coupling pass per frame swings (a lifted sheet's
-/// interior alternated 2.93 / 0.56 mm about its 2 mm lift frame after frame) or lags (the
-/// demo's brow raise), so the frame takes two relaxed passes ([`advance_coupled`]): on the
-/// demo's whole clip they give the interior's miss of the shape of three (24.0 % against
-/// 23.9 % of the motion) in 137 s against 180 s.
-fn skin_in_fit(scene: &crate::scene::Scene) -> bool {
-    scene.muscles.skin_in_fit()
-}
+/// Coupling passes per frame by default when generated muscles are fitted with the skin in
+/// the loop: the skin then stands pre-tensioned against them, and one pass per frame swings
+/// (a lifted sheet's interior alternated 2.93 / 0.56 mm about its 2 mm lift frame after
+/// frame) or lags (the demo's brow raise), so the frame takes two relaxed passes
+/// ([`advance_coupled`]): on the demo's whole clip they give the interior's miss of the
+/// shape of three (24.0 % against 23.9 % of the motion) in 137 s against 180 s.
+const SKIN_IN_FIT_PASSES: usize = 2;
 
 impl Model {
     /// How the export vertices follow the lattice, the target and the skin.
@@ -236,13 +237,10 @@ fn minus(a: &[f64], b: &[f64]) -> Vec<f64> {
 /// Aitken's relaxation factor after `omega` from the last two fixed-point residuals,
 /// within [`RELAXATION`]; `omega` again when they do not differ.
 fn aitken(omega: f64, last: &[f64], now: &[f64]) -> f64 {
-    let (mut dot, mut sq) = (0.0, 0.0);
-    for (a, b) in last.iter().zip(now) {
-        dot += a * (b - a);
-        sq += (b - a) * (b - a);
-    }
+    let change = minus(now, last);
+    let (along, sq) = (dot(last, &change), dot(&change, &change));
     if sq > 0.0 {
-        (-omega * dot / sq).clamp(RELAXATION.0, RELAXATION.1)
+        (-omega * along / sq).clamp(RELAXATION.0, RELAXATION.1)
     } else {
         omega
     }
