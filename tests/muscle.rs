@@ -898,23 +898,35 @@ fn activations_that_made_a_frame_are_recovered() {
     assert!(eg < 0.02, "{eg}");
 }
 
-/// Run the pipeline's set-up and one frame on a rig of `rigs/` with generated muscles (fitted
-/// with the skin in the loop when `skin_in_fit`) and check every muscle against the goal.
-fn muscles_make_their_shapes(rig: &str, skin_in_fit: bool) {
+/// The rig `rig` of `rigs/` (loaded, in metres) and the pipeline run on its `frames` (`A:B`)
+/// driven by generated muscles, fitted with the skin in the loop as `skin_in_fit` says
+/// (default when `None`).
+fn muscle_driven(
+    rig: &str,
+    frames: &str,
+    skin_in_fit: Option<bool>,
+) -> (furrow::io::load::Rig, pipeline::RunOutput) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(rig);
     let mut loaded = furrow::io::load::load(&path, &Default::default()).unwrap();
     furrow::io::units::apply(&mut loaded, None, None);
     let mut scene = Scene::default();
     scene.muscles.source = Some("auto".into());
-    scene.muscles.skin_in_fit = Some(skin_in_fit);
+    scene.muscles.skin_in_fit = skin_in_fit;
     let count = furrow::pipeline::plan::clip_weights(&loaded, 30.0).0.len();
     let opts = RunOptions {
         scene,
         scene_path: None,
         fps: 30.0,
-        frames: Some(furrow::pipeline::frames::FrameRange::parse("0:1", count).unwrap()),
+        frames: Some(furrow::pipeline::frames::FrameRange::parse(frames, count).unwrap()),
     };
     let out = pipeline::run(&loaded, &opts, &|_, _, _| {}).unwrap();
+    (loaded, out)
+}
+
+/// Run the pipeline's set-up and one frame on a rig of `rigs/` with generated muscles (fitted
+/// with the skin in the loop when `skin_in_fit`) and check every muscle against the goal.
+fn muscles_make_their_shapes(rig: &str, skin_in_fit: bool) {
+    let (loaded, out) = muscle_driven(rig, "0:1", Some(skin_in_fit));
     let made = &out.report.muscles;
     assert_eq!(
         made.len(),
@@ -1010,4 +1022,104 @@ fn jaw_hinge_is_fitted_from_the_shape_that_opens_the_jaw() {
         );
         assert!(h.residual < 0.02 && h.vertices >= 10, "{h:?}");
     }
+}
+
+/// The jaw's bone in the forward model (a block whose bottom layer is bone, half of it the
+/// jaw): at activations a the jaw's nodes stand turned by a₀ · angle about the hinge and the
+/// other bone nodes at rest; the bone muscle's linear response at rest, the bone's turn
+/// included, is the derivative of the equilibrium (one-sided differences); the bone's
+/// velocity is the derivative of its displacement.
+#[test]
+fn the_jaw_bone_turns_with_its_muscle_and_its_response_is_the_equilibriums_derivative() {
+    use furrow::muscle::jaw::JawBone;
+    let (_, lat, muscles) = muscle_block(0.2);
+    let nn = lat.node_count();
+    let (ylo, yhi) = lat
+        .rest
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
+            (a.min(p.y), b.max(p.y))
+        });
+    let ymid = 0.5 * (ylo + yhi);
+    let nodes: Vec<usize> = (0..nn)
+        .filter(|&n| lat.pinned[n] && lat.rest[n].y < ymid)
+        .collect();
+    let bone_count = lat.pinned.iter().filter(|&&p| p).count();
+    assert!(!nodes.is_empty() && nodes.len() < bone_count);
+    let bone = JawBone {
+        shape: 0,
+        rest: nodes.iter().map(|&n| lat.rest[n]).collect(),
+        pivot: V3::new(0.0, ymid, lat.rest[nodes[0]].z + 0.01),
+        nodes,
+        axis: V3::x(),
+        angle: 0.2,
+    };
+    let e = 1e-6;
+    let fd: Vec<f64> = bone
+        .displacement(0.3 + e, nn)
+        .iter()
+        .zip(bone.displacement(0.3 - e, nn))
+        .map(|(p, m)| (p - m) / (2.0 * e))
+        .collect();
+    assert!(max_diff(&fd, &bone.velocity(0.3, nn)) < 1e-8);
+
+    let rest = lat.rest_flat();
+    let interior = Interior::new(&lat, &Material::default()).unwrap();
+    let mut fwd = Forward::new(interior, muscles, rest.clone(), lat.pinned.clone()).unwrap();
+    fwd.bone = Some((0, bone.clone()));
+    let m = fwd.muscles.len();
+    let mut a = vec![0.0; m];
+    (a[0], a[1]) = (0.6, 0.3);
+    let (q, rep) = fwd.equilibrium(&a, &rest).unwrap();
+    assert_eq!(rep.status, ForwardStatus::Converged);
+    assert!((bone.angle_of(&q) - 0.6 * 0.2).abs() < 1e-12);
+    for n in (0..nn).filter(|&n| lat.pinned[n] && !bone.nodes.contains(&n)) {
+        assert_eq!(q[3 * n..3 * n + 3], rest[3 * n..3 * n + 3]);
+    }
+
+    let zero = vec![0.0; m];
+    let cols = fwd.response(&rest, &zero).unwrap();
+    fwd.tolerance = 1e-9;
+    let eps = 1e-5;
+    let mut ae = zero.clone();
+    ae[0] = eps;
+    let (qe, rep) = fwd.equilibrium(&ae, &rest).unwrap();
+    assert_eq!(rep.status, ForwardStatus::Converged);
+    let fd: Vec<f64> = qe.iter().zip(&rest).map(|(x, r)| (x - r) / eps).collect();
+    let scale = fd.iter().fold(0.0f64, |s, v| s.max(v.abs()));
+    let miss = max_diff(&cols[0], &fd);
+    println!("bone muscle's response against differences: {miss:.2e} of {scale:.2e} m");
+    assert!(miss < 1e-4 * scale);
+    // On the jaw's nodes the response is the bone's own turn.
+    let turn = bone.velocity(0.0, nn);
+    for &n in &bone.nodes {
+        assert!(max_diff(&cols[0][3 * n..3 * n + 3], &turn[3 * n..3 * n + 3]) < 1e-15);
+    }
+}
+
+/// On the demo face the muscles turn the jaw's bone: the bone nodes under the chin are found
+/// from the jaw shape's hinge (the record says how many turn with which muscle), and at a
+/// frame with the jaw open the bone stands turned by a fraction of the shape's 10°.
+#[test]
+fn the_face_rigs_jaw_muscle_turns_its_bone() {
+    let (_, out) = muscle_driven("rigs/face.glb", "143:144", None);
+    let jaw = out.report.jaw.as_ref().expect("the face's jaw hinge");
+    let nodes = jaw.bone_nodes.expect("bone nodes that turn with the jaw");
+    let record = out.report.stage("muscles").unwrap();
+    println!("{}", record.why);
+    let bone = out.report.sizes["bone_nodes"].as_u64().unwrap() as usize;
+    assert!(nodes > 0 && nodes < bone, "{nodes} of {bone}");
+    assert!(
+        record
+            .why
+            .contains(&format!("{nodes} bone nodes turn with muscle jaw_open")),
+        "{}",
+        record.why
+    );
+    let turned = out.report.per_frame[0].jaw_deg.expect("the jaw's angle");
+    println!(
+        "frame 143: the jaw's bone at {turned:.2}° of {:.2}°",
+        jaw.angle_deg
+    );
+    assert!(turned > 0.3 * jaw.angle_deg && turned <= 1.0001 * jaw.angle_deg);
 }

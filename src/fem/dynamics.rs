@@ -756,7 +756,27 @@ impl BackwardEuler {
         f_ext: &[f64],
         extra: Option<&ExtraTerms>,
     ) -> Result<SolveReport, FemError> {
+        self.step_from(f_ext, extra, None)
+    }
+
+    /// [`Self::step`] with Newton started at `start` (node positions, flat, m; pinned nodes
+    /// keep theirs) instead of the inertial predictor q + h v: a step taken again under a
+    /// slightly changed load (a later interior–skin coupling pass) starts where the last
+    /// attempt ended. The step's answer is the same; only the iterations to it change.
+    pub fn step_from(
+        &mut self,
+        f_ext: &[f64],
+        extra: Option<&ExtraTerms>,
+        start: Option<&[f64]>,
+    ) -> Result<SolveReport, FemError> {
         self.check_inputs(f_ext, extra)?;
+        if let Some(s) = start {
+            if s.len() != self.q.len() || s.iter().any(|v| !v.is_finite()) {
+                return Err(FemError::Input(
+                    "a step's start has the wrong length or a non-finite value".into(),
+                ));
+            }
+        }
         self.ensure_system(extra)?;
         let h = self.settings.dt;
         let x0 = self.q.clone();
@@ -769,6 +789,11 @@ impl BackwardEuler {
             }
         }
         let target: Vec<f64> = y.clone();
+        if let Some(s) = start {
+            for n in (0..self.interior.nodes).filter(|&n| !self.pinned[n]) {
+                y[3 * n..3 * n + 3].copy_from_slice(&s[3 * n..3 * n + 3]);
+            }
+        }
         let report = self.minimise(&mut y, &x0, Some((&target, h)), f_ext, extra)?;
         for i in 0..y.len() {
             self.v[i] = (y[i] - x0[i]) / h;

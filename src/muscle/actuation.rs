@@ -24,6 +24,7 @@
 //! skin relieves by wrinkling.
 
 use super::forward::{embed_flat, Coupling, Forward, ForwardStatus};
+use super::jaw::JawBone;
 use super::model::{Muscle, DEFAULT_MAX_CONTRACTION};
 use super::MuscleError;
 use crate::fem::Interior;
@@ -143,8 +144,11 @@ impl<'a> Plant<'a> {
     /// Fit the actuation that makes node displacements `u` (the shape's lattice fit, flat, m)
     /// with the tracking pulling towards surface displacements `delta` (flat, m) and, when
     /// given, the skin's force on the nodes at the shape (`skin_load`, flat, N) held as a
-    /// constant load; `moved` lists the vertices the miss is measured on. The response
-    /// (the fitter's J column) leaves out what the tracking's pull alone makes, not the skin's.
+    /// constant load; `moved` lists the vertices the miss is measured on. With the jaw's
+    /// `bone` (its shape's), u turns the bone nodes by the shape's angle: the actuation's
+    /// rest change turns them too (a rigid change of the bone's elements, which costs no
+    /// actuation) and the equilibria hold them there. The response (the fitter's J column)
+    /// leaves out what the tracking's pull alone makes, not the skin's.
     pub fn fit(
         &self,
         u: &[f64],
@@ -152,6 +156,7 @@ impl<'a> Plant<'a> {
         moved: &[usize],
         settings: &ActuationSettings,
         skin_load: Option<&[f64]>,
+        bone: Option<&JawBone>,
     ) -> Result<FittedActuation, MuscleError> {
         let rest = self.lattice.rest_flat();
         let nodes = self.lattice.node_count();
@@ -160,9 +165,22 @@ impl<'a> Plant<'a> {
         if let Some(s) = skin_load {
             load.iter_mut().zip(s).for_each(|(a, b)| *a += b);
         }
-        let mut f = self.stiffness_times(u, true);
+        // The rest change s that makes u the linearised equilibrium, with s = u on the bone
+        // nodes: K_int (u − s) + K_t u = load on the free rows.
+        let pinned = &self.lattice.pinned;
+        let on_bone = |y: &[f64], keep: bool| -> Vec<f64> {
+            (0..y.len())
+                .map(|i| if pinned[i / 3] == keep { y[i] } else { 0.0 })
+                .collect()
+        };
+        let mut f = self.stiffness_times(&on_bone(u, false), false);
+        triplets_mul_add(&self.coupling.stiffness, u, &mut f);
         f.iter_mut().zip(&load).for_each(|(a, b)| *a -= b);
         let mut shift = self.passive.solve_at_rest_factored(&f);
+        shift
+            .iter_mut()
+            .zip(on_bone(u, true))
+            .for_each(|(s, b)| *s += b);
         let bu = self.surface(u);
         let norm = rms_over(delta, None, moved).max(1e-300);
         let mut fitted = FittedActuation {
@@ -183,6 +201,7 @@ impl<'a> Plant<'a> {
         )?
         .with_coupling(self.coupling.clone());
         one.tolerance = EQUILIBRIUM_TOLERANCE;
+        one.bone = bone.map(|b| (0, b.clone()));
         // Corrections with backtracking: a step that raises the miss (or whose equilibrium
         // fails) is halved from the best state so far.
         let mut best: Option<(FittedActuation, Vec<f64>, Vec<f64>)> = None;

@@ -115,6 +115,9 @@ pub struct Forward {
     pub tolerance: f64,
     /// The pipeline's tracking, when the model stands for that interior.
     pub coupling: Option<Coupling>,
+    /// The jaw's bone and the muscle whose activation turns it (by that fraction of the
+    /// jaw shape's angle); other bone nodes stay at rest.
+    pub bone: Option<(usize, super::jaw::JawBone)>,
     free: Vec<usize>,
     nfree: usize,
     pattern: Option<Pattern>,
@@ -168,6 +171,7 @@ impl Forward {
             max_newton: 40,
             tolerance: 1e-7,
             coupling: None,
+            bone: None,
             free,
             nfree,
             pattern: None,
@@ -323,8 +327,22 @@ impl Forward {
         out
     }
 
-    /// Equilibrium node positions (flat, m) at activations `a`, by Newton from `q0` (pinned
-    /// nodes are reset to rest). Returns the positions and what the solve did.
+    /// Put the bone nodes of `q` (flat, m) where activations `a` hold them: at rest, the
+    /// jaw's turned by its muscle's activation.
+    fn place_bone(&self, a: &[f64], q: &mut [f64]) {
+        for (n, &p) in self.pinned.iter().enumerate() {
+            if p {
+                q[3 * n..3 * n + 3].copy_from_slice(&self.rest[3 * n..3 * n + 3]);
+            }
+        }
+        if let Some((m, bone)) = &self.bone {
+            bone.place(a.get(*m).copied().unwrap_or(0.0), q);
+        }
+    }
+
+    /// Equilibrium node positions (flat, m) at activations `a`, by Newton from `q0` (bone
+    /// nodes are put where `a` holds them: [`Self::bone`]). Returns the positions and what
+    /// the solve did.
     pub fn equilibrium(
         &mut self,
         a: &[f64],
@@ -352,11 +370,7 @@ impl Forward {
             ));
         }
         let mut q = q0.to_vec();
-        for (n, &p) in self.pinned.iter().enumerate() {
-            if p {
-                q[3 * n..3 * n + 3].copy_from_slice(&self.rest[3 * n..3 * n + 3]);
-            }
-        }
+        self.place_bone(a, &mut q);
         let forces = unit_forces(&self.interior, &self.muscles, &q);
         let mut applied = load.map_or_else(|| vec![0.0; q.len()], <[f64]>::to_vec);
         for (f, &am) in forces.iter().zip(a) {
@@ -433,13 +447,35 @@ impl Forward {
     }
 
     /// Linear response of the equilibrium at (q, a) to each activation: columns ∂q/∂a_m
-    /// (flat over node DOFs, m per unit activation, zero on bone nodes). One factorisation
-    /// of the Hessian at (q, a) and one solve per muscle.
+    /// (flat over node DOFs, m per unit activation, zero on bone nodes but the jaw's, which
+    /// turn with its muscle). One factorisation of the Hessian at (q, a) and one solve per
+    /// muscle.
     pub fn response(&mut self, q: &[f64], a: &[f64]) -> Result<Vec<Vec<f64>>, MuscleError> {
         self.check_activations(a)?;
         self.factorise_robust(q, a)?;
-        let forces = unit_forces(&self.interior, &self.muscles, q);
-        Ok(forces.par_iter().map(|f| self.solve_full(f)).collect())
+        let mut forces = unit_forces(&self.interior, &self.muscles, q);
+        let turn = self.bone.as_ref().map(|(m, bone)| {
+            let dp = bone.velocity(a.get(*m).copied().unwrap_or(0.0), self.interior.nodes);
+            (*m, dp)
+        });
+        if let Some((m, dp)) = &turn {
+            // The bone's turn pulls the free nodes by −K dp (a directional difference of the
+            // gradient: K is the Hessian the factorisation is of).
+            let scale = dp.iter().fold(0.0f64, |s, v| s.max(v.abs())).max(1e-300);
+            let h = 1e-6 * self.interior.cell_size / scale;
+            let (mut g0, mut g1) = (vec![0.0; q.len()], vec![0.0; q.len()]);
+            let moved: Vec<f64> = q.iter().zip(dp).map(|(x, d)| x + h * d).collect();
+            self.energy(q, a, None, Some(&mut g0));
+            self.energy(&moved, a, None, Some(&mut g1));
+            for ((f, a1), a0) in forces[*m].iter_mut().zip(&g1).zip(&g0) {
+                *f -= (a1 - a0) / h;
+            }
+        }
+        let mut cols: Vec<Vec<f64>> = forces.par_iter().map(|f| self.solve_full(f)).collect();
+        if let Some((m, dp)) = turn {
+            cols[m].iter_mut().zip(&dp).for_each(|(c, d)| *c += d);
+        }
+        Ok(cols)
     }
 
     /// K⁻¹ b with K the Hessian at rest with no activation (coupling included), for a

@@ -5,6 +5,7 @@ use super::actuation::{
     actuation_muscle, moved_vertices, ActuationSettings, FittedActuation, Plant,
 };
 use super::forward::Coupling;
+use super::jaw::JawBone;
 use super::model::Muscle;
 use super::MuscleError;
 use crate::fem::Interior;
@@ -93,6 +94,9 @@ pub struct Generated {
     /// (shape name, why) of the shapes fitted without the skin's force although it was
     /// given: their fit holding it did not converge or missed the shape beyond the goal.
     pub without_skin: Vec<(String, String)>,
+    /// The muscle that turns the jaw's bone (index into `muscles`), when a bone was given
+    /// and its shape made a muscle.
+    pub bone_muscle: Option<usize>,
 }
 
 /// The shape error a generated muscle is held to (dimensionless): 5 % of the shape's RMS
@@ -102,12 +106,14 @@ pub fn shape_goal(projection: f64) -> f64 {
 }
 
 /// Lattice node displacements (flat, m) fitted to each target (see the module notes, step
-/// 1): least squares through the embedding with an elastic regulariser, bone nodes fixed.
+/// 1): least squares through the embedding with an elastic regulariser, bone nodes fixed
+/// (the jaw's `bone`, when given, turned by its shape's full angle for that shape).
 pub fn fit_node_displacements(
     lattice: &Lattice,
     interior: &Interior,
     targets: &[MorphTarget],
     regulariser: f64,
+    bone: Option<&JawBone>,
 ) -> Result<Vec<Vec<f64>>, MuscleError> {
     let nn = lattice.node_count();
     let nv = lattice.vertex_points.len();
@@ -161,7 +167,7 @@ pub fn fit_node_displacements(
     let trace_k: f64 = kt.iter().filter(|t| t.0 == t.1).map(|t| t.2).sum();
     let alpha = regulariser * trace_btb / trace_k.max(1e-300);
     let mut trip: Vec<(usize, usize, f64)> = Vec::with_capacity(kt.len() + 3 * btb.len());
-    for (r, c, v) in kt {
+    for &(r, c, v) in &kt {
         let (fr, fc) = (free[r / 3], free[c / 3]);
         if fr != usize::MAX && fc != usize::MAX {
             trip.push((3 * fr + r % 3, 3 * fc + c % 3, alpha * v));
@@ -182,9 +188,26 @@ pub fn fit_node_displacements(
     let mut solver = SpdSolver::new();
     solver.factorize(&pat.assemble(&trip)?)?;
     let embed = lattice.embedding_triplets();
+    // (α K + BᵀB) y over all dofs: what bone displacements y put on the free rows.
+    let system_times = |y: &[f64]| {
+        let mut out = vec![0.0; 3 * nn];
+        for &(r, c, v) in &kt {
+            out[r] += alpha * v * y[c];
+        }
+        for &(a, b, v) in &btb {
+            for i in 0..3 {
+                out[3 * a + i] += v * y[3 * b + i];
+            }
+        }
+        out
+    };
     Ok(targets
         .iter()
-        .map(|t| {
+        .enumerate()
+        .map(|(ti, t)| {
+            let turned = bone
+                .filter(|b| b.shape == ti)
+                .map(|b| b.displacement(1.0, nn));
             let mut rhs = vec![0.0; n3];
             for &(v, n, w) in &embed {
                 let f = free[n];
@@ -194,8 +217,16 @@ pub fn fit_node_displacements(
                     }
                 }
             }
+            if let Some(up) = &turned {
+                let pull = system_times(up);
+                for n in (0..nn).filter(|&n| free[n] != usize::MAX) {
+                    for i in 0..3 {
+                        rhs[3 * free[n] + i] -= pull[3 * n + i];
+                    }
+                }
+            }
             solver.solve_in_place(&mut rhs);
-            let mut u = vec![0.0; 3 * nn];
+            let mut u = turned.unwrap_or_else(|| vec![0.0; 3 * nn]);
             for n in 0..nn {
                 if free[n] != usize::MAX {
                     u[3 * n..3 * n + 3].copy_from_slice(&rhs[3 * free[n]..3 * free[n] + 3]);
@@ -215,14 +246,15 @@ pub fn generate_muscles(
     coupling: Option<&Coupling>,
     settings: &GenerateSettings,
 ) -> Result<Generated, MuscleError> {
-    generate_muscles_with_skin(lattice, interior, targets, coupling, settings, None)
+    generate_muscles_with_skin(lattice, interior, targets, coupling, settings, None, None)
 }
 
 /// The skin's force on the lattice nodes (flat, N) when the interior stands at node
 /// displacements `u` (flat, m) from rest.
 pub type SkinForce<'s> = &'s mut dyn FnMut(&[f64]) -> Result<Vec<f64>, MuscleError>;
 
-/// [`generate_muscles`], with the skin's force at each shape held by the actuation.
+/// [`generate_muscles`], with the skin's force at each shape held by the actuation and the
+/// jaw's `bone` turned by the muscle of the shape that opens it.
 pub fn generate_muscles_with_skin(
     lattice: &Lattice,
     interior: &Interior,
@@ -230,9 +262,10 @@ pub fn generate_muscles_with_skin(
     coupling: Option<&Coupling>,
     settings: &GenerateSettings,
     skin_force: Option<SkinForce>,
+    bone: Option<&JawBone>,
 ) -> Result<Generated, MuscleError> {
     settings.validate()?;
-    let u = fit_node_displacements(lattice, interior, targets, settings.regulariser)?;
+    let u = fit_node_displacements(lattice, interior, targets, settings.regulariser, bone)?;
     // Only shapes strained enough to make a muscle get a (costly) skin solve.
     let strained = |ut: &[f64]| {
         let strain = ut.iter().fold(0.0f64, |m, v| m.max(v.abs())) / lattice.cell_size;
@@ -262,6 +295,7 @@ pub fn generate_muscles_with_skin(
         skipped: Vec::new(),
         fits: Vec::new(),
         without_skin: Vec::new(),
+        bone_muscle: None,
     };
     // Shapes are fitted in parallel, each with its own equilibrium solver; the results are
     // taken in shape order, so the muscles do not depend on the thread count.
@@ -270,15 +304,17 @@ pub fn generate_muscles_with_skin(
         .par_iter()
         .zip(&u)
         .zip(&skin_loads)
-        .map(|((t, ut), skin)| {
+        .enumerate()
+        .map(|(ti, ((t, ut), skin))| {
             if !strained(ut) {
                 return Ok(None);
             }
             let delta: Vec<f64> = t.positions.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
             let moved = moved_vertices(&delta, 0.1);
+            let turns = bone.filter(|b| b.shape == ti);
             let free = |why: Option<String>| {
                 plant
-                    .fit(ut, &delta, &moved, &fit_settings, None)
+                    .fit(ut, &delta, &moved, &fit_settings, None, turns)
                     .map(|f| Some((f, why)))
             };
             let Some(load) = skin else {
@@ -288,7 +324,7 @@ pub fn generate_muscles_with_skin(
                 corrections: settings.corrections_with_skin,
                 ..fit_settings
             };
-            let held = plant.fit(ut, &delta, &moved, &held_settings, Some(load))?;
+            let held = plant.fit(ut, &delta, &moved, &held_settings, Some(load), turns)?;
             if !held.converged {
                 free(Some(
                     "its equilibrium holding the skin's force did not converge".into(),
@@ -323,6 +359,9 @@ pub fn generate_muscles_with_skin(
                 let name = unique_name(&t.name, out.source.len(), &mut used);
                 out.muscles
                     .push(actuation_muscle(&name, &f.elements, &f.offsets));
+                if bone.is_some_and(|b| b.shape == ti) {
+                    out.bone_muscle = Some(out.muscles.len() - 1);
+                }
                 out.source.push(ti);
                 out.fits.push(f);
             }

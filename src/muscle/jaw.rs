@@ -31,6 +31,9 @@ pub struct Hinge {
     pub vertices: usize,
     /// RMS miss of the rotation over those vertices, relative to their RMS displacement.
     pub residual: f64,
+    /// Bone (pinned) lattice nodes that turn with the jaw, when the muscles drive it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bone_nodes: Option<usize>,
 }
 
 /// Whether `name` is a jaw-opening shape.
@@ -60,6 +63,11 @@ fn rigid_fit(from: &[V], to: &[V], pick: &[usize]) -> (Matrix3<f64>, V) {
 /// Fit the hinge of shape `name` with offsets `delta` (m) from the rest positions `rest` (m);
 /// None when the shape barely moves anything or no rotation explains it.
 pub fn fit_hinge(name: &str, rest: &[V], delta: &[V]) -> Option<Hinge> {
+    fit_rigid(name, rest, delta).map(|(h, _)| h)
+}
+
+/// [`fit_hinge`], with the vertices the rotation explains (indices into `rest`).
+fn fit_rigid(name: &str, rest: &[V], delta: &[V]) -> Option<(Hinge, Vec<usize>)> {
     let norms: Vec<f64> = delta.iter().map(|d| d.norm()).collect();
     let max = norms.iter().cloned().fold(0.0, f64::max);
     if max <= 0.0 || max.is_nan() || rest.len() != delta.len() {
@@ -90,7 +98,7 @@ pub fn fit_hinge(name: &str, rest: &[V], delta: &[V]) -> Option<Hinge> {
     }
     let mut h = hinge_of(name, &r, &t, (rest, &moved, &pick))?;
     h.angle_deg = full_angle(&h, rest, delta, 0.1 * max).to_degrees();
-    Some(h)
+    Some((h, pick))
 }
 
 /// The jaw's angle at weight 1 (rad): where a shape fades the jaw's motion out, its vertices
@@ -138,7 +146,129 @@ fn hinge_of(
         angle_deg: angle.to_degrees(),
         vertices: pick.len(),
         residual: (miss2 / disp2.max(f64::MIN_POSITIVE)).sqrt(),
+        bone_nodes: None,
     })
+}
+
+/// The jaw's bone: the bone (pinned) lattice nodes that turn with the jaw about its hinge,
+/// so that the muscle of the shape that opens it turns them by its activation times the
+/// shape's angle, and the flesh follows the bone instead of being pulled along.
+#[derive(Debug, Clone, PartialEq)]
+pub struct JawBone {
+    /// The blend shape that opens the jaw (index into the rig's shapes).
+    pub shape: usize,
+    /// The pinned lattice nodes that turn with the jaw (sorted).
+    pub nodes: Vec<usize>,
+    /// Their rest positions (m).
+    pub rest: Vec<V>,
+    /// Unit axis of the hinge (model space).
+    pub axis: V,
+    /// A point on the hinge's axis (m).
+    pub pivot: V,
+    /// The jaw's angle at the shape's weight 1 (rad).
+    pub angle: f64,
+}
+
+impl JawBone {
+    /// The jaw's bone of a face whose welded vertices rest at `rest` (m) with blend shapes
+    /// `targets` (offsets, m), embedded in `lattice`: the hinge of its first jaw-opening
+    /// shape, and the pinned nodes whose nearest vertex at rest is one the hinge turns
+    /// rigidly (bone under the chin and the lower teeth, not under the cheeks the jaw only
+    /// drags). None without a jaw shape, a hinge, or a node that turns.
+    pub fn find(
+        lattice: &crate::lattice::Lattice,
+        rest: &[V],
+        targets: &[crate::io::model::MorphTarget],
+    ) -> Option<(JawBone, Hinge)> {
+        let shape = targets.iter().position(|t| is_jaw_shape(&t.name))?;
+        let (mut hinge, turning) =
+            fit_rigid(&targets[shape].name, rest, &targets[shape].positions)?;
+        let mut rigid = vec![false; rest.len()];
+        turning.iter().for_each(|&v| rigid[v] = true);
+        let nearest = |p: &V| {
+            (0..rest.len()).min_by(|&a, &b| {
+                (rest[a] - p)
+                    .norm_squared()
+                    .total_cmp(&(rest[b] - p).norm_squared())
+            })
+        };
+        let nodes: Vec<usize> = (0..lattice.node_count())
+            .filter(|&n| lattice.pinned[n])
+            .filter(|&n| nearest(&lattice.rest[n]).is_some_and(|v| rigid[v]))
+            .collect();
+        if nodes.is_empty() {
+            return None;
+        }
+        hinge.bone_nodes = Some(nodes.len());
+        let bone = JawBone {
+            shape,
+            rest: nodes.iter().map(|&n| lattice.rest[n]).collect(),
+            nodes,
+            axis: V::from(hinge.axis).normalize(),
+            pivot: V::from(hinge.pivot_m),
+            angle: hinge.angle_deg.to_radians(),
+        };
+        Some((bone, hinge))
+    }
+
+    /// The bone nodes' positions at opening `a` (a fraction of the shape's angle, m): their
+    /// rest positions turned by a · angle about the hinge.
+    fn turned(&self, a: f64) -> impl Iterator<Item = (usize, V)> + '_ {
+        let r = nalgebra::Rotation3::from_axis_angle(
+            &nalgebra::Unit::new_unchecked(self.axis),
+            a * self.angle,
+        );
+        self.nodes
+            .iter()
+            .zip(&self.rest)
+            .map(move |(&n, x)| (n, r * (x - self.pivot) + self.pivot))
+    }
+
+    /// Write the bone nodes' positions at opening `a` into `q` (flat node positions, m).
+    pub fn place(&self, a: f64, q: &mut [f64]) {
+        for (n, y) in self.turned(a) {
+            q[3 * n..3 * n + 3].copy_from_slice(y.as_slice());
+        }
+    }
+
+    /// The bone nodes' displacements from rest at opening `a` (flat over `nodes` nodes, m;
+    /// zero at the other nodes).
+    pub fn displacement(&self, a: f64, nodes: usize) -> Vec<f64> {
+        let mut out = vec![0.0; 3 * nodes];
+        for ((n, y), x) in self.turned(a).zip(&self.rest) {
+            out[3 * n..3 * n + 3].copy_from_slice((y - x).as_slice());
+        }
+        out
+    }
+
+    /// The angle the bone nodes of `q` (flat node positions, m) stand at about the hinge
+    /// (rad): the rotation about the axis that best takes their rest positions to them in
+    /// the plane across the axis, atan2(Σ (u × w)·axis, Σ u·w) over their offsets from the
+    /// axis at rest (u) and in `q` (w), so nodes near the axis weigh little; a · angle when
+    /// placed at opening a.
+    pub fn angle_of(&self, q: &[f64]) -> f64 {
+        let flat = |v: V| v - self.axis * self.axis.dot(&v);
+        let (mut cross, mut dot) = (0.0, 0.0);
+        for (&n, x) in self.nodes.iter().zip(&self.rest) {
+            let y = V::new(q[3 * n], q[3 * n + 1], q[3 * n + 2]);
+            let (u, w) = (flat(x - self.pivot), flat(y - self.pivot));
+            cross += u.cross(&w).dot(&self.axis);
+            dot += u.dot(&w);
+        }
+        cross.atan2(dot)
+    }
+
+    /// d/da of the bone nodes' positions at opening `a` (flat over `nodes` nodes, m per unit
+    /// opening; zero at the other nodes): angle · axis × (y − pivot) at their turned
+    /// positions y.
+    pub fn velocity(&self, a: f64, nodes: usize) -> Vec<f64> {
+        let mut out = vec![0.0; 3 * nodes];
+        for (n, y) in self.turned(a) {
+            let w = self.axis.cross(&(y - self.pivot)) * self.angle;
+            out[3 * n..3 * n + 3].copy_from_slice(w.as_slice());
+        }
+        out
+    }
 }
 
 #[cfg(test)]

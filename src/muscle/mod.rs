@@ -14,22 +14,25 @@
 //! * [`generate`]: muscles from the blend-shape basis when there is no file.
 //! * [`qp`]: the per-frame convex QP (clarabel) with exact active-set polishing.
 //! * [`fit`]: the per-frame fit with Gauss–Newton re-linearisations.
-//! * [`jaw`]: the jaw's hinge, fitted from the shape that opens it.
+//! * [`jaw`]: the jaw's hinge, fitted from the shape that opens it, and the bone nodes that
+//!   turn about it with the jaw shape's muscle ([`jaw::JawBone`]).
 //!
 //! # Muscles generated from blend shapes
 //!
 //! When a rig has no muscle file, furrow makes one actuation muscle per blend shape:
 //!
 //! 1. Fit the lattice to each blend shape: node displacements u minimise
-//!    ‖B u − Δ‖² + α uᵀ K u over the free (non-bone) nodes, with B the embedding of the
+//!    ‖B u − Δ‖² + α uᵀ K u over the free (non-bone) nodes (the jaw's bone nodes turned by
+//!    the jaw shape's full angle for that shape, the other bone at rest), with B the embedding of the
 //!    surface in the lattice, Δ the shape's vertex displacements and K the interior's rest
 //!    stiffness; α = β · tr(BᵀB)/tr(K) (β = [`generate::GenerateSettings::regulariser`],
 //!    default 10⁻³) makes the elastic term a light smoothness regulariser. One sparse
 //!    Cholesky factorisation serves all shapes (one solve per shape). ‖B u − Δ‖ is the
 //!    lattice's own projection residual: no muscle on this lattice can do better.
 //! 2. Fit the actuation that makes u the equilibrium of the interior the pipeline runs with
-//!    its tracking ([`actuation`]; the skin is left out, as measured there): the rest change
-//!    is u plus K_int⁻¹ (K_t u − Bᵀ k Δ), what the tracking's pull leaves to the muscle, and
+//!    its tracking ([`actuation`]) and, with `muscles.skin_in_fit`, the skin's force at the
+//!    shape: the rest change is u plus K_int⁻¹ (K_t u − Bᵀ k Δ − f_skin), what the tracking's
+//!    pull leaves to the muscle (on the jaw's bone nodes the bone's own turn), and
 //!    nonlinear corrections remove the corotational interior's departure from the
 //!    linearisation.
 //! 3. The muscle covers every element whose offset reaches 10⁻⁴ of the shape's largest.

@@ -259,7 +259,11 @@ fn finish_report(
             .as_ref()
             .map(|m| m.made.clone())
             .unwrap_or_default(),
-        jaw: jaw_hinge(face),
+        jaw: state
+            .muscles
+            .as_ref()
+            .and_then(|m| m.bone.as_ref().map(|b| b.2.clone()))
+            .or_else(|| jaw_hinge(face)),
         export: None,
     }
 }

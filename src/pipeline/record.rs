@@ -157,6 +157,10 @@ pub struct FrameRecord {
     /// RMS over the surface's vertices of the blend-shape target's displacement from rest
     /// (m): the scale of [`Self::shape_miss_m`].
     pub shape_motion_m: f64,
+    /// The angle the jaw's bone nodes stand at about its hinge after the frame (degrees,
+    /// measured on the interior), when muscles turn a jaw bone.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub jaw_deg: Option<f64>,
 }
 
 /// Totals over the run.

@@ -10,6 +10,7 @@ use crate::io::model::MorphTarget;
 use crate::lattice::Lattice;
 use crate::mesh::TriMesh;
 use crate::muscle::fit::Calibration;
+use crate::muscle::jaw::{Hinge, JawBone};
 use crate::muscle::{Coupling, FitSettings, Fitter, GenerateSettings, Generated, MuscleError};
 use crate::pipeline::record::StagePlan;
 use crate::scene::Scene;
@@ -33,6 +34,9 @@ pub struct MuscleDrive {
     /// Whether the current frame's fit failed, so that tracking at full stiffness drives the
     /// interior for this frame instead of the kept activations.
     pub fallback: bool,
+    /// The jaw's bone and the muscle whose activation turns it (generated muscles of a face
+    /// with a jaw-opening shape), with the hinge it turns about (for the report).
+    pub bone: Option<(usize, JawBone, Hinge)>,
 }
 
 /// How well a generated muscle makes its blend shape at activation 1, in the interior the
@@ -90,8 +94,11 @@ pub fn build_muscles(
     let mut made = String::new();
     let mut calibration = None;
     let mut made_by = Vec::new();
+    let mut bone = None;
     let (muscles, origin) = if source == "auto" {
         let targets = welded_targets(face, welded_loaded);
+        let rest: Vec<_> = welded_loaded.iter().map(|&i| face.positions[i]).collect();
+        let jaw = JawBone::find(lattice, &rest, &targets);
         let interior = Interior::new(lattice, &material)?;
         let skin = skin.filter(|_| scene.muscles.skin_in_fit());
         let way = match scene.muscles.skin_at_shapes.as_deref() {
@@ -109,7 +116,9 @@ pub fn build_muscles(
             force
                 .as_mut()
                 .map(|f| f as crate::muscle::generate::SkinForce),
+            jaw.as_ref().map(|j| &j.0),
         )?;
+        bone = g.bone_muscle.zip(jaw).map(|(m, (b, h))| (m, b, h));
         made = shape_errors(&g);
         if let Some(a) = &at_shapes {
             made.push_str(&a.summary(&g.without_skin));
@@ -146,7 +155,7 @@ pub fn build_muscles(
         );
     }
     let n = muscles.len();
-    let fitter = Fitter::coupled(
+    let mut fitter = Fitter::coupled(
         lattice,
         &material,
         muscles,
@@ -154,19 +163,22 @@ pub fn build_muscles(
         Some(coupling),
         calibration,
     )?;
+    fitter.forward.bone = bone.as_ref().map(|(m, b, _)| (*m, b.clone()));
     let drive = MuscleDrive {
         fitter,
         activations: vec![0.0; n],
         origin,
         made: made_by,
         fallback: false,
+        bone,
     };
     let records = [
         StagePlan::ran(
             "muscles",
             format!(
-                "{n} muscles {}{made}; a weak tracking (κ = {MUSCLE_TRACKING}) carries what they cannot make (bone motion)",
-                drive.origin
+                "{n} muscles {}{made}{}; a weak tracking (κ = {MUSCLE_TRACKING}) carries what they cannot make",
+                drive.origin,
+                bone_summary(&drive),
             ),
             t.elapsed().as_secs_f64() * 1e3,
         ),
@@ -177,6 +189,19 @@ pub fn build_muscles(
         ),
     ];
     Ok((drive, records))
+}
+
+/// What the muscles' record says of the jaw's bone (empty without one).
+fn bone_summary(drive: &MuscleDrive) -> String {
+    match &drive.bone {
+        Some((m, bone, hinge)) => format!(
+            "; {} bone nodes turn with muscle {} about the jaw's hinge ({:.1}° at activation 1)",
+            bone.nodes.len(),
+            drive.fitter.muscles()[*m].name,
+            hinge.angle_deg
+        ),
+        None => String::new(),
+    }
 }
 
 /// The blend shapes of `face` on the welded skin, whose vertex `i` is loaded vertex
@@ -370,6 +395,7 @@ mod tests {
             &interior,
             &targets,
             regulariser,
+            None,
         )
         .unwrap();
         let rest = model.lattice.rest_flat();

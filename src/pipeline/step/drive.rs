@@ -58,7 +58,8 @@ pub fn fallback_tracking(
 }
 
 /// Actuate the interior's rest state for the fitted activations (the actuation muscles'
-/// Σ a_m d_m; fibre muscles act through [`add_muscle_terms`]).
+/// Σ a_m d_m; fibre muscles act through [`add_muscle_terms`]) and turn the jaw's bone nodes
+/// by its muscle's activation (pinned, they hold that through the frame's steps).
 pub fn actuate(muscles: &MuscleDrive, stepper: &mut BackwardEuler) -> anyhow::Result<()> {
     let d = crate::muscle::actuation_field(
         &stepper.interior,
@@ -66,6 +67,9 @@ pub fn actuate(muscles: &MuscleDrive, stepper: &mut BackwardEuler) -> anyhow::Re
         &muscles.activations,
     );
     stepper.interior.set_actuation(d)?;
+    if let Some((m, bone, _)) = &muscles.bone {
+        bone.place(muscles.activations[*m], &mut stepper.q);
+    }
     Ok(())
 }
 

@@ -34,7 +34,9 @@ pub const MAX_HALVINGS: usize = 4;
 
 /// Advance the interior over frame `k` towards the welded `target` (m) and record it, with
 /// the skin's force linearised about node positions `about` (flat, m: where the skin's
-/// current state was solved; default the interior's current positions).
+/// current state was solved; default the interior's current positions). A later coupling
+/// pass of the frame (`about` given) starts each sub-step's Newton where the last pass's
+/// ended ([`Scratch::substep_ends`]).
 pub fn advance(
     model: &Model,
     state: &mut State,
@@ -58,6 +60,11 @@ pub fn advance(
     // A later coupling pass of the frame (`about` given) keeps the frame's first tangent.
     let refresh = about.is_none();
     let skin_force = coupling_terms(model, state.skin.as_ref(), q, scratch, schedule, refresh);
+    let starts = match about {
+        Some(_) => std::mem::take(&mut scratch.substep_ends),
+        None => Vec::new(),
+    };
+    scratch.substep_ends.clear();
     let from = state.last_target.take().unwrap_or_else(|| target.to_vec());
     let skin_parts = [
         scratch
@@ -75,6 +82,7 @@ pub fn advance(
         from: &from,
         target,
         zero_force: &scratch.zero_force,
+        start: None,
         interval: (
             (k as f64 - 1.0) * schedule.frame_interval,
             schedule.frame_interval,
@@ -89,7 +97,12 @@ pub fn advance(
         let n = schedule.substeps as f64;
         for i in 0..schedule.substeps {
             let span = (i as f64 / n, (i + 1) as f64 / n);
+            load.start = (starts.len() == schedule.substeps).then(|| starts[i].clone());
+            let halvings = record.halvings;
             step_adaptive(model, state, &mut load, (span, 0), &mut record)?;
+            if record.halvings == halvings {
+                scratch.substep_ends.push(state.interior.q.clone());
+            }
         }
     }
     state.last_target = Some(target.to_vec());
@@ -108,8 +121,9 @@ type Triplet = (usize, usize, f64);
 /// What every solve of one frame shares: the combined stiffness (tracking and skin; muscle
 /// terms are appended after `base_len` per solve), the skin's force at the frame's start
 /// positions `frame_q` (m) and the skin's stiffness (its parts: simulated and left out), the
-/// last frame's and this frame's targets (m), a zero external force and the frame interval
-/// (its start and length, s).
+/// last frame's and this frame's targets (m), a zero external force, where the next step's
+/// Newton starts when not at the inertial predictor (m; taken by that step) and the frame
+/// interval (its start and length, s).
 struct StepLoad<'a> {
     frame_q: Vec<f64>,
     skin_parts: [Option<&'a [Triplet]>; 2],
@@ -119,6 +133,7 @@ struct StepLoad<'a> {
     from: &'a [Vector3<f64>],
     target: &'a [Vector3<f64>],
     zero_force: &'a [f64],
+    start: Option<Vec<f64>>,
     interval: (f64, f64),
 }
 
@@ -174,7 +189,10 @@ fn solve_once(
             (!acc.is_zero()).then(|| state.interior.frame_force(&acc))
         });
         let f_ext = inertial.as_deref().unwrap_or(load.zero_force);
-        state.interior.step(f_ext, Some(&extra))?
+        let start = load.start.take();
+        state
+            .interior
+            .step_from(f_ext, Some(&extra), start.as_deref())?
     } else {
         state.interior.quasi_static(load.zero_force, Some(&extra))?
     })
