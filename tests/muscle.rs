@@ -1123,3 +1123,44 @@ fn the_face_rigs_jaw_muscle_turns_its_bone() {
     );
     assert!(turned > 0.3 * jaw.angle_deg && turned <= 1.0001 * jaw.angle_deg);
 }
+
+/// The lattice fit of a shape that turns the whole block with its jaw (every bone node turned
+/// by the shape's angle, the surface turned the same): the fit with the bone prescribed is the
+/// turn itself, to the angle's second order (the regulariser sees a finite turn as a small
+/// strain), where the fit holding the bone at rest cannot follow it.
+#[test]
+fn the_lattice_fit_of_a_jaw_shape_follows_the_turned_bone() {
+    use furrow::io::model::MorphTarget;
+    use furrow::muscle::generate::fit_node_displacements;
+    use furrow::muscle::jaw::JawBone;
+    let (mesh, lat, _) = muscle_block(0.2);
+    let nn = lat.node_count();
+    let nodes: Vec<usize> = (0..nn).filter(|&n| lat.pinned[n]).collect();
+    let angle = 1e-3;
+    let bone = JawBone {
+        shape: 0,
+        rest: nodes.iter().map(|&n| lat.rest[n]).collect(),
+        nodes,
+        axis: V3::x(),
+        pivot: V3::new(0.0, -0.02, -0.01),
+        angle,
+    };
+    let r = Rotation3::from_axis_angle(&V3::x_axis(), angle);
+    let turn = |p: &V3| r * (p - bone.pivot) + bone.pivot - p;
+    let target = MorphTarget {
+        name: "jaw_open".into(),
+        positions: mesh.positions.iter().map(turn).collect(),
+        normals: None,
+    };
+    let interior = Interior::new(&lat, &Material::default()).unwrap();
+    let fit = |b: Option<&JawBone>| {
+        fit_node_displacements(&lat, &interior, std::slice::from_ref(&target), 1e-3, b).unwrap()
+    };
+    let (with, without) = (fit(Some(&bone)), fit(None));
+    let truth: Vec<f64> = lat.rest.iter().flat_map(|p| turn(p).data.0[0]).collect();
+    let scale = truth.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let (miss_with, miss_without) = (max_diff(&with[0], &truth), max_diff(&without[0], &truth));
+    println!("fit against the turn: {miss_with:.2e} with the bone, {miss_without:.2e} without, of {scale:.2e} m");
+    assert!(miss_with < 1e-4 * scale, "{miss_with} of {scale}");
+    assert!(miss_without > 0.3 * scale, "{miss_without} of {scale}");
+}

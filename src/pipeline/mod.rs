@@ -262,7 +262,7 @@ fn finish_report(
         jaw: state
             .muscles
             .as_ref()
-            .and_then(|m| m.bone.as_ref().map(|b| b.2.clone()))
+            .and_then(|m| m.jaw.clone())
             .or_else(|| jaw_hinge(face)),
         export: None,
     }

@@ -34,9 +34,9 @@ pub struct MuscleDrive {
     /// Whether the current frame's fit failed, so that tracking at full stiffness drives the
     /// interior for this frame instead of the kept activations.
     pub fallback: bool,
-    /// The jaw's bone and the muscle whose activation turns it (generated muscles of a face
-    /// with a jaw-opening shape), with the hinge it turns about (for the report).
-    pub bone: Option<(usize, JawBone, Hinge)>,
+    /// The jaw's hinge, when generated muscles turn the jaw's bone about it (the bone and
+    /// its muscle are the fitter's forward model's, [`crate::muscle::Forward::bone`]).
+    pub jaw: Option<Hinge>,
 }
 
 /// How well a generated muscle makes its blend shape at activation 1, in the interior the
@@ -94,7 +94,7 @@ pub fn build_muscles(
     let mut made = String::new();
     let mut calibration = None;
     let mut made_by = Vec::new();
-    let mut bone = None;
+    let (mut bone, mut jaw_hinge) = (None, None);
     let (muscles, origin) = if source == "auto" {
         let targets = welded_targets(face, welded_loaded);
         let rest: Vec<_> = welded_loaded.iter().map(|&i| face.positions[i]).collect();
@@ -118,7 +118,9 @@ pub fn build_muscles(
                 .map(|f| f as crate::muscle::generate::SkinForce),
             jaw.as_ref().map(|j| &j.0),
         )?;
-        bone = g.bone_muscle.zip(jaw).map(|(m, (b, h))| (m, b, h));
+        if let (Some(m), Some((b, h))) = (g.bone_muscle, jaw) {
+            (bone, jaw_hinge) = (Some((m, b)), Some(h));
+        }
         made = shape_errors(&g);
         if let Some(a) = &at_shapes {
             made.push_str(&a.summary(&g.without_skin));
@@ -163,14 +165,14 @@ pub fn build_muscles(
         Some(coupling),
         calibration,
     )?;
-    fitter.forward.bone = bone.as_ref().map(|(m, b, _)| (*m, b.clone()));
+    fitter.forward.bone = bone;
     let drive = MuscleDrive {
         fitter,
         activations: vec![0.0; n],
         origin,
         made: made_by,
         fallback: false,
-        bone,
+        jaw: jaw_hinge,
     };
     let records = [
         StagePlan::ran(
@@ -193,14 +195,14 @@ pub fn build_muscles(
 
 /// What the muscles' record says of the jaw's bone (empty without one).
 fn bone_summary(drive: &MuscleDrive) -> String {
-    match &drive.bone {
-        Some((m, bone, hinge)) => format!(
+    match (&drive.fitter.forward.bone, &drive.jaw) {
+        (Some((m, bone)), Some(hinge)) => format!(
             "; {} bone nodes turn with muscle {} about the jaw's hinge ({:.1}° at activation 1)",
             bone.nodes.len(),
             drive.fitter.muscles()[*m].name,
             hinge.angle_deg
         ),
-        None => String::new(),
+        _ => String::new(),
     }
 }
 

@@ -67,7 +67,7 @@ pub fn actuate(muscles: &MuscleDrive, stepper: &mut BackwardEuler) -> anyhow::Re
         &muscles.activations,
     );
     stepper.interior.set_actuation(d)?;
-    if let Some((m, bone, _)) = &muscles.bone {
+    if let Some((m, bone)) = &muscles.fitter.forward.bone {
         bone.place(muscles.activations[*m], &mut stepper.q);
     }
     Ok(())

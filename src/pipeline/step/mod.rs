@@ -151,8 +151,8 @@ pub fn step_to_target(
         jaw_deg: state
             .muscles
             .as_ref()
-            .and_then(|m| m.bone.as_ref())
-            .map(|(_, bone, _)| bone.angle_of(q).to_degrees()),
+            .and_then(|m| m.fitter.forward.bone.as_ref())
+            .map(|(_, bone)| bone.angle_of(q).to_degrees()),
     };
     Ok((record, composed))
 }
