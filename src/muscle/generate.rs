@@ -12,7 +12,7 @@ use crate::fem::Interior;
 use crate::io::model::MorphTarget;
 use crate::lattice::Lattice;
 use crate::math::rng::Lcg;
-use crate::math::sparse::{Pattern, SpdSolver};
+use crate::math::sparse::{triplets_mul_add, Pattern, SpdSolver};
 use crate::math::Energy;
 use crate::mesh::TriMesh;
 use nalgebra::Vector3;
@@ -191,9 +191,8 @@ pub fn fit_node_displacements(
     // (α K + BᵀB) y over all dofs: what bone displacements y put on the free rows.
     let system_times = |y: &[f64]| {
         let mut out = vec![0.0; 3 * nn];
-        for &(r, c, v) in &kt {
-            out[r] += alpha * v * y[c];
-        }
+        triplets_mul_add(&kt, y, &mut out);
+        out.iter_mut().for_each(|v| *v *= alpha);
         for &(a, b, v) in &btb {
             for i in 0..3 {
                 out[3 * a + i] += v * y[3 * b + i];

@@ -60,11 +60,13 @@ pub fn advance(
     // A later coupling pass of the frame (`about` given) keeps the frame's first tangent.
     let refresh = about.is_none();
     let skin_force = coupling_terms(model, state.skin.as_ref(), q, scratch, schedule, refresh);
-    let starts = match about {
+    let mut starts = match about {
         Some(_) => std::mem::take(&mut scratch.substep_ends),
         None => Vec::new(),
     };
     scratch.substep_ends.clear();
+    // Only a frame that may take another pass keeps where its sub-steps ended.
+    let keep_ends = schedule.coupling_iterations > 1;
     let from = state.last_target.take().unwrap_or_else(|| target.to_vec());
     let skin_parts = [
         scratch
@@ -97,10 +99,11 @@ pub fn advance(
         let n = schedule.substeps as f64;
         for i in 0..schedule.substeps {
             let span = (i as f64 / n, (i + 1) as f64 / n);
-            load.start = (starts.len() == schedule.substeps).then(|| starts[i].clone());
+            load.start =
+                (starts.len() == schedule.substeps).then(|| std::mem::take(&mut starts[i]));
             let halvings = record.halvings;
             step_adaptive(model, state, &mut load, (span, 0), &mut record)?;
-            if record.halvings == halvings {
+            if keep_ends && record.halvings == halvings {
                 scratch.substep_ends.push(state.interior.q.clone());
             }
         }

@@ -180,7 +180,8 @@ const PASS_LOOSENING: f64 = 1000.0;
 /// coupling that swings about its answer (a pre-tensioned skin seen through its rest tangent)
 /// settles and a slow one is sped up. The skin is solved at [`PASS_LOOSENING`] times its
 /// tolerance except after the frame's last pass, and each pass's sub-steps start Newton
-/// where the last pass's ended (demo's whole clip muscle-driven: 4.7 % less time). Returns
+/// where the last pass's ended (demo frames 0–39 muscle-driven: 9 % fewer interior Newton
+/// iterations, 5 % less interior time). Returns
 /// the interior's and the skin's records, summed over the passes.
 fn advance_coupled(
     model: &Model,
