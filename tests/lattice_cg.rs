@@ -124,10 +124,7 @@ fn cg_with_coupling_terms_matches_cholesky() {
         };
         let mut be = BackwardEuler::new(int, lat.rest_flat(), pinned.clone(), settings).unwrap();
         let zero = vec![0.0; be.q.len()];
-        let extra = furrow::fem::ExtraTerms {
-            stiffness: &stiffness,
-            force: &force,
-        };
+        let extra = furrow::fem::ExtraTerms::new(&stiffness, &force);
         for _ in 0..3 {
             be.step(&zero, Some(&extra)).unwrap();
         }

@@ -169,6 +169,63 @@ fn a_step_started_at_its_own_end_gives_the_same_answer_sooner() {
     assert!(warm.step_from(&zero, None, Some(&zero[1..])).is_err());
 }
 
+/// A coupling stiffness given with a layout key ([`ExtraTerms::layout`]) steps exactly as
+/// one the step hashes, over several steps whose stiffness values change under the same
+/// key (the matrix layout is placed once); a new key still has its triplets checked, so an
+/// index out of range is refused.
+#[test]
+fn a_coupling_stiffness_keyed_by_its_layout_steps_as_the_hashed_one() {
+    let lat = block_lattice();
+    let n = 3 * lat.rest.len();
+    let pinned: Vec<bool> = lat.rest.iter().map(|p| p.z < 0.0).collect();
+    // A spring network between neighbouring dofs, both triangles, and a pull.
+    let spring = |k: f64| -> Vec<(usize, usize, f64)> {
+        (0..n - 3)
+            .flat_map(|i| {
+                [
+                    (i, i, k),
+                    (i + 3, i + 3, k),
+                    (i, i + 3, -k),
+                    (i + 3, i, -k),
+                ]
+            })
+            .collect()
+    };
+    let force: Vec<f64> = (0..n).map(|i| if i % 3 == 2 { -0.05 } else { 0.0 }).collect();
+    let stepper = || {
+        let int = Interior::new(&lat, &soft()).unwrap();
+        BackwardEuler::new(int, lat.rest_flat(), pinned.clone(), no_gravity()).unwrap()
+    };
+    let zero = vec![0.0; n];
+    let (mut hashed, mut keyed) = (stepper(), stepper());
+    let key = furrow::fem::triplet_layout_key(&spring(1.0));
+    for step in 0..4 {
+        let k = spring(10.0 * (1.0 + step as f64));
+        let a = hashed
+            .step(&zero, Some(&ExtraTerms::new(&k, &force)))
+            .unwrap();
+        let keyed_terms = ExtraTerms {
+            layout: Some(key),
+            ..ExtraTerms::new(&k, &force)
+        };
+        let b = keyed.step(&zero, Some(&keyed_terms)).unwrap();
+        assert_eq!(a.status, SolveStatus::Converged);
+        assert_eq!(a.iterations, b.iterations);
+        assert_eq!(hashed.q, keyed.q, "step {step}");
+        assert_eq!(hashed.v, keyed.v);
+    }
+    let mut bad = spring(1.0);
+    bad.push((n, 0, 1.0));
+    let refused = keyed.step(
+        &zero,
+        Some(&ExtraTerms {
+            layout: Some(key ^ 1),
+            ..ExtraTerms::new(&bad, &force)
+        }),
+    );
+    assert!(refused.is_err());
+}
+
 /// Two boxes in shared cells: pushing one leaves the other exactly still; the pushed one
 /// gains exactly the impulse (momentum Σ M v = k h F, internal forces sum to zero).
 #[test]
@@ -321,13 +378,7 @@ fn extra_stiffness_hook_matches_sherman_morrison() {
     let zero = vec![0.0; be.q.len()];
     let mut be2 = BackwardEuler::new(int, lat.rest_flat(), pinned, no_gravity()).unwrap();
     let rep = be2
-        .quasi_static(
-            &f,
-            Some(&ExtraTerms {
-                stiffness: &trip,
-                force: &zero,
-            }),
-        )
+        .quasi_static(&f, Some(&ExtraTerms::new(&trip, &zero)))
         .unwrap();
     assert_eq!(rep.status, SolveStatus::Converged);
     let uk = lat.embed(&be2.q)[v].z - mesh.positions[v].z;

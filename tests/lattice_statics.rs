@@ -77,10 +77,7 @@ fn tip_deflection(per_width: usize) -> (usize, f64) {
     let pinned = vec![false; lat.node_count()];
     let mut be = BackwardEuler::new(int, lat.rest_flat(), pinned, StepSettings::default()).unwrap();
     let zero = vec![0.0; be.q.len()];
-    let clamp = ExtraTerms {
-        stiffness: &stiffness,
-        force: &zero,
-    };
+    let clamp = ExtraTerms::new(&stiffness, &zero);
     let rep = be.quasi_static(&zero, Some(&clamp)).unwrap();
     assert_eq!(rep.status, SolveStatus::Converged, "{rep:?}");
     let tip = V::new(l - 1e-9, b / 2.0, b / 2.0);

@@ -290,6 +290,7 @@ impl EmbeddedShell {
         self.problem.constraints = cluster_constraints(&clusters);
         self.clusters = clusters;
         self.shell = shell;
+        self.solver.forget_gradient();
         Ok(())
     }
 
@@ -479,9 +480,20 @@ impl EmbeddedShell {
     /// The skin's force on the lattice nodes, Bᵀ F_x (flat over node dofs, N), with
     /// F_x = −∇E_x at the current x: the force part of [`Self::coupling_terms`] alone.
     pub fn coupling_force(&self) -> Vec<f64> {
-        let mut grad = vec![0.0; self.x.len()];
-        self.shell.eval(&self.x, Some(&mut grad), None, false);
-        self.node_force(&grad)
+        self.node_force(&self.elastic_gradient())
+    }
+
+    /// ∇E_x at the current x (flat, N): the last solve's own evaluation when x is where it
+    /// ended (no second pass over the skin), else evaluated.
+    pub fn elastic_gradient(&self) -> std::borrow::Cow<'_, [f64]> {
+        match self.solver.gradient_at(&self.shell, &self.x) {
+            Some(g) => std::borrow::Cow::Borrowed(g),
+            None => {
+                let mut grad = vec![0.0; self.x.len()];
+                self.shell.eval(&self.x, Some(&mut grad), None, false);
+                std::borrow::Cow::Owned(grad)
+            }
+        }
     }
 
     /// −Bᵀ g over the node dofs (N) of a skin gradient `g` (flat per vertex, N).
@@ -698,10 +710,7 @@ pub fn two_step_with(
     let t = Instant::now();
     let (stiffness, force) = skin.coupling_terms();
     let coupling_s = t.elapsed().as_secs_f64();
-    let extra = ExtraTerms {
-        stiffness: &stiffness,
-        force: &force,
-    };
+    let extra = ExtraTerms::new(&stiffness, &force);
     let t = Instant::now();
     let rep = match mode {
         InteriorMode::Dynamic => interior.step(f_ext, Some(&extra))?,

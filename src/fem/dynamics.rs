@@ -170,6 +170,23 @@ pub struct ExtraTerms<'a> {
     pub stiffness: &'a [(usize, usize, f64)],
     /// F_x, flat over node DOFs.
     pub force: &'a [f64],
+    /// A key of the triplets' (row, column) sequence that the caller changes whenever that
+    /// sequence changes, so that a step need not pass over a large coupling stiffness to
+    /// know its matrix layout still holds: a step checks the triplets (indices in range,
+    /// values finite) only when their key is new, so a caller that changes the values under
+    /// the same key vouches that they are finite. `None`: every step hashes and checks them.
+    pub layout: Option<u64>,
+}
+
+impl<'a> ExtraTerms<'a> {
+    /// Terms whose layout each step hashes.
+    pub fn new(stiffness: &'a [(usize, usize, f64)], force: &'a [f64]) -> Self {
+        Self {
+            stiffness,
+            force,
+            layout: None,
+        }
+    }
 }
 
 /// The numerical outcome of a solve.
@@ -249,8 +266,12 @@ struct System {
     slot_ptr: Vec<usize>,
     /// Signature of the extra stiffness pattern this system was built for.
     extra_sig: Vec<(usize, usize)>,
-    /// FNV hash of the extra triplets' (row, column) layout last seen with this system.
+    /// FNV hash (or the caller's key) of the extra triplets' (row, column) layout last seen
+    /// with this system.
     extra_hash: u64,
+    /// For each extra triplet of that layout: its index in `mat`'s values, or `usize::MAX`
+    /// for a pinned node or the upper triangle.
+    extra_slots: Vec<usize>,
     mat: SparseColMat<usize, f64>,
     /// The same matrix with both triangles in node-block rows (for CG), filled from `mat`.
     bsr: BlockCsr,
@@ -378,6 +399,7 @@ impl System {
             slot_ptr,
             extra_sig: extra.to_vec(),
             extra_hash: 0,
+            extra_slots: Vec::new(),
             mat,
             bsr,
             bsr_rank,
@@ -514,19 +536,33 @@ impl System {
             }
         }
         if let Some(ex) = extra {
-            for &(r, c, v) in ex {
-                let (fa, fb) = (free[r / 3], free[c / 3]);
-                if fa == NONE || fb == NONE {
-                    continue;
+            debug_assert_eq!(ex.len(), self.extra_slots.len(), "slots of this layout");
+            let vals = self.mat.val_mut();
+            for (&(_, _, v), &o) in ex.iter().zip(&self.extra_slots) {
+                if o != usize::MAX {
+                    vals[o] += stiff_coef * v;
                 }
-                let (i, j) = (r % 3, c % 3);
-                if 3 * fa + i < 3 * fb + j {
-                    continue; // upper triangle: the lower one carries it
-                }
-                let o = self.offset(fa, fb, i, j);
-                self.mat.val_mut()[o] += stiff_coef * v;
             }
         }
+    }
+
+    /// Where each extra triplet goes in `mat`'s values ([`Self::extra_slots`]).
+    fn place_extra(&mut self, extra: &[(usize, usize, f64)]) {
+        let free = &self.free;
+        let slots = extra
+            .iter()
+            .map(|&(r, c, _)| {
+                let (fa, fb) = (free[r / 3], free[c / 3]);
+                let (i, j) = (r % 3, c % 3);
+                // Pinned, or the upper triangle (the lower one carries it).
+                if fa == NONE || fb == NONE || 3 * fa + i < 3 * fb + j {
+                    usize::MAX
+                } else {
+                    self.offset(fa, fb, i, j)
+                }
+            })
+            .collect();
+        self.extra_slots = slots;
     }
 }
 
@@ -553,16 +589,16 @@ fn node_csr(n: usize, mut t: Vec<(usize, usize, f64)>) -> (Vec<usize>, Vec<usize
     (ptr, col, val)
 }
 
-/// FNV-1a hash of the (row, column) sequence of the extra stiffness triplets.
-fn extra_layout_hash(extra: Option<&ExtraTerms>) -> u64 {
+/// FNV-1a hash of the (row, column) sequence of stiffness triplets: the key a step compares
+/// to know its matrix layout still holds (an [`ExtraTerms::layout`] for a caller that keeps
+/// one stiffness over many steps).
+pub fn triplet_layout_key(stiffness: &[(usize, usize, f64)]) -> u64 {
     let mut h = crate::math::hash::Fnv1a::new();
-    if let Some(x) = extra {
-        for &(r, c, _) in x.stiffness {
-            h.mix_usize(r);
-            h.mix_usize(c);
-        }
-        h.mix_usize(x.stiffness.len());
+    for &(r, c, _) in stiffness {
+        h.mix_usize(r);
+        h.mix_usize(c);
     }
+    h.mix_usize(stiffness.len());
     h.finish()
 }
 
@@ -678,9 +714,13 @@ impl BackwardEuler {
     }
 
     fn ensure_system(&mut self, extra: Option<&ExtraTerms>) -> Result<(), FemError> {
-        // The sorted pattern signature costs a sort of every extra triplet; a hash of the
-        // triplet layout (O(n), no allocation) tells first whether anything could differ.
-        let hash = extra_layout_hash(extra);
+        // The sorted pattern signature costs a sort of every extra triplet; the caller's
+        // layout key, or a hash of the triplet layout (O(n), no allocation), tells first
+        // whether anything could differ.
+        let hash = match extra {
+            Some(x) => x.layout.unwrap_or_else(|| triplet_layout_key(x.stiffness)),
+            None => triplet_layout_key(&[]),
+        };
         if let Some(s) = &self.system {
             if s.extra_hash == hash
                 && s.free.len() == self.pinned.len()
@@ -712,6 +752,7 @@ impl BackwardEuler {
         }
         if let Some(s) = self.system.as_mut() {
             s.extra_hash = hash;
+            s.place_extra(extra.map_or(&[], |x| x.stiffness));
         }
         Ok(())
     }
@@ -731,9 +772,13 @@ impl BackwardEuler {
                     x.force.len()
                 )));
             }
-            if x.stiffness
-                .iter()
-                .any(|&(r, c, v)| r >= n || c >= n || !v.is_finite())
+            // A caller's layout key vouches for the triplets it has shown before.
+            let known =
+                x.layout.is_some() && x.layout == self.system.as_ref().map(|s| s.extra_hash);
+            if !known
+                && x.stiffness
+                    .iter()
+                    .any(|&(r, c, v)| r >= n || c >= n || !v.is_finite())
             {
                 return Err(FemError::Input(
                     "extra stiffness has an index out of range or a non-finite value".into(),

@@ -13,8 +13,8 @@ pub mod matfree;
 pub mod tangent;
 
 pub use dynamics::{
-    BackwardEuler, ExtraTerms, LinearSolver, SolveReport, SolveStatus, StepSettings, Tangent,
-    AUTO_CG_DOFS,
+    triplet_layout_key, BackwardEuler, ExtraTerms, LinearSolver, SolveReport, SolveStatus,
+    StepSettings, Tangent, AUTO_CG_DOFS,
 };
 pub use frame::FrameAcceleration;
 pub use interior::{FrozenInterior, Interior};

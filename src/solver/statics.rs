@@ -247,6 +247,17 @@ impl StaticSettings {
     }
 }
 
+/// Where a solve ended and the energy's gradient there.
+#[derive(Debug, Clone)]
+struct EndGradient {
+    /// The energy's identity ([`energy_identity`]).
+    owner: (usize, usize),
+    /// The final state (flat, m).
+    x: Vec<f64>,
+    /// ∇E at `x` (flat, N).
+    grad: Vec<f64>,
+}
+
 /// A quasi-static Newton solver that keeps its factorisation analysis, γ and the constraint
 /// multipliers between calls (hold one per skin, call [`StaticSolver::solve`] every frame).
 #[derive(Default)]
@@ -273,6 +284,9 @@ pub struct StaticSolver {
     last_shift: f64,
     /// Final state of the previous solve and its pinned dofs (for the pinned-motion predictor).
     last_x: Vec<f64>,
+    /// The previous solve's gradient at its end, which it evaluated anyway
+    /// ([`StaticSolver::gradient_at`]).
+    last_gradient: Option<EndGradient>,
     last_pinned: Vec<usize>,
     /// Layout of the current factorisation when it may precondition later directions (a
     /// lagged factor): it was of the exact, unshifted Hessian and passed the inertia test.
@@ -469,6 +483,9 @@ struct Point {
     r: Vec<f64>,
     energy: f64,
     rn: f64,
+    /// ∇E at x over all dofs (N): the energy's own gradient, before external forces and
+    /// constraint terms.
+    grad: Vec<f64>,
 }
 
 impl Model<'_> {
@@ -483,11 +500,12 @@ impl Model<'_> {
     }
 
     /// Residual vector over [free dofs; constraint rows] (N) and the energy (J), at (x, μ).
-    fn residual(&self, x: &[f64], mu: &[f64]) -> (Vec<f64>, f64) {
+    fn residual(&self, x: &[f64], mu: &[f64]) -> (Vec<f64>, f64, Vec<f64>) {
         let (p, gamma) = (self.p, self.gamma);
         let n = x.len();
         let mut g = vec![0.0; n];
         let mut energy = self.e.eval(x, Some(&mut g), None, false);
+        let grad = g.clone();
         if !p.forces.is_empty() {
             for i in 0..n {
                 g[i] -= p.forces[i];
@@ -504,12 +522,12 @@ impl Model<'_> {
                 .zip(&p.constraints.rhs)
                 .map(|(a, b)| gamma * (a - b)),
         );
-        (r, energy)
+        (r, energy, grad)
     }
 
     /// The iterate (x, μ) with its residual, energy and residual norm.
     fn point(&self, x: Vec<f64>, mu: Vec<f64>) -> Point {
-        let (r, energy) = self.residual(&x, &mu);
+        let (r, energy, grad) = self.residual(&x, &mu);
         let rn = norm(&r);
         Point {
             x,
@@ -517,6 +535,7 @@ impl Model<'_> {
             r,
             energy,
             rn,
+            grad,
         }
     }
 }
@@ -944,7 +963,7 @@ impl StaticSolver {
         mu: &[f64],
         dp: &[f64],
     ) -> Result<(Vec<f64>, f64), SolverError> {
-        let (r_prev, _) = m.residual(x_prev, mu);
+        let (r_prev, _, _) = m.residual(x_prev, mu);
         let sym_s = self.assemble_at(m, x_prev, false)?;
         let mut rhs: Vec<f64> = r_prev[..m.free()].iter().map(|v| -v).collect();
         let (pairs, values) = self.kkt.pinned_coupling();
@@ -1120,8 +1139,29 @@ impl StaticSolver {
             .fold(0.0, f64::max);
         x.copy_from_slice(&end.x);
         self.multipliers = end.mu;
+        self.last_gradient = Some(EndGradient {
+            owner: energy_identity(m.e),
+            x: end.x.clone(),
+            grad: end.grad,
+        });
         self.last_x = end.x;
         self.last_pinned = p.pinned.clone();
+    }
+
+    /// The gradient ∇E (flat, N) of energy `e` at `x` as the last solve evaluated it, when
+    /// that solve was of `e` and ended exactly at `x`, and `e` has not changed since (the
+    /// caller's word: [`StaticSolver::forget_gradient`] after changing it); `None`
+    /// otherwise.
+    pub fn gradient_at(&self, e: &dyn Energy, x: &[f64]) -> Option<&[f64]> {
+        match &self.last_gradient {
+            Some(g) if g.owner == energy_identity(e) && g.x == x => Some(&g.grad),
+            _ => None,
+        }
+    }
+
+    /// Drop the last solve's gradient (the energy changed: material, thickness, rest state).
+    pub fn forget_gradient(&mut self) {
+        self.last_gradient = None;
     }
 
     /// The residual norm ‖[∇E − f + γCᵀμ; γ(Cx − d)]‖ (N) of `x` with the multipliers of the
@@ -1895,6 +1935,29 @@ mod tests {
         assert!(solver.solve(&QUARTIC, &p, &mut short).is_err());
         let mut nan = vec![f64::NAN; 6];
         assert!(solver.solve(&QUARTIC, &p, &mut nan).is_err());
+    }
+
+    /// A solve keeps the energy's gradient where it ended, the same bits a fresh evaluation
+    /// gives; it is offered only for that energy at exactly that state, and not after
+    /// `forget_gradient`.
+    #[test]
+    fn the_gradient_a_solve_ends_with_is_the_energys_at_its_end() {
+        let p = quartic_problem();
+        let e = QUARTIC;
+        let mut solver = StaticSolver::default();
+        let mut x = vec![0.5, 3.0, -0.5, 1.0, 1.0, 0.0];
+        assert!(solver.gradient_at(&e, &x).is_none());
+        solver.solve(&e, &p, &mut x).unwrap();
+        let mut fresh = vec![0.0; 6];
+        e.eval(&x, Some(&mut fresh), None, false);
+        assert_eq!(solver.gradient_at(&e, &x), Some(fresh.as_slice()));
+        let mut moved = x.clone();
+        moved[1] += 1e-12;
+        assert!(solver.gradient_at(&e, &moved).is_none());
+        let other = Wells { k: 1.0, w: 0.0 };
+        assert!(solver.gradient_at(&other, &x).is_none());
+        solver.forget_gradient();
+        assert!(solver.gradient_at(&e, &x).is_none());
     }
 
     /// Directions may come from a lagged factor (of an earlier iterate or the previous

@@ -78,8 +78,9 @@ pub fn advance(
     let mut load = StepLoad {
         frame_q: q.to_vec(),
         skin_parts,
-        stiffness: scratch.combined.clone().unwrap_or_default(),
+        stiffness: scratch.combined.take().unwrap_or_default(),
         base_len: 0,
+        layout: scratch.combined_layout,
         skin_force,
         from: &from,
         target,
@@ -108,6 +109,8 @@ pub fn advance(
             }
         }
     }
+    load.stiffness.truncate(load.base_len);
+    scratch.combined = Some(load.stiffness);
     state.last_target = Some(target.to_vec());
     if state.interior.q.iter().any(|v| !v.is_finite()) {
         bail!(
@@ -121,8 +124,9 @@ pub fn advance(
 /// One stiffness entry (row dof, column dof, N/m).
 type Triplet = (usize, usize, f64);
 
-/// What every solve of one frame shares: the combined stiffness (tracking and skin; muscle
-/// terms are appended after `base_len` per solve), the skin's force at the frame's start
+/// What every solve of one frame shares: the combined stiffness (tracking and skin, taken
+/// from the scratch for the frame; muscle terms are appended after `base_len` per solve) and
+/// its layout key ([`Scratch::combined_layout`]), the skin's force at the frame's start
 /// positions `frame_q` (m) and the skin's stiffness (its parts: simulated and left out), the
 /// last frame's and this frame's targets (m), a zero external force, where the next step's
 /// Newton starts when not at the inertial predictor (m; taken by that step) and the frame
@@ -132,6 +136,7 @@ struct StepLoad<'a> {
     skin_parts: [Option<&'a [Triplet]>; 2],
     stiffness: Vec<(usize, usize, f64)>,
     base_len: usize,
+    layout: u64,
     skin_force: Option<Vec<f64>>,
     from: &'a [Vector3<f64>],
     target: &'a [Vector3<f64>],
@@ -184,6 +189,8 @@ fn solve_once(
     let extra = ExtraTerms {
         stiffness: &load.stiffness,
         force: &force,
+        // Muscle terms appended to the combined stiffness may change its layout.
+        layout: (load.stiffness.len() == load.base_len).then_some(load.layout),
     };
     Ok(if dynamics {
         let inertial = model.head_motion.as_ref().and_then(|m| {
@@ -279,7 +286,9 @@ fn coupling_terms(
         if let (Some(_), Some(ks)) = (skin, &scratch.skin_stiffness) {
             all.extend_from_slice(ks);
         }
-        scratch.combined = Some(aggregate(all));
+        let combined = aggregate(all);
+        scratch.combined_layout = crate::fem::triplet_layout_key(&combined);
+        scratch.combined = Some(combined);
     }
     let nd = scratch.zero_force.len();
     let force = skin.map(|s| skin_force(s, &model.sim_vertices, &model.rows, nd));
@@ -306,7 +315,8 @@ pub fn skin_force(
     rows: &[Vec<(usize, f64)>],
     nd: usize,
 ) -> Vec<f64> {
-    elastic_force(skin, skin.x(), verts, rows, nd)
+    // The last skin solve's own gradient at x: no second pass over the skin.
+    carry_to_nodes(&skin.elastic_gradient(), verts, rows, nd)
 }
 
 /// Bᵀ F_x of the skin at positions `x` (flat, m), as [`skin_force`].
@@ -320,6 +330,17 @@ fn elastic_force(
     use crate::math::Energy;
     let mut grad = vec![0.0; x.len()];
     skin.shell.eval(x, Some(&mut grad), None, false);
+    carry_to_nodes(&grad, verts, rows, nd)
+}
+
+/// −Bᵀ g over `nd` node dofs (N) of a skin gradient `g` (flat, N); shell vertex i is export
+/// vertex `verts[i]`.
+fn carry_to_nodes(
+    grad: &[f64],
+    verts: &[usize],
+    rows: &[Vec<(usize, f64)>],
+    nd: usize,
+) -> Vec<f64> {
     let mut force = vec![0.0; nd];
     for (i, &v) in verts.iter().enumerate() {
         for &(n, w) in &rows[v] {

@@ -24,6 +24,9 @@ pub struct Scratch {
     pub skin_stiffness: Option<Vec<(usize, usize, f64)>>,
     /// Tracking and skin stiffness summed into one compact triplet list (N/m).
     pub combined: Option<Vec<(usize, usize, f64)>>,
+    /// The layout key of `combined` ([`crate::fem::triplet_layout_key`]), taken when it is
+    /// built, so that the interior's steps need not hash it again.
+    pub combined_layout: u64,
     /// A zero external force over the node dofs (N).
     pub zero_force: Vec<f64>,
     /// Node positions at the end of each sub-step of the frame's last coupling pass (flat,
@@ -204,7 +207,7 @@ fn advance_coupled(
     });
     let mut interior = interior::advance(model, state, scratch, schedule, target, k, None)?;
     let first_loosening = if start.is_some() { PASS_LOOSENING } else { 1.0 };
-    let mut shell = solve_skin_on_interior(state, first_loosening)?;
+    let mut shell = solve_skin_on_interior(state, first_loosening, false)?;
     let Some((q0, v0, t0, last)) = &start else {
         return Ok((interior, shell));
     };
@@ -230,7 +233,12 @@ fn advance_coupled(
         } else {
             PASS_LOOSENING
         };
-        if let (Some(s), Some(p)) = (shell.as_mut(), solve_skin_on_interior(state, loosening)?) {
+        // Every earlier solve of the frame was loosened, and unchecked.
+        let moved = shell.as_ref().is_some_and(|s| s.iterations > 0);
+        if let (Some(s), Some(p)) = (
+            shell.as_mut(),
+            solve_skin_on_interior(state, loosening, moved)?,
+        ) {
             s.then(p);
         }
         if settled {
@@ -259,13 +267,19 @@ fn aitken(omega: f64, last: &[f64], now: &[f64]) -> f64 {
 }
 
 /// The skin's statics on the interior's current positions, when a skin is simulated, at
-/// `loosening` times its tolerance.
+/// `loosening` times its tolerance ([`skin::solve_skin`]).
 fn solve_skin_on_interior(
     state: &mut State,
     loosening: f64,
+    moved_unchecked: bool,
 ) -> anyhow::Result<Option<StageRecord>> {
     match state.skin.as_mut() {
-        Some(skin) => Ok(Some(skin::solve_skin(skin, &state.interior.q, loosening)?)),
+        Some(skin) => Ok(Some(skin::solve_skin(
+            skin,
+            &state.interior.q,
+            loosening,
+            moved_unchecked,
+        )?)),
         None => Ok(None),
     }
 }

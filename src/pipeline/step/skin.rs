@@ -9,18 +9,25 @@ use crate::pipeline::record::{SolveTime, StageRecord};
 use std::time::Instant;
 
 /// Solve the skin for node positions `q` (flat, m) at `loosening` times its statics'
-/// tolerance (1 for a frame's result) and record the statics' outcome.
+/// tolerance (1 for a frame's result) and record the statics' outcome; `moved_unchecked`:
+/// a loosened solve of the frame moved the skin since its last self-intersection check.
 pub fn solve_skin(
     skin: &mut EmbeddedShell,
     q: &[f64],
     loosening: f64,
+    moved_unchecked: bool,
 ) -> anyhow::Result<StageRecord> {
     let t = Instant::now();
     let rep = skin.solve_loosened(q, loosening)?;
     let mut status = rep.status.as_str().to_string();
-    // 8 ms on the demo's 19,729 triangles; a solve that took no step left the skin where
-    // the last frame checked it.
-    if rep.iterations > 0 && first_self_intersection(&skin.shell.rest, skin.x()).is_some() {
+    // 8 ms on the demo's 19,729 triangles. A solve that took no step left the skin where
+    // the last check saw it; a loosened one is not a result (its force only feeds the
+    // frame's next coupling pass, whose exact solve checks where the skin ends).
+    let result = loosening <= 1.0;
+    if result
+        && (rep.iterations > 0 || moved_unchecked)
+        && first_self_intersection(&skin.shell.rest, skin.x()).is_some()
+    {
         // No contact in the model: an equilibrium through itself is not a result.
         status = "self_intersecting".into();
     }
