@@ -7,7 +7,10 @@ use crate::io::mesh::MeshInstance;
 use crate::io::{self as fio, LoadOptions, Rig};
 use crate::lattice::{Lattice, LatticeSettings};
 use crate::mesh::TriMesh;
-use crate::muscle::{self, FitSettings, Fitter, FrameStatus, GenerateSettings, Muscle};
+use crate::muscle::jaw::{Hinge, JawBone};
+use crate::muscle::{
+    self, fit::Calibration, FitSettings, Fitter, FrameStatus, GenerateSettings, Muscle,
+};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -101,8 +104,13 @@ pub fn run(a: FitArgs, out: &Output) -> anyhow::Result<()> {
         },
     )?;
     let material = Material::default();
-    let (muscles, origin) =
-        muscle_rig(a.muscles.as_deref(), &lattice, &mesh, &material, face, out)?;
+    let MuscleRig {
+        muscles,
+        origin,
+        bone,
+        hinge,
+        calibration,
+    } = muscle_rig(a.muscles.as_deref(), &lattice, &mesh, &material, face, out)?;
     anyhow::ensure!(
         !muscles.is_empty(),
         "{}: no muscles (every blend shape is empty); give a muscle file with --muscles",
@@ -112,7 +120,8 @@ pub fn run(a: FitArgs, out: &Output) -> anyhow::Result<()> {
         gauss_newton: a.gauss_newton,
         ..Default::default()
     };
-    let mut fitter = Fitter::new(&lattice, &material, muscles, settings)?;
+    let mut fitter = Fitter::coupled(&lattice, &material, muscles, settings, None, calibration)?;
+    fitter.forward.bone = bone;
     let weights = rig.frame_weights(a.fps);
     let range = frame_range(a.frames.as_deref(), weights.len())?;
     let names: Vec<String> = fitter.muscles().iter().map(|m| m.name.clone()).collect();
@@ -154,6 +163,7 @@ pub fn run(a: FitArgs, out: &Output) -> anyhow::Result<()> {
         "rms_residual_mean_m": mean, "rms_residual_max_m": fits.rms_max,
         "frames_not_fitted": fits.not_fitted.iter().map(|(k, s)| serde_json::json!({"frame": k, "status": format!("{s:?}")})).collect::<Vec<_>>(),
         "jacobian_s": fitter.jacobian_s, "qp_s": fits.qp_s, "seconds": secs,
+        "jaw": jaw_json(&fitter, &names, hinge.as_ref()),
     }));
     out.say(format!(
         "{nf} frames of '{}' fitted with {} muscles ({origin}) on {} lattice elements in {secs:.2} s",
@@ -194,8 +204,35 @@ fn check_args(a: &FitArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The muscles to fit and where they came from: read from the rig file `file`, or one
-/// generated per blend shape of `face` (saying which make none).
+/// The jaw's bone in the JSON result: the muscle that turns it, its nodes and the hinge's
+/// angle at activation 1 (degrees) and fit residual; null without one.
+fn jaw_json(fitter: &Fitter, names: &[String], hinge: Option<&Hinge>) -> serde_json::Value {
+    match (&fitter.forward.bone, hinge) {
+        (Some((m, bone)), Some(h)) => serde_json::json!({
+            "muscle": names[*m], "bone_nodes": bone.nodes.len(),
+            "angle_deg": h.angle_deg, "hinge_residual": h.residual,
+        }),
+        _ => serde_json::Value::Null,
+    }
+}
+
+/// The muscles `furrow fit` fits.
+struct MuscleRig {
+    muscles: Vec<Muscle>,
+    /// Where they came from, for the summary.
+    origin: String,
+    /// The jaw's bone and the muscle that turns it.
+    bone: Option<(usize, JawBone)>,
+    /// The hinge the bone turns about.
+    hinge: Option<Hinge>,
+    /// Generated muscles' responses at activation 1 (the bone's turn included): the rest
+    /// J's columns, as `animate` uses them.
+    calibration: Option<Calibration>,
+}
+
+/// The muscles to fit: read from the rig file `file` (no bone), or one generated per blend
+/// shape of `face` (saying which make none), the jaw-opening shape's turning the bone about
+/// its fitted hinge as `animate`'s generated muscles do.
 fn muscle_rig(
     file: Option<&Path>,
     lattice: &Lattice,
@@ -203,25 +240,49 @@ fn muscle_rig(
     material: &Material,
     face: &MeshInstance,
     out: &Output,
-) -> anyhow::Result<(Vec<Muscle>, String)> {
+) -> anyhow::Result<MuscleRig> {
     Ok(match file {
-        Some(p) => (
-            muscle::rigfile::load(p, lattice, mesh)?,
-            format!("from {}", p.display()),
-        ),
+        Some(p) => MuscleRig {
+            muscles: muscle::rigfile::load(p, lattice, mesh)?,
+            origin: format!("from {}", p.display()),
+            bone: None,
+            hinge: None,
+            calibration: None,
+        },
         None => {
             let interior = Interior::new(lattice, material)?;
-            let g = muscle::generate_muscles(
+            let jaw = JawBone::find(lattice, &face.positions, &face.targets);
+            let g = muscle::generate::generate_muscles_with_skin(
                 lattice,
                 &interior,
                 &face.targets,
                 None,
                 &GenerateSettings::default(),
+                None,
+                jaw.as_ref().map(|j| &j.0),
             )?;
             for (name, why) in &g.skipped {
                 out.note(format!("blend shape '{name}' makes no muscle: {why}"));
             }
-            (g.muscles, "generated from the blend shapes".to_string())
+            let (bone, hinge) = g.bone_muscle.zip(jaw).map(|(m, (bone, hinge))| {
+                out.note(format!(
+                    "jaw: muscle '{}' turns {} bone nodes by {:.2}° about the hinge fitted to its shape (residual {:.1} %)",
+                    g.muscles[m].name,
+                    bone.nodes.len(),
+                    hinge.angle_deg,
+                    100.0 * hinge.residual
+                ));
+                ((m, bone), hinge)
+            }).unzip();
+            MuscleRig {
+                calibration: Some(Calibration {
+                    responses: g.fits.iter().map(|f| f.response.clone()).collect(),
+                }),
+                muscles: g.muscles,
+                origin: "generated from the blend shapes".to_string(),
+                bone,
+                hinge,
+            }
         }
     })
 }
