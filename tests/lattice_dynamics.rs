@@ -181,17 +181,12 @@ fn a_coupling_stiffness_keyed_by_its_layout_steps_as_the_hashed_one() {
     // A spring network between neighbouring dofs, both triangles, and a pull.
     let spring = |k: f64| -> Vec<(usize, usize, f64)> {
         (0..n - 3)
-            .flat_map(|i| {
-                [
-                    (i, i, k),
-                    (i + 3, i + 3, k),
-                    (i, i + 3, -k),
-                    (i + 3, i, -k),
-                ]
-            })
+            .flat_map(|i| [(i, i, k), (i + 3, i + 3, k), (i, i + 3, -k), (i + 3, i, -k)])
             .collect()
     };
-    let force: Vec<f64> = (0..n).map(|i| if i % 3 == 2 { -0.05 } else { 0.0 }).collect();
+    let force: Vec<f64> = (0..n)
+        .map(|i| if i % 3 == 2 { -0.05 } else { 0.0 })
+        .collect();
     let stepper = || {
         let int = Interior::new(&lat, &soft()).unwrap();
         BackwardEuler::new(int, lat.rest_flat(), pinned.clone(), no_gravity()).unwrap()
@@ -224,6 +219,73 @@ fn a_coupling_stiffness_keyed_by_its_layout_steps_as_the_hashed_one() {
         }),
     );
     assert!(refused.is_err());
+}
+
+/// The linear response of backward Euler steps to a constant extra force is the steps'
+/// own change to first order: one and two steps of a block pulled sideways against springs
+/// anchored at rest, taken again with a small extra force, move by what `linear_response`
+/// predicts from the last Newton factor (within 1e-3 of the change; the corotational block
+/// is nearly linear there); without a factor (no step yet) there is none.
+#[test]
+fn the_linear_response_of_steps_is_their_change_under_a_small_extra_force() {
+    let lat = block_lattice();
+    let n = 3 * lat.rest.len();
+    let pinned: Vec<bool> = lat.rest.iter().map(|p| p.z < 0.0).collect();
+    let stepper = || {
+        let int = Interior::new(&lat, &soft()).unwrap();
+        BackwardEuler::new(int, lat.rest_flat(), pinned.clone(), no_gravity()).unwrap()
+    };
+    assert!(stepper().linear_response(&vec![0.0; n], 1).is_none());
+    let pull: Vec<f64> = (0..n)
+        .map(|i| if i % 3 == 0 { 0.02 } else { 0.0 })
+        .collect();
+    let df: Vec<f64> = (0..n)
+        .map(|i| 1e-4 * (((i * 7919) % 13) as f64 - 6.0))
+        .collect();
+    let stiffness: Vec<(usize, usize, f64)> = (0..n).map(|i| (i, i, 0.5)).collect();
+    for steps in [1, 2] {
+        let (mut base, mut pushed) = (stepper(), stepper());
+        let pulled: Vec<f64> = pull.iter().zip(&df).map(|(a, b)| a + b).collect();
+        // ExtraTerms' stiffness is about each step's start: its force carries the springs
+        // to their fixed anchors at rest, as the pipeline carries the skin's.
+        let rest = lat.rest_flat();
+        let anchored = |be: &BackwardEuler| -> Vec<f64> {
+            be.q.iter()
+                .zip(&rest)
+                .map(|(q, r)| -0.5 * (q - r))
+                .collect()
+        };
+        for _ in 0..steps {
+            let f = anchored(&base);
+            base.step(&pull, Some(&ExtraTerms::new(&stiffness, &f)))
+                .unwrap();
+            let f = anchored(&pushed);
+            pushed
+                .step(&pulled, Some(&ExtraTerms::new(&stiffness, &f)))
+                .unwrap();
+        }
+        let (dy, dv) = base.linear_response(&df, steps).unwrap();
+        let change: Vec<f64> = pushed.q.iter().zip(&base.q).map(|(a, b)| a - b).collect();
+        let dvel: Vec<f64> = pushed.v.iter().zip(&base.v).map(|(a, b)| a - b).collect();
+        let size = change.iter().map(|c| c * c).sum::<f64>().sqrt();
+        let off = change
+            .iter()
+            .zip(&dy)
+            .map(|(a, b)| (a - b).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        let vsize = dvel.iter().map(|c| c * c).sum::<f64>().sqrt();
+        let voff = dvel
+            .iter()
+            .zip(&dv)
+            .map(|(a, b)| (a - b).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        println!("{steps} steps: change {size:.3e} m, off by {off:.3e}; velocity off {voff:.3e} of {vsize:.3e}");
+        assert!(size > 0.0 && off < 1e-3 * size, "{off} of {size}");
+        // The velocity change is a difference of positions over h: 1e-2 of it.
+        assert!(voff < 1e-2 * vsize, "{voff} of {vsize}");
+    }
 }
 
 /// Two boxes in shared cells: pushing one leaves the other exactly still; the pushed one

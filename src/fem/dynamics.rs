@@ -637,6 +637,9 @@ pub struct BackwardEuler {
     lumped: Vec<f64>,
     system: Option<System>,
     solver: SpdSolver,
+    /// The (mass, stiffness) coefficients of the Newton matrix `solver` last factorised
+    /// (time steps only; `None` when it holds no factor of one).
+    factor_coefs: Option<(f64, f64)>,
     eval_clock: std::cell::Cell<(f64, usize)>,
     /// First Newton direction of the last time step (free DOFs, m), CG's warm start.
     last_direction: Option<Vec<f64>>,
@@ -682,6 +685,7 @@ impl BackwardEuler {
             lumped,
             system: None,
             solver: SpdSolver::new(),
+            factor_coefs: None,
             eval_clock: std::cell::Cell::new((0.0, 0)),
             last_direction: None,
             operator: None,
@@ -711,6 +715,53 @@ impl BackwardEuler {
             });
         }
         out
+    }
+
+    /// The linear response of `steps` backward Euler steps of the current dt, taken from
+    /// the current state, to a constant extra force `df` (flat over node dofs, N) held over
+    /// them: the change of the end positions and velocities (flat, m and m/s; zero at pinned
+    /// nodes), with the last factorised Newton matrix M + h²(K + K_x) as every step's
+    /// tangent: δy_k = A⁻¹ (M (δy_{k−1} + h δv_{k−1}) + h² δf), δv_k = (δy_k − δy_{k−1}) / h.
+    /// Exact for a quadratic energy whose matrix the steps share; to first order in `df`
+    /// otherwise. K_x is taken about fixed positions: a caller whose [`ExtraTerms`] force
+    /// carries the stiffness from each step's start to its anchor (as the pipeline's
+    /// coupling does) gets its steps' response. `None` when no Cholesky factor of a time step of this dt is at hand
+    /// (conjugate gradients, a quasi-static solve, or no step yet).
+    pub fn linear_response(&self, df: &[f64], steps: usize) -> Option<(Vec<f64>, Vec<f64>)> {
+        let h = self.settings.dt;
+        let (mass_coef, stiff_coef) = self.factor_coefs?;
+        let same_dt = mass_coef == 1.0 && (stiff_coef - h * h).abs() <= 1e-12 * h * h;
+        let sys = self.system.as_ref()?;
+        if !same_dt || df.len() != self.q.len() {
+            return None;
+        }
+        let n = df.len();
+        let (mut y, mut v) = (vec![0.0; n], vec![0.0; n]);
+        for _ in 0..steps {
+            let predicted: Vec<f64> = (0..n).map(|i| y[i] + h * v[i]).collect();
+            let m = self.mass_times(&predicted);
+            let mut rhs = vec![0.0; 3 * sys.nfree];
+            for (node, &f) in sys.free.iter().enumerate() {
+                if f != NONE {
+                    for i in 0..3 {
+                        let d = 3 * node + i;
+                        rhs[3 * f + i] = m[d] + h * h * df[d];
+                    }
+                }
+            }
+            self.solver.solve_in_place(&mut rhs);
+            let mut next = vec![0.0; n];
+            for (node, &f) in sys.free.iter().enumerate() {
+                if f != NONE {
+                    next[3 * node..3 * node + 3].copy_from_slice(&rhs[3 * f..3 * f + 3]);
+                }
+            }
+            for i in 0..n {
+                v[i] = (next[i] - y[i]) / h;
+            }
+            y = next;
+        }
+        Some((y, v))
     }
 
     fn ensure_system(&mut self, extra: Option<&ExtraTerms>) -> Result<(), FemError> {
@@ -747,6 +798,7 @@ impl BackwardEuler {
         if rebuild {
             self.system = Some(System::new(&self.interior, &self.pinned, &sig)?);
             self.solver.reset();
+            self.factor_coefs = None;
             self.last_direction = None;
             self.operator = None;
         }
@@ -1296,6 +1348,8 @@ impl NewtonProblem for EulerNewton<'_, '_> {
             let solved = self
                 .be
                 .solve_newton_system(solver, matrix_free, rhs, flags)?;
+            let factored = time_step && solved.is_some() && solver == LinearSolver::Cholesky;
+            self.be.factor_coefs = factored.then(|| self.terms.coefficients());
             self.report.solve_s += t1.elapsed().as_secs_f64();
             let Some((dy, cg_iterations)) = solved else {
                 continue;

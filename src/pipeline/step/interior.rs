@@ -111,6 +111,14 @@ pub fn advance(
     }
     load.stiffness.truncate(load.base_len);
     scratch.combined = Some(load.stiffness);
+    if keep_ends && about.is_none() {
+        scratch.first_pass = load.skin_force.map(|force| FirstPass {
+            q0: load.frame_q,
+            force,
+            q: state.interior.q.clone(),
+            v: state.interior.v.clone(),
+        });
+    }
     state.last_target = Some(target.to_vec());
     if state.interior.q.iter().any(|v| !v.is_finite()) {
         bail!(
@@ -119,6 +127,66 @@ pub fn advance(
     }
     record.ms = t.elapsed().as_secs_f64() * 1e3;
     Ok(record)
+}
+
+/// A frame's first coupling pass, for its later passes' linear response
+/// ([`linear_pass`]): where the frame started (flat, m), the skin's force there that the
+/// pass's linear model took (flat, N), and where the pass ended (m, m/s).
+#[derive(Debug, Clone)]
+pub struct FirstPass {
+    q0: Vec<f64>,
+    force: Vec<f64>,
+    q: Vec<f64>,
+    v: Vec<f64>,
+}
+
+/// A later coupling pass of the frame about node positions `about` (flat, m; where the skin
+/// was just solved) as the linear response of the first pass's sub-steps, instead of taking
+/// them again: the pass's skin force model F(about) − K_x (y − about) differs from the first
+/// pass's F(q₀) − K_x (y − q₀) by the constant c = F(about) − F(q₀) + K_x (about − q₀) (the
+/// tracking, muscles and targets are the same), so the pass ends at the first pass's end
+/// plus the steps' response to c ([`crate::fem::BackwardEuler::linear_response`], two
+/// triangular solves per sub-step with the last Newton factor). Sets the interior's q and v
+/// and returns true; false (nothing changed) when there is no first pass or no factor to
+/// respond with (conjugate gradients, a halved sub-step, quasi-static frames), and the caller
+/// takes the pass's steps again.
+pub fn linear_pass(
+    model: &Model,
+    state: &mut State,
+    scratch: &mut Scratch,
+    schedule: InteriorSchedule,
+    about: &[f64],
+) -> bool {
+    let Some(first) = scratch.first_pass.take() else {
+        return false;
+    };
+    let force = coupling_terms(model, state.skin.as_ref(), about, scratch, schedule, false);
+    let Some(mut c) = force else {
+        return false;
+    };
+    for (ci, f0) in c.iter_mut().zip(&first.force) {
+        *ci -= f0;
+    }
+    let moved: Vec<f64> = about.iter().zip(&first.q0).map(|(a, b)| a - b).collect();
+    let skin_parts = [
+        scratch
+            .skin_stiffness
+            .as_deref()
+            .filter(|_| state.skin.is_some()),
+        model.left_out.as_ref().map(|(_, k)| k.as_slice()),
+    ];
+    for part in skin_parts.into_iter().flatten() {
+        crate::math::sparse::triplets_mul_add(part, &moved, &mut c);
+    }
+    let Some((dy, dv)) = state.interior.linear_response(&c, schedule.substeps) else {
+        scratch.first_pass = Some(first);
+        return false;
+    };
+    let be = &mut state.interior;
+    be.q = first.q.iter().zip(&dy).map(|(a, b)| a + b).collect();
+    be.v = first.v.iter().zip(&dv).map(|(a, b)| a + b).collect();
+    scratch.first_pass = Some(first);
+    true
 }
 
 /// One stiffness entry (row dof, column dof, N/m).
