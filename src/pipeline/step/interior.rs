@@ -68,13 +68,8 @@ pub fn advance(
     // Only a frame that may take another pass keeps where its sub-steps ended.
     let keep_ends = schedule.coupling_iterations > 1;
     let from = state.last_target.take().unwrap_or_else(|| target.to_vec());
-    let skin_parts = [
-        scratch
-            .skin_stiffness
-            .as_deref()
-            .filter(|_| state.skin.is_some()),
-        model.left_out.as_ref().map(|(_, k)| k.as_slice()),
-    ];
+    let simulated = scratch.skin_stiffness.as_deref();
+    let skin_parts = skin_parts(model, simulated.filter(|_| state.skin.is_some()));
     let mut load = StepLoad {
         frame_q: q.to_vec(),
         skin_parts,
@@ -168,13 +163,8 @@ pub fn linear_pass(
         *ci -= f0;
     }
     let moved: Vec<f64> = about.iter().zip(&first.q0).map(|(a, b)| a - b).collect();
-    let skin_parts = [
-        scratch
-            .skin_stiffness
-            .as_deref()
-            .filter(|_| state.skin.is_some()),
-        model.left_out.as_ref().map(|(_, k)| k.as_slice()),
-    ];
+    let simulated = scratch.skin_stiffness.as_deref();
+    let skin_parts = skin_parts(model, simulated.filter(|_| state.skin.is_some()));
     for part in skin_parts.into_iter().flatten() {
         crate::math::sparse::triplets_mul_add(part, &moved, &mut c);
     }
@@ -187,6 +177,18 @@ pub fn linear_pass(
     be.v = first.v.iter().zip(&dv).map(|(a, b)| a + b).collect();
     scratch.first_pass = Some(first);
     true
+}
+
+/// The skin's stiffness on the lattice (N/m, triplets over node dofs), in its parts: the
+/// simulated skin's Bᵀ K_x B (`simulated`, when a skin is simulated) and the left-out skin's.
+fn skin_parts<'a>(
+    model: &'a Model,
+    simulated: Option<&'a [Triplet]>,
+) -> [Option<&'a [Triplet]>; 2] {
+    [
+        simulated,
+        model.left_out.as_ref().map(|(_, k)| k.as_slice()),
+    ]
 }
 
 /// One stiffness entry (row dof, column dof, N/m).

@@ -476,16 +476,11 @@ mod tests {
                     state.interior.time,
                 );
                 let last = state.last_target.clone();
-                interior::advance(
-                    &model,
-                    &mut state,
-                    &mut scratch,
-                    o.schedule,
-                    &target,
-                    k,
-                    None,
-                )
-                .unwrap();
+                let pass = |state: &mut State, scratch: &mut Scratch, about: Option<&[f64]>| {
+                    interior::advance(&model, state, scratch, o.schedule, &target, k, about)
+                        .unwrap();
+                };
+                pass(&mut state, &mut scratch, None);
                 solve_skin_on_interior(&mut state, PASS_LOOSENING, false).unwrap();
                 let x = state.interior.q.clone();
                 if linear {
@@ -500,16 +495,7 @@ mod tests {
                     let be = &mut state.interior;
                     (be.q, be.v, be.time) = (q0, v0, t0);
                     state.last_target = last;
-                    interior::advance(
-                        &model,
-                        &mut state,
-                        &mut scratch,
-                        o.schedule,
-                        &target,
-                        k,
-                        Some(&x),
-                    )
-                    .unwrap();
+                    pass(&mut state, &mut scratch, Some(&x));
                 }
                 out.push((x, state.interior.q.clone()));
                 solve_skin_on_interior(&mut state, 1.0, true).unwrap();
