@@ -106,8 +106,11 @@ pub fn advance(
     }
     load.stiffness.truncate(load.base_len);
     scratch.combined = Some(load.stiffness);
-    if keep_ends && about.is_none() {
-        scratch.first_pass = load.skin_force.map(|force| FirstPass {
+    if about.is_none() {
+        // Kept for the later passes' linear response only by a frame that may take them
+        // and whose sub-steps all took the frame's time step.
+        let keep = keep_ends && record.halvings == 0;
+        scratch.first_pass = load.skin_force.filter(|_| keep).map(|force| FirstPass {
             q0: load.frame_q,
             force,
             q: state.interior.q.clone(),
@@ -142,9 +145,9 @@ pub struct FirstPass {
 /// tracking, muscles and targets are the same), so the pass ends at the first pass's end
 /// plus the steps' response to c ([`crate::fem::BackwardEuler::linear_response`], two
 /// triangular solves per sub-step with the last Newton factor). Sets the interior's q and v
-/// and returns true; false (nothing changed) when there is no first pass or no factor to
-/// respond with (conjugate gradients, a halved sub-step, quasi-static frames), and the caller
-/// takes the pass's steps again.
+/// and returns true; false (nothing changed) when there is no first pass to respond from (a
+/// sub-step of it was halved) or no factor to respond with (conjugate gradients,
+/// quasi-static frames), and the caller takes the pass's steps again.
 pub fn linear_pass(
     model: &Model,
     state: &mut State,
