@@ -120,8 +120,15 @@ pub fn run(a: FitArgs, out: &Output) -> anyhow::Result<()> {
         gauss_newton: a.gauss_newton,
         ..Default::default()
     };
-    let mut fitter = Fitter::coupled(&lattice, &material, muscles, settings, None, calibration)?;
-    fitter.forward.bone = bone;
+    let mut fitter = Fitter::coupled(
+        &lattice,
+        &material,
+        muscles,
+        settings,
+        None,
+        calibration,
+        bone,
+    )?;
     let weights = rig.frame_weights(a.fps);
     let range = frame_range(a.frames.as_deref(), weights.len())?;
     let names: Vec<String> = fitter.muscles().iter().map(|m| m.name.clone()).collect();
@@ -264,7 +271,7 @@ fn muscle_rig(
             for (name, why) in &g.skipped {
                 out.note(format!("blend shape '{name}' makes no muscle: {why}"));
             }
-            let (bone, hinge) = g.bone_muscle.zip(jaw).map(|(m, (bone, hinge))| {
+            let (bone, hinge) = g.jaw(jaw).map(|((m, bone), hinge)| {
                 out.note(format!(
                     "jaw: muscle '{}' turns {} bone nodes by {:.2}° about the hinge fitted to its shape (residual {:.1} %)",
                     g.muscles[m].name,
@@ -275,9 +282,7 @@ fn muscle_rig(
                 ((m, bone), hinge)
             }).unzip();
             MuscleRig {
-                calibration: Some(Calibration {
-                    responses: g.fits.iter().map(|f| f.response.clone()).collect(),
-                }),
+                calibration: Some(g.calibration()),
                 muscles: g.muscles,
                 origin: "generated from the blend shapes".to_string(),
                 bone,

@@ -20,6 +20,7 @@
 //! units. A frame whose QP fails keeps the last good activations and says so.
 
 use super::forward::{embed_flat, Coupling, Forward, ForwardReport};
+use super::jaw::JawBone;
 use super::model::Muscle;
 use super::qp::{solve_qp, QpProblem, QpSolution, QpStatus};
 use super::MuscleError;
@@ -162,14 +163,16 @@ impl Fitter {
         muscles: Vec<Muscle>,
         settings: FitSettings,
     ) -> Result<Self, MuscleError> {
-        Self::coupled(lattice, material, muscles, settings, None, None)
+        Self::coupled(lattice, material, muscles, settings, None, None, None)
     }
 
     /// [`Self::new`] in the interior the pipeline runs: with the tracking's `coupling`,
     /// J = B K_p⁻¹ F includes its stiffness (or J's columns are the `calibration`'s measured
     /// responses), and each frame's target is first relieved of what the tracking's pull
     /// alone makes, B K_p⁻¹ Bᵀ k d (one solve with the rest factorisation), so that
-    /// activations fit the rest.
+    /// activations fit the rest. The jaw's `bone` and the muscle that turns it
+    /// ([`Forward::bone`]) are in the forward model before J is taken, so a linearised J
+    /// carries the bone's turn too.
     pub fn coupled(
         lattice: &Lattice,
         material: &Material,
@@ -177,6 +180,7 @@ impl Fitter {
         settings: FitSettings,
         coupling: Option<Coupling>,
         calibration: Option<Calibration>,
+        bone: Option<(usize, JawBone)>,
     ) -> Result<Self, MuscleError> {
         let responses = calibration.map(|c| c.responses).unwrap_or_default();
         settings.validate()?;
@@ -186,6 +190,7 @@ impl Fitter {
         if let Some(c) = coupling {
             forward = forward.with_coupling(c);
         }
+        forward.bone = bone;
         let m = forward.muscles.len();
         if !responses.is_empty() && responses.len() != m {
             return Err(MuscleError::Input(format!(

@@ -4,6 +4,7 @@
 use super::actuation::{
     actuation_muscle, moved_vertices, ActuationSettings, FittedActuation, Plant,
 };
+use super::fit::Calibration;
 use super::forward::Coupling;
 use super::jaw::JawBone;
 use super::model::Muscle;
@@ -97,6 +98,23 @@ pub struct Generated {
     /// The muscle that turns the jaw's bone (index into `muscles`), when a bone was given
     /// and its shape made a muscle.
     pub bone_muscle: Option<usize>,
+}
+
+impl Generated {
+    /// Each muscle's measured response at activation 1: the activation fit's J columns.
+    pub fn calibration(&self) -> Calibration {
+        Calibration {
+            responses: self.fits.iter().map(|f| f.response.clone()).collect(),
+        }
+    }
+
+    /// The jaw's bone `found` for these muscles (with its hinge) and the muscle that turns
+    /// it, when its shape made one.
+    pub fn jaw<H>(&self, found: Option<(JawBone, H)>) -> Option<((usize, JawBone), H)> {
+        self.bone_muscle
+            .zip(found)
+            .map(|(m, (bone, hinge))| ((m, bone), hinge))
+    }
 }
 
 /// The shape error a generated muscle is held to (dimensionless): 5 % of the shape's RMS

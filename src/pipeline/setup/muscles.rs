@@ -9,7 +9,6 @@ use crate::io::mesh::MeshInstance;
 use crate::io::model::MorphTarget;
 use crate::lattice::Lattice;
 use crate::mesh::TriMesh;
-use crate::muscle::fit::Calibration;
 use crate::muscle::jaw::{Hinge, JawBone};
 use crate::muscle::{Coupling, FitSettings, Fitter, GenerateSettings, Generated, MuscleError};
 use crate::pipeline::record::StagePlan;
@@ -118,9 +117,7 @@ pub fn build_muscles(
                 .map(|f| f as crate::muscle::generate::SkinForce),
             jaw.as_ref().map(|j| &j.0),
         )?;
-        if let (Some(m), Some((b, h))) = (g.bone_muscle, jaw) {
-            (bone, jaw_hinge) = (Some((m, b)), Some(h));
-        }
+        (bone, jaw_hinge) = g.jaw(jaw).unzip();
         made = shape_errors(&g);
         if let Some(a) = &at_shapes {
             made.push_str(&a.summary(&g.without_skin));
@@ -137,9 +134,7 @@ pub fn build_muscles(
                 corrections: f.corrections,
             })
             .collect();
-        calibration = Some(Calibration {
-            responses: g.fits.iter().map(|f| f.response.clone()).collect(),
-        });
+        calibration = Some(g.calibration());
         (g.muscles, "generated from the blend shapes".to_string())
     } else {
         let welded_mesh = TriMesh::new(
@@ -157,15 +152,15 @@ pub fn build_muscles(
         );
     }
     let n = muscles.len();
-    let mut fitter = Fitter::coupled(
+    let fitter = Fitter::coupled(
         lattice,
         &material,
         muscles,
         FitSettings::default(),
         Some(coupling),
         calibration,
+        bone,
     )?;
-    fitter.forward.bone = bone;
     let drive = MuscleDrive {
         fitter,
         activations: vec![0.0; n],
