@@ -48,7 +48,7 @@ fn detail_rms(out: &pipeline::RunOutput, frame: usize, pick: impl Fn(f64) -> boo
 }
 
 #[test]
-fn sheet_wrinkles_where_compressed_and_not_where_stretched() {
+fn sheet_tracked_wrinkles_where_compressed_and_not_where_stretched() {
     let dir = tempfile::tempdir().unwrap();
     let path = write_sheet(dir.path(), "sheet.glb");
     let rig = load_bytes(
@@ -57,8 +57,9 @@ fn sheet_wrinkles_where_compressed_and_not_where_stretched() {
         &LoadOptions::default(),
     )
     .unwrap();
+    // Tracking of the blended surface (the muscle-driven default is tested below).
     let opts = RunOptions {
-        scene: Scene::default(),
+        scene: Scene::parse("[muscles]\nsource = \"none\"\n", "t.toml").unwrap(),
         scene_path: None,
         fps: 30.0,
         frames: None,
@@ -445,7 +446,7 @@ fn a_ten_times_human_face_is_scaled_and_scale_one_is_refused_with_the_numbers() 
 }
 
 #[test]
-fn muscles_fitted_per_frame_drive_the_interior_and_the_skin_wrinkles() {
+fn muscles_fitted_per_frame_drive_the_interior_and_the_skin_wrinkles_by_default() {
     let dir = tempfile::tempdir().unwrap();
     let path = write_sheet(dir.path(), "sheet.glb");
     let rig = load_bytes(
@@ -455,7 +456,7 @@ fn muscles_fitted_per_frame_drive_the_interior_and_the_skin_wrinkles() {
     )
     .unwrap();
     let opts = RunOptions {
-        scene: Scene::parse("[muscles]\nsource = \"auto\"\n", "m.toml").unwrap(),
+        scene: Scene::default(),
         scene_path: None,
         fps: 30.0,
         frames: None,

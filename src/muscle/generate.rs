@@ -341,7 +341,14 @@ pub fn generate_muscles_with_skin(
                 corrections: settings.corrections_with_skin,
                 ..fit_settings
             };
-            let held = plant.fit(ut, &delta, &moved, &held_settings, Some(load), turns)?;
+            let held = match plant.fit(ut, &delta, &moved, &held_settings, Some(load), turns) {
+                Ok(held) => held,
+                Err(e) => {
+                    return free(Some(format!(
+                        "its equilibrium holding the skin's force failed: {e}"
+                    )))
+                }
+            };
             if !held.converged {
                 free(Some(
                     "its equilibrium holding the skin's force did not converge".into(),

@@ -89,21 +89,35 @@ pub struct RunOutput {
 /// Progress callback: (stage, done, total).
 pub type Progress<'a> = &'a dyn Fn(&str, usize, usize);
 
+/// A still rig's state for its next shape, solved alone from rest: set up afresh, keeping
+/// `old`'s muscles (reset to rest) rather than making them again.
+fn fresh_state(rig: &Rig, scene: &Scene, plan: &Plan, old: State) -> anyhow::Result<State> {
+    let muscles = old.muscles.map(|mut m| {
+        m.reset();
+        m
+    });
+    let mut plan = plan.clone();
+    plan.driver = plan::Driver::Tracking;
+    let mut state = setup::set_up(rig, scene, &mut plan, &mut Log::default(), &|_, _, _| {})?.1;
+    state.muscles = muscles;
+    Ok(state)
+}
+
 /// Run the pipeline on a loaded rig: plan, set up, step every frame, report.
 pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<RunOutput> {
     let wall = Instant::now();
     let scene = &opts.scene;
-    let plan = Plan::new(rig, opts)?;
+    let mut plan = Plan::new(rig, opts)?;
     let mut log = Log::default();
     log.stages.push(plan.load_stage(rig));
-    let (model, mut state) = setup::set_up(rig, scene, &plan, &mut log, progress)?;
+    let (model, mut state) = setup::set_up(rig, scene, &mut plan, &mut log, progress)?;
     if let Some(w) = thickness_warning(&plan, &model, &state) {
         log.warnings.push(w);
     }
     if state.skin.is_some() {
         log.stages.push(shell_stage(&plan, &model));
     }
-    let options = StepOptions::of(scene, plan.substeps, plan.fps);
+    let options = StepOptions::of(scene, &plan);
     let mut scratch = Scratch::new(model.lattice.node_count());
     let mut per_frame = Vec::new();
     let mut out = Frames::default();
@@ -115,7 +129,7 @@ pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<R
     for k in first..end {
         progress("frames", k, end);
         if !plan.animated && k > first {
-            state = setup::set_up(rig, scene, &plan, &mut Log::default(), &|_, _, _| {})?.1;
+            state = fresh_state(rig, scene, &plan, state)?;
             scratch = Scratch::new(model.lattice.node_count());
         }
         let w = &plan.weights[k];

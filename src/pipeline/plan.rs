@@ -25,14 +25,27 @@ pub enum Driver {
 }
 
 impl Driver {
-    /// The driver a scene asks for (`muscles.source`, default `none`: tracking).
-    pub fn of(scene: &Scene) -> Self {
-        match scene.muscles.source.as_deref().unwrap_or("none") {
-            "none" => Self::Tracking,
-            s => Self::Muscles {
+    /// The driver a scene asks for on `rig`: `muscles.source` when given (`none` is
+    /// tracking); by default muscles generated from the blend shapes (`auto`) when the rig's
+    /// face has a blend shape that moves it, tracking otherwise (nothing to make muscles of).
+    pub fn of(scene: &Scene, rig: &Rig) -> Self {
+        match scene.muscles.source.as_deref() {
+            Some("none") => Self::Tracking,
+            Some(s) => Self::Muscles {
                 source: s.to_string(),
             },
+            None if has_moving_shape(rig) => Self::Muscles {
+                source: "auto".to_string(),
+            },
+            None => Self::Tracking,
         }
+    }
+
+    /// Whether generated muscles are fitted with the skin in the loop: muscles generated from
+    /// the blend shapes (`auto`), unless `muscles.skin_in_fit = false`.
+    pub fn skin_in_fit(&self, scene: &Scene) -> bool {
+        matches!(self, Self::Muscles { source } if source == "auto")
+            && scene.muscles.skin_in_fit != Some(false)
     }
 
     /// The driver's name in the report.
@@ -42,6 +55,14 @@ impl Driver {
             Self::Muscles { .. } => "muscle activations",
         }
     }
+}
+
+/// Whether the rig's face has a blend shape that moves a vertex.
+fn has_moving_shape(rig: &Rig) -> bool {
+    rig.face()
+        .targets
+        .iter()
+        .any(|t| t.positions.iter().any(|d| d.norm() > 0.0))
 }
 
 /// Skin thickness over the face and the critical wavelengths it gives.
@@ -160,7 +181,7 @@ impl Plan {
             materials,
             skin,
             substeps,
-            driver: Driver::of(scene),
+            driver: Driver::of(scene, rig),
             head_motion: head_motion(rig, scene, substeps > 0),
         })
     }
@@ -284,15 +305,33 @@ mod tests {
 
     #[test]
     fn the_driver_follows_the_muscle_source() {
+        use crate::pipeline::setup::test_support::{bump_sheet, face_of, sheet_rig};
+        let (rig, face) = sheet_rig(face_of(bump_sheet(5)));
         let mut scene = Scene::default();
-        assert_eq!(Driver::of(&scene), Driver::Tracking);
-        scene.muscles.source = Some("auto".into());
-        assert_eq!(
-            Driver::of(&scene),
-            Driver::Muscles {
-                source: "auto".into()
-            }
+        let auto = Driver::Muscles {
+            source: "auto".into(),
+        };
+        assert_eq!(Driver::of(&scene, &rig), auto, "muscles by default");
+        assert!(auto.skin_in_fit(&scene));
+        scene.muscles.skin_in_fit = Some(false);
+        assert!(!auto.skin_in_fit(&scene));
+        scene.muscles.source = Some("none".into());
+        assert_eq!(Driver::of(&scene, &rig), Driver::Tracking);
+        assert!(!Driver::Tracking.skin_in_fit(&scene));
+        scene.muscles.source = Some("m.toml".into());
+        let file = Driver::of(&scene, &rig);
+        assert_eq!(file.name(), "muscle activations");
+        assert!(
+            !file.skin_in_fit(&Scene::default()),
+            "only generated muscles"
         );
-        assert_eq!(Driver::of(&scene).name(), "muscle activations");
+        // A rig whose only shape moves nothing has nothing to make muscles of.
+        let mut still = face;
+        still.targets[0]
+            .positions
+            .iter_mut()
+            .for_each(|d| *d *= 0.0);
+        let (still, _) = sheet_rig(still);
+        assert_eq!(Driver::of(&Scene::default(), &still), Driver::Tracking);
     }
 }

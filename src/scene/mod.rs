@@ -160,12 +160,13 @@ pub struct DynamicsSection {
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct MuscleSection {
-    /// `none` (default: the interior tracks the blended surface directly, no QP), `auto`
-    /// (muscles generated from the blend shapes, activations fitted per frame), or the path of
-    /// a muscle TOML file.
+    /// `auto` (muscles generated from the blend shapes, activations fitted per frame by a
+    /// QP; the default when the rig has a blend shape that moves it), `none` (the interior
+    /// tracks the blended surface directly, no QP; the default for a rig without blend
+    /// shapes), or the path of a muscle TOML file.
     pub source: Option<String>,
     /// Fit each generated muscle's actuation with the skin in the loop (default true with
-    /// `source = "auto"`; false fits the muscles against the flesh alone): the actuation
+    /// generated muscles, `source = "auto"`; false fits the muscles against the flesh alone): the actuation
     /// holds the force the skin puts on the lattice at the blend shape (`skin_at_shapes` says
     /// how it is found), so that the muscle makes its shape against the skin's resistance.
     /// Makes `solver.coupling_iterations` default to 2.
@@ -176,14 +177,6 @@ pub struct MuscleSection {
     /// milliseconds per shape) or `solved` (the reference: the skin solved quasi-statically
     /// from rest with its clusters on the shape's lattice fit; seconds per shape).
     pub skin_at_shapes: Option<String>,
-}
-
-impl MuscleSection {
-    /// Whether generated muscles are fitted with the skin in the loop: `skin_in_fit`, true
-    /// unless turned off, for muscles generated from the blend shapes (`source = "auto"`).
-    pub fn skin_in_fit(&self) -> bool {
-        self.source.as_deref() == Some("auto") && self.skin_in_fit != Some(false)
-    }
 }
 
 /// The values of `muscles.skin_at_shapes`.
@@ -213,8 +206,8 @@ pub struct SolverSection {
     /// When the skin's stiffness Bᵀ K_x B seen by the interior is recomputed: `once` (at
     /// rest; default, the force Bᵀ F_x is always current) or `every_frame` (the paper).
     pub skin_stiffness: Option<String>,
-    /// Most solves of the interior and the skin per frame (default 1, or 2 with
-    /// `muscles.skin_in_fit`): the staggered coupling (interior with the skin's force
+    /// Most solves of the interior and the skin per frame (default 2 with generated muscles
+    /// fitted with the skin in the loop, `muscles.skin_in_fit`; 1 otherwise): the staggered coupling (interior with the skin's force
     /// linearised, then the skin on the interior) is repeated from the frame's start, each
     /// time linearised about the last skin, until the interior moves by less than a
     /// thousandth of the frame's motion. 1 is the paper's one pass per frame, whose coupling

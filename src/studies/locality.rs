@@ -207,11 +207,11 @@ struct Stepper {
 impl Stepper {
     /// Plan and set up `opts` on `rig`.
     fn new(rig: &Rig, opts: &RunOptions) -> anyhow::Result<Self> {
-        let plan = pipeline::plan::Plan::new(rig, opts)?;
+        let mut plan = pipeline::plan::Plan::new(rig, opts)?;
         let mut log = pipeline::setup::Log::default();
         let (model, state) =
-            pipeline::setup::set_up(rig, &opts.scene, &plan, &mut log, &|_, _, _| {})?;
-        let options = pipeline::step::StepOptions::of(&opts.scene, plan.substeps, plan.fps);
+            pipeline::setup::set_up(rig, &opts.scene, &mut plan, &mut log, &|_, _, _| {})?;
+        let options = pipeline::step::StepOptions::of(&opts.scene, &plan);
         let scratch = pipeline::step::Scratch::new(model.lattice.node_count());
         Ok(Self {
             plan,

@@ -146,6 +146,16 @@ pub fn cases(quick: bool, n: usize, size: f64, seconds: f64) -> Vec<Case> {
         out: Vec::new(),
     };
     set.push("baseline", "defaults".into(), base, set.scene.clone(), 30.0);
+    // The defaults drive the interior by muscles; the tracking driver once at the baseline.
+    let mut tracked = set.scene.clone();
+    tracked.muscles.source = Some("none".into());
+    set.push(
+        "driver",
+        "tracking (muscles.source = none)".into(),
+        base,
+        tracked,
+        30.0,
+    );
     set.materials();
     set.loads();
     set.time_steps();

@@ -103,11 +103,14 @@ pub struct Log {
     pub warnings: Vec<String>,
 }
 
-/// Build the model and the initial state, recording each stage in `log`.
+/// Build the model and the initial state, recording each stage in `log`. Muscles by default
+/// (`muscles.source` not given) that cannot be made for the rig (no bone behind the face, no
+/// shape a muscle can make) leave the interior to tracking: `plan.driver` becomes
+/// [`Driver::Tracking`] and a warning says why.
 pub fn set_up(
     rig: &Rig,
     scene: &Scene,
-    plan: &Plan,
+    plan: &mut Plan,
     log: &mut Log,
     progress: Progress,
 ) -> anyhow::Result<(Model, State)> {
@@ -147,43 +150,50 @@ pub fn set_up(
     progress("setup", 3, 4);
     let stepper = interior::stepper(&lattice, scene, plan)?;
     let young = scene.interior.material()?.young;
-    let tracking = interior::tracking(
-        &welded.mesh,
-        &refined.rows,
-        interior::tracking_factor(scene, &plan.driver),
-        young,
-        lattice.cell_size,
-    );
+    let track = |driver: &Driver| {
+        let kappa = interior::tracking_factor(scene, driver);
+        interior::tracking(&welded.mesh, &refined.rows, kappa, young, lattice.cell_size)
+    };
+    let mut tracking = track(&plan.driver);
     progress("setup", 4, 4);
-    log.stages.push(interior::record(plan, &stepper));
     let skin_stiffness = simulated
         .as_ref()
         .map(|s| s.shell.coupling_terms().0)
         .unwrap_or_default();
-    let muscles = match &plan.driver {
-        Driver::Tracking => {
-            log.stages.extend(muscles::skipped());
-            None
-        }
-        Driver::Muscles { source } => {
-            let coupling = muscle_coupling(&tracking);
-            let (m, records) = muscles::build_muscles(
-                face,
-                &path,
-                scene,
-                &lattice,
-                &welded.loaded_of,
-                source,
-                muscles::Beside {
-                    coupling,
-                    skin: simulated.as_mut().map(|s| &mut s.shell),
-                    wavelength: plan.skin.lambda,
-                },
-            )?;
-            log.stages.extend(records);
-            Some(m)
-        }
+    let driven = match plan.driver.clone() {
+        Driver::Tracking => Ok(None),
+        Driver::Muscles { source } => muscles::build_muscles(
+            face,
+            &path,
+            scene,
+            &lattice,
+            &welded.loaded_of,
+            &source,
+            muscles::Beside {
+                coupling: muscle_coupling(&tracking),
+                skin: simulated.as_mut().map(|s| &mut s.shell),
+                wavelength: plan.skin.lambda,
+            },
+        )
+        .map(Some),
     };
+    let (muscles, records) = match driven {
+        Ok(Some((m, records))) => (Some(m), records),
+        Ok(None) => (None, muscles::skipped(scene)),
+        // Muscles by default, not asked for: a rig they cannot drive is tracked instead.
+        Err(e) if scene.muscles.source.is_none() => {
+            plan.driver = Driver::Tracking;
+            tracking = track(&plan.driver);
+            log.warnings.push(format!(
+                "{path}: muscles cannot drive this rig ({e:#}); the interior tracks the blended \
+                 surface instead (`[muscles] source = \"none\"` says so and skips the attempt)"
+            ));
+            (None, muscles::fell_back(&e))
+        }
+        Err(e) => return Err(e),
+    };
+    log.stages.push(interior::record(plan, &stepper));
+    log.stages.extend(records);
     let (skin, sim_vertices, sigma) = match simulated {
         Some(s) => (Some(s.shell), s.vertices, s.sigma),
         None => (None, Vec::new(), f64::NAN),
@@ -365,14 +375,9 @@ pub(crate) mod test_support {
         small_model_with(driver, substeps, |_| {})
     }
 
-    /// [`small_model`] with its scene changed by `tweak` first.
-    pub fn small_model_with(
-        driver: Driver,
-        substeps: usize,
-        tweak: impl Fn(&mut crate::scene::Scene),
-    ) -> (super::Model, super::State, MeshInstance) {
-        use super::*;
-        let face = face_of(bump_sheet(7));
+    /// The rig of `face`'s mesh and blend shapes, animated over two frames at 30 fps from
+    /// rest to its first shape at weight 1, loaded as a file would be. Returns the face too.
+    pub fn sheet_rig(face: MeshInstance) -> (crate::io::load::Rig, MeshInstance) {
         let mesh = TriMesh::new(face.positions.clone(), face.triangles.clone());
         let keys = crate::io::model::WeightKeys {
             times: vec![0.0, 1.0 / 30.0],
@@ -381,12 +386,24 @@ pub(crate) mod test_support {
         let bytes = crate::io::export::rig_glb("sheet", &mesh, &face.targets, &keys).unwrap();
         let path = std::path::Path::new("sheet.glb");
         let rig = crate::io::load::load_bytes(path, &bytes, &Default::default()).unwrap();
+        (rig, face)
+    }
+
+    /// [`small_model`] with its scene changed by `tweak` first.
+    pub fn small_model_with(
+        driver: Driver,
+        substeps: usize,
+        tweak: impl Fn(&mut crate::scene::Scene),
+    ) -> (super::Model, super::State, MeshInstance) {
+        use super::*;
+        let (rig, _) = sheet_rig(face_of(bump_sheet(7)));
         let mut scene = Scene::default();
         scene.interior.cell_size = Some(0.01);
         scene.skin.simulate = Some("all".into());
-        if let Driver::Muscles { source } = &driver {
-            scene.muscles.source = Some(source.clone());
-        }
+        scene.muscles.source = Some(match &driver {
+            Driver::Muscles { source } => source.clone(),
+            Driver::Tracking => "none".into(),
+        });
         tweak(&mut scene);
         let opts = crate::pipeline::RunOptions {
             scene: scene.clone(),
@@ -399,7 +416,7 @@ pub(crate) mod test_support {
         plan.skin.lambda_max = 0.01;
         plan.substeps = substeps;
         let (model, state) =
-            set_up(&rig, &scene, &plan, &mut Log::default(), &|_, _, _| {}).unwrap();
+            set_up(&rig, &scene, &mut plan, &mut Log::default(), &|_, _, _| {}).unwrap();
         (model, state, rig.face().clone())
     }
 }

@@ -38,6 +38,19 @@ pub struct MuscleDrive {
     pub jaw: Option<Hinge>,
 }
 
+impl MuscleDrive {
+    /// Back to rest: activations zero (within bounds) and the fit's memory of the last frame
+    /// forgotten, for a pose solved alone from rest.
+    pub fn reset(&mut self) {
+        self.fitter.reset();
+        let rest = self.fitter.muscles().iter();
+        self.activations = rest
+            .map(|m| 0.0f64.clamp(m.bounds[0], m.bounds[1]))
+            .collect();
+        self.fallback = false;
+    }
+}
+
 /// How well a generated muscle makes its blend shape at activation 1, in the interior the
 /// pipeline runs (tracking included), over the vertices the shape moves by more than a tenth
 /// of its largest displacement.
@@ -99,7 +112,7 @@ pub fn build_muscles(
         let rest: Vec<_> = welded_loaded.iter().map(|&i| face.positions[i]).collect();
         let jaw = JawBone::find(lattice, &rest, &targets);
         let interior = Interior::new(lattice, &material)?;
-        let skin = skin.filter(|_| scene.muscles.skin_in_fit());
+        let skin = skin.filter(|_| scene.muscles.skin_in_fit != Some(false));
         let way = match scene.muscles.skin_at_shapes.as_deref() {
             Some("solved") => SkinWay::Solved,
             _ => SkinWay::TensionField { wavelength },
@@ -347,12 +360,28 @@ fn shape_errors(g: &Generated) -> String {
     )
 }
 
-/// The `muscles` and `fit` records of a run without muscles.
-pub fn skipped() -> [StagePlan; 2] {
+/// The `muscles` and `fit` records of a run without muscles: `scene` asked for none, or
+/// (by default) the rig has no blend shape to make them of.
+pub fn skipped(scene: &Scene) -> [StagePlan; 2] {
+    let why = if scene.muscles.source.is_some() {
+        "muscles.source = none: the interior tracks the blended surface directly"
+    } else {
+        "the rig has no blend shape that moves it, so no muscles to make: the interior tracks \
+         the surface directly"
+    };
+    [
+        StagePlan::skipped("muscles", why),
+        StagePlan::skipped("fit", "no muscles: no activation QP"),
+    ]
+}
+
+/// The `muscles` and `fit` records of a run whose default muscles could not be made
+/// (`error` says why): the interior tracks the blended surface.
+pub fn fell_back(error: &anyhow::Error) -> [StagePlan; 2] {
     [
         StagePlan::skipped(
             "muscles",
-            "muscles.source = none: the interior tracks the blended surface directly",
+            format!("muscles cannot drive this rig ({error:#}): the interior tracks the blended surface directly"),
         ),
         StagePlan::skipped("fit", "no muscles: no activation QP"),
     ]
@@ -362,7 +391,7 @@ pub fn skipped() -> [StagePlan; 2] {
 mod tests {
     use super::*;
     use crate::math::vector::norm;
-    use crate::pipeline::plan::Plan;
+    use crate::pipeline::plan::{Driver, Plan};
     use crate::pipeline::setup::{set_up, Log};
 
     /// The tension-field force at a shape is the solved skin's (the reference) within 15 %
@@ -374,15 +403,23 @@ mod tests {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("rigs/face.glb");
         let mut rig = crate::io::load::load(&path, &Default::default()).unwrap();
         crate::io::units::apply(&mut rig, None, None);
+        let mut scene = Scene::default();
+        scene.muscles.source = Some("none".into());
         let opts = crate::pipeline::RunOptions {
-            scene: Scene::default(),
+            scene,
             scene_path: None,
             fps: 30.0,
             frames: None,
         };
-        let plan = Plan::new(&rig, &opts).unwrap();
-        let (model, mut state) =
-            set_up(&rig, &opts.scene, &plan, &mut Log::default(), &|_, _, _| {}).unwrap();
+        let mut plan = Plan::new(&rig, &opts).unwrap();
+        let (model, mut state) = set_up(
+            &rig,
+            &opts.scene,
+            &mut plan,
+            &mut Log::default(),
+            &|_, _, _| {},
+        )
+        .unwrap();
         let targets = welded_targets(rig.face(), &model.welded_loaded);
         let interior =
             Interior::new(&model.lattice, &opts.scene.interior.material().unwrap()).unwrap();
@@ -429,5 +466,55 @@ mod tests {
             assert!(off(&field) < 0.15, "{name}: {}", off(&field));
             assert!(3.0 * off(&field) < off(&unrelaxed), "{name}");
         }
+    }
+
+    /// Muscles by default on a rig they cannot drive (a closed surface: no bone behind the
+    /// face) leave the interior to tracking, with a warning and the reason in the `muscles`
+    /// record; asked for explicitly, the same rig is an error.
+    #[test]
+    fn default_muscles_that_cannot_be_made_fall_back_to_tracking() {
+        use crate::pipeline::setup::test_support::{face_of, sheet_rig};
+        let cube = crate::mesh::cube_mesh(0.04, 4);
+        let (rig, _) = sheet_rig(face_of(cube));
+        let mut scene = Scene::default();
+        scene.interior.cell_size = Some(0.01);
+        let opts = |scene: &Scene| crate::pipeline::RunOptions {
+            scene: scene.clone(),
+            scene_path: None,
+            fps: 30.0,
+            frames: None,
+        };
+        let mut plan = Plan::new(&rig, &opts(&scene)).unwrap();
+        assert_eq!(
+            plan.driver,
+            Driver::Muscles {
+                source: "auto".into()
+            }
+        );
+        let mut log = Log::default();
+        let (model, state) = set_up(&rig, &scene, &mut plan, &mut log, &|_, _, _| {}).unwrap();
+        assert_eq!(plan.driver, Driver::Tracking);
+        assert!(state.muscles.is_none());
+        assert!(
+            log.warnings.iter().any(|w| w.contains("no bone")),
+            "{:?}",
+            log.warnings
+        );
+        let record = log.stages.iter().find(|s| s.stage == "muscles").unwrap();
+        assert!(
+            !record.is_ran() && record.why.contains("no bone"),
+            "{record:?}"
+        );
+        // The tracking is the tracking driver's (κ = 10), not the weak one beside muscles.
+        scene.muscles.source = Some("none".into());
+        let mut plan = Plan::new(&rig, &opts(&scene)).unwrap();
+        let tracked = set_up(&rig, &scene, &mut plan, &mut Log::default(), &|_, _, _| {});
+        assert_eq!(model.tracking.k, tracked.unwrap().0.tracking.k);
+        scene.muscles.source = Some("auto".into());
+        let mut plan = Plan::new(&rig, &opts(&scene)).unwrap();
+        let e = set_up(&rig, &scene, &mut plan, &mut Log::default(), &|_, _, _| {})
+            .err()
+            .expect("muscles asked for on a rig without bone");
+        assert!(format!("{e:#}").contains("no bone"), "{e:#}");
     }
 }

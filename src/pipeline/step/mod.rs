@@ -59,16 +59,17 @@ pub struct StepOptions {
 }
 
 impl StepOptions {
-    /// The stepping `scene` asks for, with `substeps` interior sub-steps per frame at `fps`
-    /// frames per second (Hz).
-    pub fn of(scene: &crate::scene::Scene, substeps: usize, fps: f64) -> Self {
+    /// The stepping `scene` asks for under `plan` (its interior sub-steps per frame, its
+    /// frames per second and its driver).
+    pub fn of(scene: &crate::scene::Scene, plan: &super::plan::Plan) -> Self {
+        let (substeps, fps) = (plan.substeps, plan.fps);
         Self {
             schedule: InteriorSchedule {
                 substeps,
                 every_frame_stiffness: scene.solver.skin_stiffness.as_deref()
                     == Some("every_frame"),
                 coupling_iterations: scene.solver.coupling_iterations.unwrap_or(
-                    if scene.muscles.skin_in_fit() {
+                    if plan.driver.skin_in_fit(scene) {
                         SKIN_IN_FIT_PASSES
                     } else {
                         1
