@@ -194,7 +194,8 @@ pub struct SolverSection {
     pub shell_tolerance: Option<f64>,
     /// Shell Newton iteration limit (default 60).
     pub shell_iterations: Option<usize>,
-    /// Interior Newton iterations per step (default 3).
+    /// Interior Newton iterations per step (default 4 on rigs, 20 in synthetic scenes); a
+    /// step that does not converge within them is retried as two half steps.
     pub interior_iterations: Option<usize>,
     /// The interior Newton matrix: `consistent` (default: with the rotation's derivative,
     /// quadratic convergence) or `frozen` (the warped stiffness R K₀ Rᵀ, the reference).

@@ -26,6 +26,9 @@ pub struct MuscleDrive {
     pub fitter: Fitter,
     /// Activation of each muscle at the current frame (dimensionless, in [0, 1]).
     pub activations: Vec<f64>,
+    /// Activation of each muscle at the last frame (dimensionless): a frame's sub-steps move
+    /// from these to `activations` ([`Self::at`]), as tracking moves its target.
+    pub previous: Vec<f64>,
     /// Where the muscles came from (for the report).
     pub origin: String,
     /// How well each generated muscle makes its shape (empty for a muscle file).
@@ -47,7 +50,19 @@ impl MuscleDrive {
         self.activations = rest
             .map(|m| 0.0f64.clamp(m.bounds[0], m.bounds[1]))
             .collect();
+        self.previous = self.activations.clone();
         self.fallback = false;
+    }
+
+    /// The activations at fraction `at` of the frame interval (dimensionless): linear from
+    /// the last frame's to this frame's.
+    pub fn at(&self, at: f64) -> Vec<f64> {
+        let lerp = |(p, a): (&f64, &f64)| p + (a - p) * at.clamp(0.0, 1.0);
+        self.previous
+            .iter()
+            .zip(&self.activations)
+            .map(lerp)
+            .collect()
     }
 }
 
@@ -177,6 +192,7 @@ pub fn build_muscles(
     let drive = MuscleDrive {
         fitter,
         activations: vec![0.0; n],
+        previous: vec![0.0; n],
         origin,
         made: made_by,
         fallback: false,

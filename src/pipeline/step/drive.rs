@@ -17,7 +17,7 @@ pub fn fit_activations(
 ) -> anyhow::Result<StageRecord> {
     let t = Instant::now();
     let f = muscles.fitter.fit_frame(target)?;
-    muscles.activations = f.activations.clone();
+    muscles.previous = std::mem::replace(&mut muscles.activations, f.activations.clone());
     muscles.fallback = f.status != crate::muscle::FrameStatus::Fitted;
     Ok(StageRecord {
         status: if muscles.fallback {
@@ -57,18 +57,20 @@ pub fn fallback_tracking(
     );
 }
 
-/// Actuate the interior's rest state for the fitted activations (the actuation muscles'
-/// Σ a_m d_m; fibre muscles act through [`add_muscle_terms`]) and turn the jaw's bone nodes
-/// by its muscle's activation (pinned, they hold that through the frame's steps).
-pub fn actuate(muscles: &MuscleDrive, stepper: &mut BackwardEuler) -> anyhow::Result<()> {
-    let d = crate::muscle::actuation_field(
-        &stepper.interior,
-        muscles.fitter.muscles(),
-        &muscles.activations,
-    );
+/// Actuate the interior's rest state for `activations` (the muscles' at a step's end,
+/// [`MuscleDrive::at`]: the actuation muscles' Σ a_m d_m; fibre muscles act through
+/// [`add_muscle_terms`]) and turn the jaw's bone nodes by its muscle's activation (pinned,
+/// they hold that through the step).
+pub fn actuate(
+    muscles: &MuscleDrive,
+    activations: &[f64],
+    stepper: &mut BackwardEuler,
+) -> anyhow::Result<()> {
+    let d =
+        crate::muscle::actuation_field(&stepper.interior, muscles.fitter.muscles(), activations);
     stepper.interior.set_actuation(d)?;
     if let Some((m, bone)) = &muscles.fitter.forward.bone {
-        bone.place(muscles.activations[*m], &mut stepper.q);
+        bone.place(activations[*m], &mut stepper.q);
     }
     Ok(())
 }
@@ -98,21 +100,19 @@ pub fn tracking_force(
     force
 }
 
-/// Add the fibre muscles' active energy, linearised at the stepper's state (PSD stiffness, like the
-/// skin's terms), to `force` (N) and to `stiffness` after its first `base_len` triplets (N/m;
-/// the triplet layout is the same every step).
+/// Add the fibre muscles' active energy at `activations` (dimensionless), linearised at the
+/// stepper's state (PSD stiffness, like the skin's terms), to `force` (N) and to `stiffness`
+/// after its first `base_len` triplets (N/m; the triplet layout is the same every step).
 pub fn add_muscle_terms(
     muscles: &MuscleDrive,
+    activations: &[f64],
     stepper: &BackwardEuler,
     stiffness: &mut Vec<(usize, usize, f64)>,
     base_len: usize,
     force: &mut [f64],
 ) {
-    let act = crate::muscle::ActiveEnergy::new(
-        &stepper.interior,
-        muscles.fitter.muscles(),
-        &muscles.activations,
-    );
+    let act =
+        crate::muscle::ActiveEnergy::new(&stepper.interior, muscles.fitter.muscles(), activations);
     let (k, f) = crate::muscle::linearised_terms(&act, &stepper.q);
     stiffness.truncate(base_len);
     stiffness.extend_from_slice(&k);

@@ -228,6 +228,11 @@ fn solve_once(
     dynamics: bool,
     at: f64,
 ) -> anyhow::Result<SolveReport> {
+    // The muscles at this step's end, as the target below.
+    let activations = state.muscles.as_ref().map(|m| m.at(at));
+    if let (Some(m), Some(a)) = (state.muscles.as_ref(), &activations) {
+        drive::actuate(m, a, &mut state.interior)?;
+    }
     let be = &state.interior;
     let target: Vec<Vector3<f64>> = if at >= 1.0 {
         load.target.to_vec()
@@ -240,7 +245,8 @@ fn solve_once(
     };
     let mut force = drive::tracking_force(&model.tracking, &model.rows, &be.q, &target);
     if let Some(m) = state.muscles.as_ref() {
-        drive::add_muscle_terms(m, be, &mut load.stiffness, load.base_len, &mut force);
+        let a = activations.as_deref().unwrap_or_default();
+        drive::add_muscle_terms(m, a, be, &mut load.stiffness, load.base_len, &mut force);
         if m.fallback {
             drive::fallback_tracking(&model.tracking, &mut load.stiffness, &mut force);
         }
