@@ -170,6 +170,8 @@ fn a_muscle_driven_frame_that_does_not_converge_is_redone_by_tracking() {
         redone > 0,
         "no frame needed tracking: the case no longer tests the fallback"
     );
+    assert_eq!(out.report.totals.frames_tracked, redone);
+    assert_eq!(out.report.totals.frames_not_converged, 0);
 }
 
 /// The capture-shaped head at twice its performance's weights (its first half second, the

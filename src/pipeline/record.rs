@@ -163,6 +163,9 @@ pub struct FrameRecord {
     pub jaw_deg: Option<f64>,
 }
 
+/// What a muscle-driven frame's fit status says when tracking drove the frame instead.
+pub const TRACKED_FRAME: &str = "tracking drives this frame";
+
 /// Totals over the run.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct Totals {
@@ -172,6 +175,9 @@ pub struct Totals {
     pub frames_written: usize,
     /// Frames whose shell or interior did not converge.
     pub frames_not_converged: usize,
+    /// Muscle-driven runs: frames that tracking drove instead (the fit failed, or the
+    /// muscle-driven frame did not converge and was redone; see `per_frame[].fit.status`).
+    pub frames_tracked: usize,
     /// Milliseconds per stage summed over frames.
     pub fit_ms: f64,
     /// Interior milliseconds.
@@ -201,6 +207,8 @@ impl Totals {
         if unconverged(&frame.interior) || unconverged(&frame.shell) {
             self.frames_not_converged += 1;
         }
+        let tracked = |r: &StageRecord| r.status.contains(TRACKED_FRAME);
+        self.frames_tracked += usize::from(frame.fit.as_ref().is_some_and(tracked));
         self.frames_simulated += 1;
         let ms = |r: &Option<StageRecord>| r.as_ref().map_or(0.0, |r| r.ms);
         self.fit_ms += ms(&frame.fit);

@@ -22,9 +22,10 @@ pub fn fit_activations(
     Ok(StageRecord {
         status: if muscles.fallback {
             format!(
-                "{} ({}); tracking drives this frame",
+                "{} ({}); {}",
                 format!("{:?}", f.status).to_lowercase(),
-                f.clarabel_status
+                f.clarabel_status,
+                crate::pipeline::record::TRACKED_FRAME
             )
         } else {
             "converged".into()

@@ -234,7 +234,8 @@ fn advance_driven(
     m.fallback = true;
     m.activations.iter_mut().for_each(|a| *a = 0.0);
     if let Some(f) = fit.as_mut() {
-        f.status = format!("{}; tracking drives this frame ({why})", f.status);
+        let tracked = crate::pipeline::record::TRACKED_FRAME;
+        f.status = format!("{}; {tracked} ({why})", f.status);
     }
     let (interior, shell) = advance_coupled(model, state, scratch, schedule, target, k)?;
     Ok(match result {
