@@ -171,7 +171,12 @@ pub fn set_up(
             &source,
             muscles::Beside {
                 coupling: muscle_coupling(&tracking),
-                skin: simulated.as_mut().map(|s| &mut s.shell),
+                // The skin's force at each shape joins the actuation fit when the driver
+                // fits generated muscles with the skin in the loop.
+                skin: simulated
+                    .as_mut()
+                    .filter(|_| plan.driver.skin_in_fit(scene))
+                    .map(|s| &mut s.shell),
                 wavelength: plan.skin.lambda,
             },
         )

@@ -89,8 +89,9 @@ pub struct MuscleMade {
 pub struct Beside<'s> {
     /// The tracking's stiffness and pull.
     pub coupling: Coupling,
-    /// The simulated skin, whose force at each shape the actuations hold when
-    /// `muscles.skin_in_fit` asks for it.
+    /// The simulated skin, whose force at each shape the actuations hold: given only when
+    /// the driver fits generated muscles with the skin in the loop
+    /// ([`crate::pipeline::plan::Driver::skin_in_fit`]).
     pub skin: Option<&'s mut EmbeddedShell>,
     /// The wavelength the skin wrinkles at (m, its thinnest part's).
     pub wavelength: f64,
@@ -127,7 +128,6 @@ pub fn build_muscles(
         let rest: Vec<_> = welded_loaded.iter().map(|&i| face.positions[i]).collect();
         let jaw = JawBone::find(lattice, &rest, &targets);
         let interior = Interior::new(lattice, &material)?;
-        let skin = skin.filter(|_| scene.muscles.skin_in_fit != Some(false));
         let way = match scene.muscles.skin_at_shapes.as_deref() {
             Some("solved") => SkinWay::Solved,
             _ => SkinWay::TensionField { wavelength },
@@ -379,26 +379,28 @@ fn shape_errors(g: &Generated) -> String {
 /// The `muscles` and `fit` records of a run without muscles: `scene` asked for none, or
 /// (by default) the rig has no blend shape to make them of.
 pub fn skipped(scene: &Scene) -> [StagePlan; 2] {
-    let why = if scene.muscles.source.is_some() {
-        "muscles.source = none: the interior tracks the blended surface directly"
+    without_muscles(if scene.muscles.source.is_some() {
+        "muscles.source = none: the interior tracks the blended surface directly".into()
     } else {
         "the rig has no blend shape that moves it, so no muscles to make: the interior tracks \
          the surface directly"
-    };
-    [
-        StagePlan::skipped("muscles", why),
-        StagePlan::skipped("fit", "no muscles: no activation QP"),
-    ]
+            .into()
+    })
 }
 
 /// The `muscles` and `fit` records of a run whose default muscles could not be made
 /// (`error` says why): the interior tracks the blended surface.
 pub fn fell_back(error: &anyhow::Error) -> [StagePlan; 2] {
+    without_muscles(format!(
+        "muscles cannot drive this rig ({error:#}): the interior tracks the blended surface \
+         directly"
+    ))
+}
+
+/// The `muscles` record skipped for `why`, and the `fit` record that follows from it.
+fn without_muscles(why: String) -> [StagePlan; 2] {
     [
-        StagePlan::skipped(
-            "muscles",
-            format!("muscles cannot drive this rig ({error:#}): the interior tracks the blended surface directly"),
-        ),
+        StagePlan::skipped("muscles", why),
         StagePlan::skipped("fit", "no muscles: no activation QP"),
     ]
 }
