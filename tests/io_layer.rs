@@ -25,7 +25,12 @@ fn unrefined_map(rig: &Rig) -> FaceMap {
     let f = rig.face();
     let m = TriMesh::new(f.positions.clone(), f.triangles.clone());
     let (lo, hi) = m.bounding_box().unwrap();
-    let w = weld(&f.positions, &f.triangles, 1e-7 * (hi - lo).norm());
+    let w = weld(
+        &f.positions,
+        &f.targets,
+        &f.triangles,
+        1e-7 * (hi - lo).norm(),
+    );
     let n = w.mesh.positions.len();
     let id = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
     FaceMap {

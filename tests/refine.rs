@@ -99,7 +99,7 @@ fn above(m: &TriMesh, y: f64) -> Vec<bool> {
 fn welded_face() -> TriMesh {
     let rig = furrow::rig::face::generate();
     let m = &rig.mesh;
-    furrow::pipeline::setup::weld::weld(&m.positions, &m.triangles, 1e-9).mesh
+    furrow::pipeline::setup::weld::weld(&m.positions, &[], &m.triangles, 1e-9).mesh
 }
 
 #[test]

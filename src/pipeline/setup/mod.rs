@@ -292,6 +292,7 @@ fn simulated_skin(
     } else {
         let (mut sim, record) = skin::build_selected_shell(s, &candidates, &triangles, &ring)?;
         skin::pin_degenerate(&mut sim, &on_degenerate)?;
+        skin::pin_slits(&mut sim)?;
         log.stages.push(record);
         Some(sim)
     };

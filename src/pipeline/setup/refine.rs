@@ -223,7 +223,7 @@ mod tests {
     #[test]
     fn refines_a_coarse_sheet_for_a_short_wavelength_and_embeds_every_vertex() {
         let face = face_of(bump_sheet(6));
-        let welded = weld(&face.positions, &face.triangles, 1e-9);
+        let welded = weld(&face.positions, &face.targets, &face.triangles, 1e-9);
         let (lattice, _) = crate::pipeline::setup::lattice::build_lattice(
             &welded.mesh,
             &Default::default(),
@@ -276,7 +276,7 @@ mod tests {
         .map(|[x, y]| Vector3::new(x, y, 0.0));
         let mesh = TriMesh::new(p.to_vec(), vec![[0, 1, 2], [3, 4, 5]]);
         let face = face_of(mesh);
-        let welded = weld(&face.positions, &face.triangles, 1e-9);
+        let welded = weld(&face.positions, &face.targets, &face.triangles, 1e-9);
         assert_eq!(welded.loaded_of, vec![0, 1, 2, 4]);
         let flat = RefineSettings {
             smoothing: refine::Smoothing::Midpoint,

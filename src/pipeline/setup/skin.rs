@@ -116,6 +116,34 @@ pub fn pin_degenerate(sim: &mut SimulatedSkin, on_degenerate: &[bool]) -> anyhow
     Ok(())
 }
 
+/// Pin the skin's slits to the interior: the sides of a slit modelled closed (lips that
+/// touch at rest, kept apart by the weld because the blend shapes part them) coincide at rest
+/// and have no contact between them, so their edge vertices follow B q, as the lattice, cut
+/// along the slit, parts them. Returns how many vertices were pinned.
+pub fn pin_slits(sim: &mut SimulatedSkin) -> anyhow::Result<usize> {
+    let rest = &sim.shell.shell.rest;
+    let Some((lo, hi)) = rest.bounding_box() else {
+        return Ok(0);
+    };
+    let tol = super::weld::WELD_TOLERANCE * (hi - lo).norm();
+    let key = |p: &nalgebra::Vector3<f64>| p.map(|c| (c / tol).round() as i64);
+    let mut at: std::collections::HashMap<_, Vec<usize>> = std::collections::HashMap::new();
+    for (v, p) in rest.positions.iter().enumerate() {
+        at.entry(key(p)).or_default().push(v);
+    }
+    let slit: Vec<usize> = at
+        .into_values()
+        .filter(|vs| vs.len() > 1)
+        .flatten()
+        .collect();
+    if !slit.is_empty() {
+        let mut pinned = sim.shell.pinned().to_vec();
+        pinned.extend(&slit);
+        sim.shell.set_pinned(&pinned)?;
+    }
+    Ok(slit.len())
+}
+
 /// The record of a run whose shell simulates nothing; `compressed` says whether any triangle
 /// was compressed enough to wrinkle (the `select` stage).
 pub fn skipped_shell(scene: &Scene, compressed: bool) -> StagePlan {
@@ -461,5 +489,85 @@ mod tests {
         assert_eq!(verts, vec![1, 3, 2]);
         assert_eq!(sub.triangles, vec![[0, 1, 2]]);
         assert_eq!(sub.positions[1], two_triangles().positions[3]);
+    }
+
+    /// A 7 × 7 sheet with a slit modelled closed (lips that touch at rest: the middle three
+    /// vertices of row 3 have a copy used by the triangles below it) and a shape that opens
+    /// it (the rows below move down 1 mm, the copies with them): the weld keeps the copies
+    /// apart, and the skin pins both sides of the slit to the interior.
+    #[test]
+    fn a_slit_modelled_closed_stays_open_and_its_sides_follow_the_interior() {
+        use crate::pipeline::plan::Plan;
+        use crate::pipeline::setup::test_support::{bump_sheet, face_of, sheet_rig};
+        use crate::pipeline::setup::{set_up, Log};
+        use nalgebra::Vector3;
+        let n = 7;
+        let mut mesh = bump_sheet(n);
+        let copies: Vec<usize> = (2..5).map(|i| 3 * n + i).collect();
+        let copy_of = |v: usize| copies.iter().position(|&c| c == v).map(|k| n * n + k);
+        for (t, tri) in mesh.triangles.iter_mut().enumerate() {
+            // Triangles of the row of cells below row 3 (j = 2) use the copies.
+            if t / (2 * (n - 1)) == 2 {
+                tri.iter_mut().for_each(|v| *v = copy_of(*v).unwrap_or(*v));
+            }
+        }
+        let line: Vec<_> = copies.iter().map(|&c| mesh.positions[c]).collect();
+        mesh.positions.extend(line);
+        let mut face = face_of(mesh);
+        let open = &mut face.targets[0];
+        open.name = "open".into();
+        for (v, d) in open.positions.iter_mut().enumerate() {
+            let below = v >= n * n || v / n < 3;
+            *d = if below {
+                Vector3::new(0.0, -0.001, 0.0)
+            } else {
+                Vector3::zeros()
+            };
+        }
+        let (rig, _) = sheet_rig(face);
+        let mut scene = Scene::default();
+        scene.interior.cell_size = Some(0.01);
+        scene.skin.simulate = Some("all".into());
+        scene.muscles.source = Some("none".into());
+        let opts = crate::pipeline::RunOptions {
+            scene: scene.clone(),
+            scene_path: None,
+            fps: 30.0,
+            frames: None,
+        };
+        let mut plan = Plan::new(&rig, &opts).unwrap();
+        plan.skin.lambda = 0.01;
+        plan.skin.lambda_max = 0.01;
+        let mut log = Log::default();
+        let (_, state) = set_up(&rig, &scene, &mut plan, &mut log, &|_, _, _| {}).unwrap();
+        let weld = &log.stages[0];
+        assert_eq!(weld.stage, "weld");
+        assert!(
+            weld.why
+                .contains("3 vertices at a welded vertex kept apart"),
+            "{}",
+            weld.why
+        );
+        let skin = state.skin.expect("the whole skin is simulated");
+        let rest = &skin.shell.rest.positions;
+        let pinned_at = |p: &Vector3<f64>| {
+            skin.pinned()
+                .iter()
+                .filter(|&&v| (rest[v] - p).norm() < 1e-12)
+                .count()
+        };
+        // Refined, the slit holds more coincident pairs than the three loaded ones: each is
+        // pinned on both sides.
+        let pairs: Vec<usize> = (0..rest.len())
+            .filter(|&v| (0..rest.len()).any(|w| w != v && (rest[w] - rest[v]).norm() < 1e-12))
+            .collect();
+        assert!(pairs.len() >= 6, "{} slit vertices", pairs.len());
+        for v in pairs {
+            assert_eq!(
+                pinned_at(&rest[v]),
+                2,
+                "both sides of the slit at vertex {v}"
+            );
+        }
     }
 }

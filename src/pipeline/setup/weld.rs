@@ -1,7 +1,10 @@
 //! Welding a loaded face into one manifold skin: glTF splits vertices along texture seams and
-//! normal creases, but the skin must be one connected sheet to carry stress across them.
+//! normal creases, but the skin must be one connected sheet to carry stress across them. A
+//! slit modelled closed (lips that touch at rest) is not a seam: its blend shapes part it, so
+//! its sides stay apart.
 
 use crate::io::mesh::MeshInstance;
+use crate::io::model::MorphTarget;
 use crate::mesh::TriMesh;
 use crate::pipeline::record::StagePlan;
 use anyhow::{bail, Context};
@@ -26,17 +29,24 @@ pub fn weld_face(face: &MeshInstance, path: &str) -> anyhow::Result<(Welded, Sta
     if !(diag.is_finite() && diag > 0.0) {
         bail!("{path}: the face '{}' has no extent", face.name);
     }
-    let welded = weld(&face.positions, &face.triangles, WELD_TOLERANCE * diag);
+    let welded = weld(
+        &face.positions,
+        &face.targets,
+        &face.triangles,
+        WELD_TOLERANCE * diag,
+    );
     if welded.mesh.triangles.is_empty() {
         bail!("{path}: the face '{}' has no triangles", face.name);
     }
     let record = StagePlan::ran(
         "weld",
         format!(
-            "{} loaded vertices → {} skin vertices ({} triangles dropped as collapsed)",
+            "{} loaded vertices → {} skin vertices ({} triangles dropped as collapsed; {} \
+             vertices at a welded vertex kept apart, as blend shapes part them)",
             face.positions.len(),
             welded.mesh.positions.len(),
-            welded.dropped_triangles
+            welded.dropped_triangles,
+            welded.kept_apart
         ),
         t.elapsed().as_secs_f64() * 1e3,
     );
@@ -56,12 +66,22 @@ pub struct Welded {
     pub dropped_triangles: usize,
     /// For each welded triangle, the loaded triangle it comes from (same corner order).
     pub loaded_triangle: Vec<usize>,
+    /// Loaded vertices left unwelded although they coincide with a skin vertex, because a
+    /// blend shape moves them apart (the sides of a slit modelled closed).
+    pub kept_apart: usize,
 }
 
-/// Weld vertices closer than `tol` (m): positions are snapped to a grid of `tol` and equal
-/// cells (including the 7 neighbours towards +) are merged, first come first served, so the
-/// result does not depend on thread count.
-pub fn weld(positions: &[Vector3<f64>], triangles: &[[usize; 3]], tol: f64) -> Welded {
+/// Weld vertices closer than `tol` (m) whose blend shapes move them alike (each target's
+/// deltas, m, differ by at most `tol` too): seam copies become one skin vertex, while a slit
+/// modelled closed (lips or eyelids that touch at rest) stays open, since its shapes part it.
+/// Positions are snapped to a grid of `tol` and vertices in neighbouring cells are merged,
+/// first come first served, so the result does not depend on thread count.
+pub fn weld(
+    positions: &[Vector3<f64>],
+    targets: &[MorphTarget],
+    triangles: &[[usize; 3]],
+    tol: f64,
+) -> Welded {
     let key = |p: &Vector3<f64>| {
         [
             (p.x / tol).floor() as i64,
@@ -69,37 +89,44 @@ pub fn weld(positions: &[Vector3<f64>], triangles: &[[usize; 3]], tol: f64) -> W
             (p.z / tol).floor() as i64,
         ]
     };
+    let move_alike = |a: usize, b: usize| {
+        targets
+            .iter()
+            .all(|t| (t.positions[a] - t.positions[b]).norm() <= tol)
+    };
     let mut cells: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
     let mut of_loaded = vec![usize::MAX; positions.len()];
     let mut loaded_of = Vec::new();
     let mut welded_pos: Vec<Vector3<f64>> = Vec::new();
+    let mut kept_apart = 0;
     for (i, p) in positions.iter().enumerate() {
         let k = key(p);
         let mut found = None;
+        let mut parted = false;
         'search: for dx in -1..=1 {
             for dy in -1..=1 {
                 for dz in -1..=1 {
-                    if let Some(list) = cells.get(&[k[0] + dx, k[1] + dy, k[2] + dz]) {
-                        for &w in list {
-                            if (welded_pos[w] - p).norm() <= tol {
-                                found = Some(w);
-                                break 'search;
-                            }
+                    let Some(list) = cells.get(&[k[0] + dx, k[1] + dy, k[2] + dz]) else {
+                        continue;
+                    };
+                    for &w in list.iter().filter(|&&w| (welded_pos[w] - p).norm() <= tol) {
+                        if move_alike(loaded_of[w], i) {
+                            found = Some(w);
+                            break 'search;
                         }
+                        parted = true;
                     }
                 }
             }
         }
-        let w = match found {
-            Some(w) => w,
-            None => {
-                let w = welded_pos.len();
-                welded_pos.push(*p);
-                loaded_of.push(i);
-                cells.entry(k).or_default().push(w);
-                w
-            }
-        };
+        let w = found.unwrap_or_else(|| {
+            kept_apart += usize::from(parted);
+            let w = welded_pos.len();
+            welded_pos.push(*p);
+            loaded_of.push(i);
+            cells.entry(k).or_default().push(w);
+            w
+        });
         of_loaded[i] = w;
     }
     let mut tris = Vec::with_capacity(triangles.len());
@@ -120,6 +147,7 @@ pub fn weld(positions: &[Vector3<f64>], triangles: &[[usize; 3]], tol: f64) -> W
         loaded_of,
         dropped_triangles: dropped,
         loaded_triangle,
+        kept_apart,
     }
 }
 
@@ -138,12 +166,56 @@ mod tests {
             Vector3::new(0.0, 1.0, 1e-12), // seam copy of 2 within tolerance
         ];
         let t = vec![[0, 1, 2], [3, 4, 5], [0, 1, 3]];
-        let w = weld(&p, &t, 1e-9);
+        let w = weld(&p, &[], &t, 1e-9);
         assert_eq!(w.mesh.positions.len(), 4);
         assert_eq!(w.of_loaded, vec![0, 1, 2, 1, 3, 2]);
         assert_eq!(w.mesh.triangles, vec![[0, 1, 2], [1, 3, 2]]);
         assert_eq!(w.dropped_triangles, 1);
         assert_eq!(w.loaded_triangle, vec![0, 1]);
         assert_eq!(w.loaded_of, vec![0, 1, 2, 4]);
+    }
+
+    /// Lips modelled closed: two strips meet along a line with their own copies of its
+    /// vertices. A shape that opens the mouth (moves the lower copies) keeps them apart; a
+    /// shape that moves both copies alike (a texture seam) lets them weld.
+    #[test]
+    fn a_slit_that_blend_shapes_part_stays_open() {
+        let line = |y: f64| (0..3).map(move |i| Vector3::new(i as f64, y, 0.0));
+        // Upper lip: row y = 1 above the line y = 0; lower lip: the line's copies and y = -1.
+        let p: Vec<Vector3<f64>> = line(1.0)
+            .chain(line(0.0))
+            .chain(line(0.0))
+            .chain(line(-1.0))
+            .collect();
+        let strip = |a: usize, b: usize| {
+            vec![
+                [a, a + 1, b],
+                [a + 1, b + 1, b],
+                [a + 1, a + 2, b + 1],
+                [a + 2, b + 2, b + 1],
+            ]
+        };
+        let t: Vec<[usize; 3]> = strip(0, 3).into_iter().chain(strip(6, 9)).collect();
+        let shape = |moved: &[usize], d: Vector3<f64>| MorphTarget {
+            name: "s".into(),
+            positions: (0..p.len())
+                .map(|i| {
+                    if moved.contains(&i) {
+                        d
+                    } else {
+                        Vector3::zeros()
+                    }
+                })
+                .collect(),
+            normals: None,
+        };
+        let down = Vector3::new(0.0, -0.3, 0.0);
+        let open = weld(&p, &[shape(&[6, 7, 8, 9, 10, 11], down)], &t, 1e-9);
+        assert_eq!(open.mesh.positions.len(), 12);
+        assert_eq!(open.kept_apart, 3);
+        let seam = weld(&p, &[shape(&[3, 4, 5, 6, 7, 8], down)], &t, 1e-9);
+        assert_eq!(seam.mesh.positions.len(), 9);
+        assert_eq!(seam.kept_apart, 0);
+        assert_eq!(seam.of_loaded[6..9], seam.of_loaded[3..6]);
     }
 }
