@@ -746,6 +746,27 @@ fn fit_command_writes_activations_per_frame() {
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(j["frames"], 4);
     assert_eq!(j["muscles"].as_array().unwrap().len(), 9);
+    // Fitted in the interior the pipeline runs: its set-up's stages, each muscle's shape.
+    let stages: Vec<&str> = j["stages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["stage"].as_str().unwrap())
+        .collect();
+    for s in ["weld", "lattice", "clusters", "muscles", "fit"] {
+        assert!(stages.contains(&s), "{stages:?}");
+    }
+    let made = j["made"].as_array().unwrap();
+    assert_eq!(made.len(), 9);
+    for m in made {
+        let (e, p) = (
+            m["shape_error"].as_f64().unwrap(),
+            m["projection"].as_f64().unwrap(),
+        );
+        assert!(e <= furrow::muscle::generate::shape_goal(p), "{m}");
+    }
+    let ratio = j["residual_of_motion"].as_f64().unwrap();
+    assert!(ratio > 0.0 && ratio < 0.2, "{ratio}");
     let text = std::fs::read_to_string(&csv).unwrap();
     let lines: Vec<&str> = text.lines().collect();
     assert_eq!(lines.len(), 5);

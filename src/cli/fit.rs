@@ -1,16 +1,12 @@
 //! `furrow fit`: muscle activations per frame of a rig's blend-shape animation (CSV).
 
 use super::Output;
-use crate::fem::{Interior, Material};
 use crate::io::atomic::{self, Overwrite};
-use crate::io::mesh::MeshInstance;
 use crate::io::{self as fio, LoadOptions, Rig};
-use crate::lattice::{Lattice, LatticeSettings};
-use crate::mesh::TriMesh;
-use crate::muscle::jaw::{Hinge, JawBone};
-use crate::muscle::{
-    self, fit::Calibration, FitSettings, Fitter, FrameStatus, GenerateSettings, Muscle,
-};
+use crate::muscle::jaw::Hinge;
+use crate::muscle::{Fitter, FrameStatus};
+use crate::pipeline::{self, MuscleSetUp, RunOptions};
+use crate::scene::Scene;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -31,13 +27,19 @@ pub struct FitArgs {
     /// Replace the output if it exists.
     #[arg(long)]
     pub force: bool,
-    /// Muscle rig file (TOML); without it, one muscle per blend shape is generated.
+    /// Muscle rig file (TOML); without it, one muscle per blend shape is generated (in place
+    /// of the scene's `muscles.source`).
     #[arg(long)]
     pub muscles: Option<PathBuf>,
+    /// Scene TOML (materials, lattice, muscles) whose set-up the fit runs in, as `furrow
+    /// animate --scene` runs it; default: the built-in defaults.
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
     /// Frames per second at which the animation is sampled.
     #[arg(long, default_value_t = 30.0)]
     pub fps: f64,
-    /// Lattice cell size (m); default: about 500 cells over the face.
+    /// Lattice cell size (m), in place of the scene's `interior.cell_size`; default: about
+    /// 500 cells over the face.
     #[arg(long)]
     pub cell_size: Option<f64>,
     /// Gauss–Newton re-linearisations per frame with the nonlinear forward model.
@@ -85,109 +87,138 @@ fn csv_field(s: &str) -> String {
     }
 }
 
-/// Run `furrow fit`.
+/// Run `furrow fit`: the pipeline's set-up up to its muscles (the interior the pipeline
+/// runs: welded skin, lattice, tracking, the skin's force in the muscles' fit), then the QP
+/// on each frame.
 pub fn run(a: FitArgs, out: &Output) -> anyhow::Result<()> {
     check_args(&a)?;
     let outputs: Vec<&PathBuf> = std::iter::once(&a.output).chain(a.plot.as_ref()).collect();
     atomic::check_free(&outputs, Overwrite::from_force(a.force))?;
     let t0 = Instant::now();
+    let scene = fit_scene(&a)?;
     let mut rig = fio::load(&a.rig, &LoadOptions::default())?;
     out.note(&rig.face_reason);
-    out.note(crate::io::units::apply(&mut rig, a.scale, None));
-    let face = rig.face();
-    let mesh = TriMesh::new(face.positions.clone(), face.triangles.clone());
-    let lattice = Lattice::build(
-        &mesh,
-        &LatticeSettings {
-            cell_size: a.cell_size,
-            ..Default::default()
-        },
-    )?;
-    let material = Material::default();
-    let MuscleRig {
-        muscles,
-        origin,
-        bone,
-        hinge,
-        calibration,
-    } = muscle_rig(a.muscles.as_deref(), &lattice, &mesh, &material, face, out)?;
-    anyhow::ensure!(
-        !muscles.is_empty(),
-        "{}: no muscles (every blend shape is empty); give a muscle file with --muscles",
-        a.rig.display()
-    );
-    let settings = FitSettings {
-        gauss_newton: a.gauss_newton,
-        ..Default::default()
+    out.note(crate::io::units::apply(&mut rig, a.scale, scene.rig.scale));
+    let opts = RunOptions {
+        scene,
+        scene_path: a.scene.as_ref().map(|p| p.display().to_string()),
+        fps: a.fps,
+        frames: None,
     };
-    let mut fitter = Fitter::coupled(
-        &lattice,
-        &material,
-        muscles,
-        settings,
-        None,
-        calibration,
-        bone,
-    )?;
-    let weights = rig.frame_weights(a.fps);
-    let range = frame_range(a.frames.as_deref(), weights.len())?;
-    let names: Vec<String> = fitter.muscles().iter().map(|m| m.name.clone()).collect();
+    let pb = out.progress(4, "setting up");
+    let mut set = pipeline::set_up_muscles(&rig, &opts, &|stage, done, _| {
+        if stage == "setup" {
+            pb.set_position(done as u64)
+        }
+    })?;
+    pb.finish_and_clear();
+    for w in &set.log.warnings {
+        out.note(format!("warning: {w}"));
+    }
+    let setup_s = t0.elapsed().as_secs_f64();
+    set.muscles.fitter.settings.gauss_newton = a.gauss_newton;
+    let range = frame_range(a.frames.as_deref(), set.plan.weights.len())?;
+    let names: Vec<String> = set
+        .muscles
+        .fitter
+        .muscles()
+        .iter()
+        .map(|m| m.name.clone())
+        .collect();
     let pb = out.progress(range.len() as u64, "fitting");
-    let fits = fit_frames(
-        &mut fitter,
-        &rig,
-        &weights,
-        range.clone(),
-        a.fps,
-        &names,
-        &|| pb.inc(1),
-    )?;
+    let fits = fit_frames(&mut set, &rig, range.clone(), &names, &|| pb.inc(1))?;
     pb.finish_and_clear();
     atomic::write(
         &a.output,
         fits.csv.as_bytes(),
-        if a.force {
-            Overwrite::Replace
-        } else {
-            Overwrite::Refuse
-        },
+        Overwrite::from_force(a.force),
     )?;
     if let Some(p) = &a.plot {
-        plot_activations(p, &a.rig, &names, fits.curves)?;
+        plot_activations(p, &a.rig, &names, fits.curves.clone())?;
     }
-    let nf = range.len();
-    let mean = if nf > 0 {
-        fits.rms_sum / nf as f64
-    } else {
-        0.0
+    say_fit(
+        out,
+        (&a, &rig),
+        &set,
+        &fits,
+        (range, setup_s, t0.elapsed().as_secs_f64()),
+    );
+    Ok(())
+}
+
+/// The scene `furrow fit` sets up: `--scene` (or the defaults) with `--cell-size` and
+/// `--muscles` in place of its lattice cell and muscle source; muscles generated from the
+/// blend shapes unless it names a muscle file.
+fn fit_scene(a: &FitArgs) -> anyhow::Result<Scene> {
+    let mut scene = match &a.scene {
+        Some(p) => Scene::load(p)?,
+        None => Scene::default(),
     };
-    let secs = t0.elapsed().as_secs_f64();
+    if let Some(h) = a.cell_size {
+        scene.interior.cell_size = Some(h);
+        scene.interior.target_cells = None;
+    }
+    if let Some(m) = &a.muscles {
+        scene.muscles.source = Some(m.display().to_string());
+    }
+    scene.validate()?;
+    Ok(scene)
+}
+
+/// Say what was fitted to `rig` as `a` asked: the summary line, the residual against the
+/// motion, and the JSON result; `(range, setup_s, seconds)` are the frames fitted and the times (s).
+fn say_fit(
+    out: &Output,
+    (a, rig): (&FitArgs, &Rig),
+    set: &MuscleSetUp,
+    fits: &FittedFrames,
+    (range, setup_s, secs): (std::ops::Range<usize>, f64, f64),
+) {
+    let fitter = &set.muscles.fitter;
+    let names: Vec<&str> = fitter.muscles().iter().map(|m| m.name.as_str()).collect();
+    let nf = range.len().max(1) as f64;
+    let (mean, motion) = (fits.rms_sum / nf, fits.displacement_sum / nf);
+    let of_motion = mean / motion.max(1e-300);
+    let lattice = &set.model.lattice;
+    let made: Vec<serde_json::Value> = set
+        .muscles
+        .made
+        .iter()
+        .map(|m| serde_json::json!({"name": m.name, "shape_error": m.shape_error, "projection": m.projection}))
+        .collect();
     out.json_result(&serde_json::json!({
-        "ok": true, "rig": a.rig, "output": a.output, "frames": nf,
+        "ok": true, "rig": a.rig, "output": a.output, "frames": range.len(),
         "first_frame": range.start, "fps": a.fps,
-        "elements": lattice.elements.len(), "muscles": names, "muscle_origin": origin,
+        "elements": lattice.elements.len(), "cell_size_m": lattice.cell_size,
+        "muscles": names, "muscle_origin": set.muscles.origin, "made": made,
         "gauss_newton": a.gauss_newton,
         "rms_residual_mean_m": mean, "rms_residual_max_m": fits.rms_max,
+        "rms_displacement_mean_m": motion, "residual_of_motion": of_motion,
         "frames_not_fitted": fits.not_fitted.iter().map(|(k, s)| serde_json::json!({"frame": k, "status": format!("{s:?}")})).collect::<Vec<_>>(),
-        "jacobian_s": fitter.jacobian_s, "qp_s": fits.qp_s, "seconds": secs,
-        "jaw": jaw_json(&fitter, &names, hinge.as_ref()),
+        "setup_s": setup_s, "jacobian_s": fitter.jacobian_s, "qp_s": fits.qp_s, "seconds": secs,
+        "jaw": jaw_json(fitter, set.muscles.jaw.as_ref()),
+        "stages": set.log.stages,
     }));
     out.say(format!(
-        "{nf} frames of '{}' fitted with {} muscles ({origin}) on {} lattice elements in {secs:.2} s",
-        face.name,
+        "{} frames of '{}' fitted with {} muscles ({}) on {} lattice elements (cell {:.1} mm) in {secs:.2} s (set-up {setup_s:.2} s)",
+        range.len(),
+        rig.face().name,
         names.len(),
-        lattice.elements.len()
+        set.muscles.origin,
+        lattice.elements.len(),
+        lattice.cell_size * 1e3
     ));
     out.say(format!(
-        "  RMS residual mean {:.3} mm, max {:.3} mm; wrote {}",
+        "  RMS residual mean {:.3} mm ({:.1} % of the mean blend displacement, {:.3} mm), max {:.3} mm; wrote {}",
         mean * 1e3,
+        100.0 * of_motion,
+        motion * 1e3,
         fits.rms_max * 1e3,
         a.output.display()
     ));
     for (k, s) in &fits.not_fitted {
         out.note(format!("frame {k}: {s:?}"));
     }
-    Ok(())
 }
 
 /// Refuse out-of-range `--fps`, `--cell-size` and `--gauss-newton`.
@@ -213,83 +244,14 @@ fn check_args(a: &FitArgs) -> anyhow::Result<()> {
 
 /// The jaw's bone in the JSON result: the muscle that turns it, its nodes and the hinge's
 /// angle at activation 1 (degrees) and fit residual; null without one.
-fn jaw_json(fitter: &Fitter, names: &[String], hinge: Option<&Hinge>) -> serde_json::Value {
+fn jaw_json(fitter: &Fitter, hinge: Option<&Hinge>) -> serde_json::Value {
     match (&fitter.forward.bone, hinge) {
         (Some((m, bone)), Some(h)) => serde_json::json!({
-            "muscle": names[*m], "bone_nodes": bone.nodes.len(),
+            "muscle": fitter.muscles()[*m].name, "bone_nodes": bone.nodes.len(),
             "angle_deg": h.angle_deg, "hinge_residual": h.residual,
         }),
         _ => serde_json::Value::Null,
     }
-}
-
-/// The muscles `furrow fit` fits.
-struct MuscleRig {
-    muscles: Vec<Muscle>,
-    /// Where they came from, for the summary.
-    origin: String,
-    /// The jaw's bone and the muscle that turns it.
-    bone: Option<(usize, JawBone)>,
-    /// The hinge the bone turns about.
-    hinge: Option<Hinge>,
-    /// Generated muscles' responses at activation 1 (the bone's turn included): the rest
-    /// J's columns, as `animate` uses them.
-    calibration: Option<Calibration>,
-}
-
-/// The muscles to fit: read from the rig file `file` (no bone), or one generated per blend
-/// shape of `face` (saying which make none), the jaw-opening shape's turning the bone about
-/// its fitted hinge as `animate`'s generated muscles do.
-fn muscle_rig(
-    file: Option<&Path>,
-    lattice: &Lattice,
-    mesh: &TriMesh,
-    material: &Material,
-    face: &MeshInstance,
-    out: &Output,
-) -> anyhow::Result<MuscleRig> {
-    Ok(match file {
-        Some(p) => MuscleRig {
-            muscles: muscle::rigfile::load(p, lattice, mesh)?,
-            origin: format!("from {}", p.display()),
-            bone: None,
-            hinge: None,
-            calibration: None,
-        },
-        None => {
-            let interior = Interior::new(lattice, material)?;
-            let jaw = JawBone::find(lattice, &face.positions, &face.targets);
-            let g = muscle::generate::generate_muscles_with_skin(
-                lattice,
-                &interior,
-                &face.targets,
-                None,
-                &GenerateSettings::default(),
-                None,
-                jaw.as_ref().map(|j| &j.0),
-            )?;
-            for (name, why) in &g.skipped {
-                out.note(format!("blend shape '{name}' makes no muscle: {why}"));
-            }
-            let (bone, hinge) = g.jaw(jaw).map(|((m, bone), hinge)| {
-                out.note(format!(
-                    "jaw: muscle '{}' turns {} bone nodes by {:.2}° about the hinge fitted to its shape (residual {:.1} %)",
-                    g.muscles[m].name,
-                    bone.nodes.len(),
-                    hinge.angle_deg,
-                    100.0 * hinge.residual
-                ));
-                ((m, bone), hinge)
-            }).unzip();
-            MuscleRig {
-                calibration: Some(g.calibration()),
-                muscles: g.muscles,
-                origin: "generated from the blend shapes".to_string(),
-                bone,
-                hinge,
-            }
-        }
-    })
 }
 
 /// The fitted frames: the CSV (header included), the activation curves and residual totals.
@@ -302,20 +264,20 @@ struct FittedFrames {
     rms_max: f64,
     /// Sum of the finite RMS residuals (m).
     rms_sum: f64,
+    /// Sum of the frames' RMS blend displacements from the neutral face (m).
+    displacement_sum: f64,
     /// Seconds spent in the QP solves.
     qp_s: f64,
     /// Frames whose fit did not end `Fitted`, with their status.
     not_fitted: Vec<(usize, FrameStatus)>,
 }
 
-/// Fit the blend of each frame of `range` (morph weights per frame `weights`, sampled at
-/// `fps`) with muscles `names`; `progress()` after each frame.
+/// Fit the blended face of each frame of `range` with the set-up's muscles `names`, each
+/// shape of a still rig from rest; `progress()` after each frame.
 fn fit_frames(
-    fitter: &mut Fitter,
+    set: &mut MuscleSetUp,
     rig: &Rig,
-    weights: &[Vec<f64>],
     range: std::ops::Range<usize>,
-    fps: f64,
     names: &[String],
     progress: &dyn Fn(),
 ) -> anyhow::Result<FittedFrames> {
@@ -330,12 +292,17 @@ fn fit_frames(
         curves: vec![Vec::new(); names.len()],
         rms_max: 0.0,
         rms_sum: 0.0,
+        displacement_sum: 0.0,
         qp_s: 0.0,
         not_fitted: Vec::new(),
     };
+    let fps = set.plan.fps;
     for k in range {
-        let target = rig.blend(&weights[k]);
-        let f = fitter.fit_frame(&target)?;
+        let target = set.target(rig, k)?;
+        if !set.plan.animated {
+            set.muscles.fitter.reset();
+        }
+        let f = set.muscles.fitter.fit_frame(&target)?;
         let _ = write!(done.csv, "{k},{:.6}", k as f64 / fps);
         for (c, v) in done.curves.iter_mut().zip(&f.activations) {
             let _ = write!(done.csv, ",{v:.9}");
@@ -352,6 +319,9 @@ fn fit_frames(
         if f.rms_residual.is_finite() {
             done.rms_max = done.rms_max.max(f.rms_residual);
             done.rms_sum += f.rms_residual;
+        }
+        if f.rms_displacement.is_finite() {
+            done.displacement_sum += f.rms_displacement;
         }
         done.qp_s += f.qp_s;
         progress();

@@ -164,6 +164,68 @@ pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<R
     })
 }
 
+/// A run's set-up up to its muscles, without stepping a frame: what fitting activations
+/// alone (`furrow fit`) needs to fit in the interior the pipeline runs.
+pub struct MuscleSetUp {
+    /// The run's plan (its frames' weights, materials, driver).
+    pub plan: Plan,
+    /// The model (welded skin, lattice, tracking).
+    pub model: Model,
+    /// The muscles, their fitter (the QP's J in this interior) and the jaw's hinge.
+    pub muscles: setup::muscles::MuscleDrive,
+    /// The set-up's stage records and warnings.
+    pub log: Log,
+}
+
+impl MuscleSetUp {
+    /// The blended face of frame `k` as the welded skin's positions (m): the fit's target.
+    pub fn target(&self, rig: &Rig, k: usize) -> anyhow::Result<Vec<Vector3<f64>>> {
+        let m = &self.model;
+        step::blend::blend_frame(
+            rig,
+            &self.plan.weights[k],
+            &m.welded_of_loaded,
+            m.welded_count,
+            k,
+        )
+    }
+}
+
+/// Set up a run of `rig` under `opts` as [`run`] does (weld, lattice, selection, skin,
+/// muscles) and stop before the first frame. An error names the rig when its driver is not
+/// muscles or they cannot be made (a scene that leaves `muscles.source` out gets the
+/// muscles' error, not the run's fallback to tracking).
+pub fn set_up_muscles(
+    rig: &Rig,
+    opts: &RunOptions,
+    progress: Progress,
+) -> anyhow::Result<MuscleSetUp> {
+    let mut opts = opts.clone();
+    opts.scene
+        .muscles
+        .source
+        .get_or_insert_with(|| "auto".into());
+    let mut plan = Plan::new(rig, &opts)?;
+    if plan.driver == plan::Driver::Tracking {
+        anyhow::bail!(
+            "{}: no muscles to fit (`muscles.source = \"none\"`, or no blend shape moves the face)",
+            rig.path.display()
+        );
+    }
+    let mut log = Log::default();
+    log.stages.push(plan.load_stage(rig));
+    let (model, state) = setup::set_up(rig, &opts.scene, &mut plan, &mut log, progress)?;
+    let muscles = state
+        .muscles
+        .ok_or_else(|| anyhow::anyhow!("{}: the set-up made no muscles", rig.path.display()))?;
+    Ok(MuscleSetUp {
+        plan,
+        model,
+        muscles,
+        log,
+    })
+}
+
 /// The written frames' surfaces (m).
 #[derive(Default)]
 struct Frames {
