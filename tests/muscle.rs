@@ -1002,6 +1002,35 @@ fn every_muscle_makes_its_shape_against_the_skin_on_the_face_rig() {
     muscles_make_their_shapes("rigs/face.glb", true);
 }
 
+/// Muscles by default only where they make the rig's shapes: the capture-shaped head's 36 mm
+/// lattice cannot (37 % on average), so its run is tracked, with the reason in a warning and
+/// in the `muscles` record. Asked for (`source = "auto"`), they drive it (the next test).
+#[test]
+fn default_muscles_leave_a_rig_they_cannot_shape_to_tracking() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("rigs/head.glb");
+    let mut loaded = furrow::io::load::load(&path, &Default::default()).unwrap();
+    furrow::io::units::apply(&mut loaded, None, None);
+    let count = furrow::pipeline::plan::clip_weights(&loaded, 30.0).0.len();
+    let opts = RunOptions {
+        scene: Scene::default(),
+        scene_path: None,
+        fps: 30.0,
+        frames: Some(furrow::pipeline::frames::FrameRange::parse("0:1", count).unwrap()),
+    };
+    let out = pipeline::run(&loaded, &opts, &|_, _, _| {}).unwrap();
+    let record = out.report.stage("muscles").unwrap();
+    println!("{}", record.why);
+    assert!(!record.is_ran(), "{}", record.why);
+    assert!(record.why.contains("only within"), "{}", record.why);
+    assert!(!out.report.stage("fit").unwrap().is_ran());
+    let warned = out
+        .report
+        .warnings
+        .iter()
+        .any(|w| w.contains("only within"));
+    assert!(warned, "{:?}", out.report.warnings);
+}
+
 #[test]
 fn every_muscle_makes_its_shape_on_the_capture_head() {
     muscles_make_their_shapes("rigs/head.glb", false);

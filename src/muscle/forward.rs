@@ -82,6 +82,17 @@ pub enum ForwardStatus {
     Stalled,
 }
 
+/// Muscles need bone: a lattice without bone (pinned) nodes would be moved rigidly by them.
+/// The error says how to give it bone. `pinned` flags each lattice node.
+pub fn check_bone(pinned: &[bool]) -> Result<(), MuscleError> {
+    if pinned.iter().any(|&p| p) {
+        return Ok(());
+    }
+    Err(MuscleError::Input(
+        "the lattice has no bone (pinned) nodes, so muscles would move it rigidly; give the lattice a flesh depth so bone exists behind the face".into(),
+    ))
+}
+
 /// What an equilibrium solve did.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ForwardReport {
@@ -148,11 +159,7 @@ impl Forward {
             m.validate(interior.elements.len())
                 .map_err(MuscleError::Input)?;
         }
-        if !pinned.iter().any(|&p| p) {
-            return Err(MuscleError::Input(
-                "the lattice has no bone (pinned) nodes, so muscles would move it rigidly; give the lattice a flesh depth so bone exists behind the face".into(),
-            ));
-        }
+        check_bone(&pinned)?;
         let mut free = vec![NONE; 3 * n];
         let mut nfree = 0;
         for (node, &p) in pinned.iter().enumerate() {

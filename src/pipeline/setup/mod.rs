@@ -105,7 +105,8 @@ pub struct Log {
 
 /// Build the model and the initial state, recording each stage in `log`. Muscles by default
 /// (`muscles.source` not given) that cannot be made for the rig (no bone behind the face, no
-/// shape a muscle can make) leave the interior to tracking: `plan.driver` becomes
+/// shape a muscle can make) or that cannot make its shapes
+/// ([`muscles::MUSCLE_SHAPE_LIMIT`]) leave the interior to tracking: `plan.driver` becomes
 /// [`Driver::Tracking`] and a warning says why.
 pub fn set_up(
     rig: &Rig,

@@ -46,12 +46,40 @@ impl MuscleDrive {
     /// forgotten, for a pose solved alone from rest.
     pub fn reset(&mut self) {
         self.fitter.reset();
-        let rest = self.fitter.muscles().iter();
-        self.activations = rest
-            .map(|m| 0.0f64.clamp(m.bounds[0], m.bounds[1]))
-            .collect();
+        self.activations = rest_activations(self.fitter.muscles());
         self.previous = self.activations.clone();
         self.fallback = false;
+    }
+
+    /// Relax the muscles: this frame's activations back to rest, so that the frame's
+    /// sub-steps move them there from the last frame's.
+    pub fn relax(&mut self) {
+        self.activations = rest_activations(self.fitter.muscles());
+    }
+
+    /// Why muscles by default should leave this rig to tracking, if they should: generated
+    /// muscles that make the rig's shapes worse than [`MUSCLE_SHAPE_LIMIT`] RMS on average
+    /// (the lattice too coarse for its shapes) do not reproduce the rig, which is what
+    /// muscles drive by default for. `None` for a muscle file (nothing to judge against).
+    pub fn cannot_make_shapes(&self) -> Option<String> {
+        if self.made.is_empty() {
+            return None;
+        }
+        let n = self.made.len() as f64;
+        let mean = self.made.iter().map(|m| m.shape_error).sum::<f64>() / n;
+        let projection = self.made.iter().map(|m| m.projection).sum::<f64>() / n;
+        (mean > MUSCLE_SHAPE_LIMIT).then(|| {
+            format!(
+                "its generated muscles make its blend shapes only within {:.1} % RMS on \
+                 average (the lattice's own projection residual: {:.1} %), beyond the {:.0} % \
+                 muscles drive by default within; a finer lattice (`interior.cell_size`) lets \
+                 muscles make them, and `[muscles] source = \"auto\"` drives it with these \
+                 anyway",
+                100.0 * mean,
+                100.0 * projection,
+                100.0 * MUSCLE_SHAPE_LIMIT
+            )
+        })
     }
 
     /// The activations at fraction `at` of the frame interval (dimensionless): linear from
@@ -64,6 +92,24 @@ impl MuscleDrive {
             .map(lerp)
             .collect()
     }
+}
+
+/// The mean shape error (RMS over the vertices each shape moves, as a fraction of the shape's
+/// displacement) beyond which generated muscles do not drive a rig by default: they do not
+/// reproduce it. Measured (2026-11-26): on `rigs/face.glb` the muscles make its shapes within
+/// 7.3 % on average and drive its clip in 113 s (tracking 85 s), missing the shape by 24 % of
+/// the motion against tracking's 30 %; on `rigs/head.glb`, whose 36 mm lattice cannot resolve
+/// its 52 capture shapes (projection residual 37 % on average), within 37.4 %, and its whole
+/// clip took 969 s under them (2.7 s of skin per frame, 33 frames redone by tracking, the
+/// shape missed by 42 %) against 422 s tracked (1.1 s of skin per frame, missed by 48 %).
+pub const MUSCLE_SHAPE_LIMIT: f64 = 0.2;
+
+/// Each muscle's activation at rest: zero, within its bounds (dimensionless).
+fn rest_activations(muscles: &[crate::muscle::Muscle]) -> Vec<f64> {
+    muscles
+        .iter()
+        .map(|m| 0.0f64.clamp(m.bounds[0], m.bounds[1]))
+        .collect()
 }
 
 /// How well a generated muscle makes its blend shape at activation 1, in the interior the
@@ -98,11 +144,12 @@ pub struct Beside<'s> {
 }
 
 /// The muscles from `source` (`auto`: generated from the blend shapes of `face` (from the rig
-/// at `path`) on the welded skin,
-/// whose vertex `i` is loaded vertex `welded_loaded[i]`; otherwise a muscle TOML file), with
-/// their fitter and the `muscles` and `fit` records. Actuations and the fitter's J see the
-/// interior the pipeline runs: its elasticity with the tracking's coupling and, with
-/// `muscles.skin_in_fit`, the skin's force at each shape (`beside`).
+/// at `path`) on the welded skin, whose vertex `i` is loaded vertex `welded_loaded[i]`;
+/// otherwise a muscle TOML file), with their fitter and the `muscles` and `fit` records.
+/// Actuations and the fitter's J see the interior the pipeline runs: its elasticity with the
+/// tracking's coupling and, with `muscles.skin_in_fit`, the skin's force at each shape
+/// (`beside`). Muscles by default (`muscles.source` not given) that cannot make the rig's
+/// shapes ([`MuscleDrive::cannot_make_shapes`]) are an error, which `set_up` falls back on.
 pub fn build_muscles(
     face: &MeshInstance,
     path: &str,
@@ -118,6 +165,8 @@ pub fn build_muscles(
         wavelength,
     } = beside;
     let t = Instant::now();
+    // Before any fit: a lattice without bone (a closed surface) cannot carry muscles.
+    crate::muscle::forward::check_bone(&lattice.pinned)?;
     let material = scene.interior.material()?;
     let mut made = String::new();
     let mut calibration = None;
@@ -180,6 +229,7 @@ pub fn build_muscles(
         );
     }
     let n = muscles.len();
+    let rest = rest_activations(&muscles);
     let fitter = Fitter::coupled(
         lattice,
         &material,
@@ -191,13 +241,20 @@ pub fn build_muscles(
     )?;
     let drive = MuscleDrive {
         fitter,
-        activations: vec![0.0; n],
-        previous: vec![0.0; n],
+        activations: rest.clone(),
+        previous: rest,
         origin,
         made: made_by,
         fallback: false,
         jaw: jaw_hinge,
     };
+    // Muscles by default only where they make the rig's shapes (`set_up` falls back).
+    if let Some(why) = drive
+        .cannot_make_shapes()
+        .filter(|_| scene.muscles.source.is_none())
+    {
+        anyhow::bail!(why);
+    }
     let records = [
         StagePlan::ran(
             "muscles",

@@ -161,7 +161,9 @@ pub fn step_to_target(
 }
 
 /// The state a frame starts from: the interior's positions (m), velocities (m/s) and time
-/// (s), the last frame's target (m) and the skin's positions (flat, m).
+/// (s), the last frame's target (m) and, for a frame that may be redone, the skin's
+/// positions (flat, m). Copied once per frame, for the coupling's later passes and the
+/// muscle-driven frame's redo alike.
 struct FrameStart {
     q: Vec<f64>,
     v: Vec<f64>,
@@ -171,23 +173,36 @@ struct FrameStart {
 }
 
 impl FrameStart {
-    fn of(state: &State) -> Self {
+    /// The start of the frame `state` is at; the skin's positions too `with_skin`.
+    fn of(state: &State, with_skin: bool) -> Self {
         let be = &state.interior;
         Self {
             q: be.q.clone(),
             v: be.v.clone(),
             time: be.time,
             last_target: state.last_target.clone(),
-            x: state.skin.as_ref().map(|s| s.x().to_vec()),
+            x: state
+                .skin
+                .as_ref()
+                .filter(|_| with_skin)
+                .map(|s| s.x().to_vec()),
         }
     }
 
-    fn restore(self, state: &mut State) -> anyhow::Result<()> {
+    /// Put the interior (and the last target) back to the frame's start.
+    fn rewind_interior(&self, state: &mut State) {
         let be = &mut state.interior;
-        (be.q, be.v, be.time) = (self.q, self.v, self.time);
-        state.last_target = self.last_target;
-        if let (Some(skin), Some(x)) = (state.skin.as_mut(), self.x) {
-            skin.set_x(&x)?;
+        be.q.clone_from(&self.q);
+        be.v.clone_from(&self.v);
+        be.time = self.time;
+        state.last_target.clone_from(&self.last_target);
+    }
+
+    /// Put the interior and the skin back to the frame's start.
+    fn restore(&self, state: &mut State) -> anyhow::Result<()> {
+        self.rewind_interior(state);
+        if let (Some(skin), Some(x)) = (state.skin.as_mut(), &self.x) {
+            skin.set_x(x)?;
         }
         Ok(())
     }
@@ -196,7 +211,7 @@ impl FrameStart {
 /// [`advance_coupled`] under the frame's driver. A muscle-driven frame whose interior or
 /// skin does not converge (or goes non-finite) is redone from its start driven by tracking
 /// at its full stiffness while the muscles relax over the frame (activations from the last
-/// frame's to zero across the sub-steps); the `fit` record says so, and the records sum
+/// frame's to rest across the sub-steps); the `fit` record says so, and the records sum
 /// both tries. Holding the last activations instead left the stability sweep's sheet
 /// compressed by 70 % in 0.1 s with a self-intersecting skin in its last frame; relaxing
 /// them converges.
@@ -211,9 +226,10 @@ fn advance_driven(
 ) -> anyhow::Result<(StageRecord, Option<StageRecord>)> {
     let schedule = options.schedule;
     let muscled = state.muscles.as_ref().is_some_and(|m| !m.fallback);
-    let start = muscled.then(|| FrameStart::of(state));
-    let result = advance_coupled(model, state, scratch, schedule, target, k);
-    let Some(start) = start else {
+    let passes = schedule.coupling_iterations.max(1);
+    let start = (muscled || passes > 1).then(|| FrameStart::of(state, muscled));
+    let result = advance_coupled(model, state, scratch, schedule, target, k, start.as_ref());
+    let Some(start) = start.filter(|_| muscled) else {
         return result;
     };
     let converged = |r: &StageRecord| r.status == "converged";
@@ -232,12 +248,13 @@ fn advance_driven(
         .as_mut()
         .expect("a muscle-driven frame has muscles");
     m.fallback = true;
-    m.activations.iter_mut().for_each(|a| *a = 0.0);
+    m.relax();
     if let Some(f) = fit.as_mut() {
         let tracked = crate::pipeline::record::TRACKED_FRAME;
         f.status = format!("{}; {tracked} ({why})", f.status);
     }
-    let (interior, shell) = advance_coupled(model, state, scratch, schedule, target, k)?;
+    let (interior, shell) =
+        advance_coupled(model, state, scratch, schedule, target, k, Some(&start))?;
     Ok(match result {
         Ok((mut i, s)) => {
             i.then(interior);
@@ -283,7 +300,8 @@ const PASS_LOOSENING: f64 = 1000.0;
 /// factor; demo whole clip muscle-driven, interior 23.2 s against 45.5 s, same miss of the
 /// shape); where there is no such factor (conjugate gradients, a halved sub-step,
 /// quasi-static frames) the sub-steps are taken again, starting Newton where the last
-/// pass's ended. Returns the interior's and the skin's records, summed over the passes.
+/// pass's ended. `start` is the frame's start (needed when a second pass may run). Returns
+/// the interior's and the skin's records, summed over the passes.
 fn advance_coupled(
     model: &Model,
     state: &mut State,
@@ -291,24 +309,17 @@ fn advance_coupled(
     schedule: InteriorSchedule,
     target: &[nalgebra::Vector3<f64>],
     k: usize,
+    start: Option<&FrameStart>,
 ) -> anyhow::Result<(StageRecord, Option<StageRecord>)> {
     let passes = schedule.coupling_iterations.max(1);
-    // The frame's start, kept only when a second pass may run.
-    let start = (passes > 1).then(|| {
-        let be = &state.interior;
-        (
-            be.q.clone(),
-            be.v.clone(),
-            be.time,
-            state.last_target.clone(),
-        )
-    });
+    let start = start.filter(|_| passes > 1);
     let mut interior = interior::advance(model, state, scratch, schedule, target, k, None)?;
     let first_loosening = if start.is_some() { PASS_LOOSENING } else { 1.0 };
     let mut shell = solve_skin_on_interior(state, first_loosening, false)?;
-    let Some((q0, v0, t0, last)) = &start else {
+    let Some(start) = start else {
         return Ok((interior, shell));
     };
+    let q0 = &start.q;
     let mut residual = minus(&state.interior.q, q0);
     let mut omega = 1.0;
     for pass in 1..passes {
@@ -317,9 +328,7 @@ fn advance_coupled(
         if interior::linear_pass(model, state, scratch, schedule, &x) {
             interior.ms += clock.elapsed().as_secs_f64() * 1e3;
         } else {
-            let be = &mut state.interior;
-            (be.q, be.v, be.time) = (q0.clone(), v0.clone(), *t0);
-            state.last_target = last.clone();
+            start.rewind_interior(state);
             let step = interior::advance(model, state, scratch, schedule, target, k, Some(&x))?;
             interior.then(step);
         }
