@@ -402,8 +402,21 @@ pub(crate) mod test_support {
         substeps: usize,
         tweak: impl Fn(&mut crate::scene::Scene),
     ) -> (super::Model, super::State, MeshInstance) {
-        use super::*;
         let (rig, _) = sheet_rig(face_of(bump_sheet(7)));
+        let (model, state, _) = set_up_sheet(&rig, driver, substeps, tweak);
+        (model, state, rig.face().clone())
+    }
+
+    /// [`set_up`](super::set_up) on a sheet `rig` as [`small_model`] sets it up (1 cm cells,
+    /// λ = 1 cm, the whole skin simulated, driven by `driver`, `substeps` backward Euler steps
+    /// per frame), its scene changed by `tweak` first; with the set-up's log.
+    pub fn set_up_sheet(
+        rig: &crate::io::load::Rig,
+        driver: Driver,
+        substeps: usize,
+        tweak: impl Fn(&mut crate::scene::Scene),
+    ) -> (super::Model, super::State, super::Log) {
+        use super::*;
         let mut scene = Scene::default();
         scene.interior.cell_size = Some(0.01);
         scene.skin.simulate = Some("all".into());
@@ -418,12 +431,12 @@ pub(crate) mod test_support {
             fps: 30.0,
             frames: None,
         };
-        let mut plan = Plan::new(&rig, &opts).unwrap();
+        let mut plan = Plan::new(rig, &opts).unwrap();
         plan.skin.lambda = 0.01;
         plan.skin.lambda_max = 0.01;
         plan.substeps = substeps;
-        let (model, state) =
-            set_up(&rig, &scene, &mut plan, &mut Log::default(), &|_, _, _| {}).unwrap();
-        (model, state, rig.face().clone())
+        let mut log = Log::default();
+        let (model, state) = set_up(rig, &scene, &mut plan, &mut log, &|_, _, _| {}).unwrap();
+        (model, state, log)
     }
 }

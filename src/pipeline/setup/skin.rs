@@ -497,9 +497,8 @@ mod tests {
     /// apart, and the skin pins both sides of the slit to the interior.
     #[test]
     fn a_slit_modelled_closed_stays_open_and_its_sides_follow_the_interior() {
-        use crate::pipeline::plan::Plan;
-        use crate::pipeline::setup::test_support::{bump_sheet, face_of, sheet_rig};
-        use crate::pipeline::setup::{set_up, Log};
+        use crate::pipeline::plan::Driver;
+        use crate::pipeline::setup::test_support::{bump_sheet, face_of, set_up_sheet, sheet_rig};
         use nalgebra::Vector3;
         let n = 7;
         let mut mesh = bump_sheet(n);
@@ -525,21 +524,7 @@ mod tests {
             };
         }
         let (rig, _) = sheet_rig(face);
-        let mut scene = Scene::default();
-        scene.interior.cell_size = Some(0.01);
-        scene.skin.simulate = Some("all".into());
-        scene.muscles.source = Some("none".into());
-        let opts = crate::pipeline::RunOptions {
-            scene: scene.clone(),
-            scene_path: None,
-            fps: 30.0,
-            frames: None,
-        };
-        let mut plan = Plan::new(&rig, &opts).unwrap();
-        plan.skin.lambda = 0.01;
-        plan.skin.lambda_max = 0.01;
-        let mut log = Log::default();
-        let (_, state) = set_up(&rig, &scene, &mut plan, &mut log, &|_, _, _| {}).unwrap();
+        let (_, state, log) = set_up_sheet(&rig, Driver::Tracking, 0, |_| {});
         let weld = &log.stages[0];
         assert_eq!(weld.stage, "weld");
         assert!(
