@@ -99,6 +99,9 @@ pub fn run(a: FitArgs, out: &Output) -> anyhow::Result<()> {
     let mut rig = fio::load(&a.rig, &LoadOptions::default())?;
     out.note(&rig.face_reason);
     out.note(crate::io::units::apply(&mut rig, a.scale, scene.rig.scale));
+    // A bad range is refused before the set-up's seconds.
+    let count = pipeline::plan::clip_weights(&rig, a.fps).0.len();
+    let range = frame_range(a.frames.as_deref(), count)?;
     let opts = RunOptions {
         scene,
         scene_path: a.scene.as_ref().map(|p| p.display().to_string()),
@@ -117,7 +120,6 @@ pub fn run(a: FitArgs, out: &Output) -> anyhow::Result<()> {
     }
     let setup_s = t0.elapsed().as_secs_f64();
     set.muscles.fitter.settings.gauss_newton = a.gauss_newton;
-    let range = frame_range(a.frames.as_deref(), set.plan.weights.len())?;
     let names: Vec<String> = set
         .muscles
         .fitter
