@@ -128,7 +128,7 @@ pub fn run(a: FitArgs, out: &Output) -> anyhow::Result<()> {
         .map(|m| m.name.clone())
         .collect();
     let pb = out.progress(range.len() as u64, "fitting");
-    let fits = fit_frames(&mut set, &rig, range.clone(), &names, &|| pb.inc(1))?;
+    let mut fits = fit_frames(&mut set, &rig, range.clone(), &names, &|| pb.inc(1))?;
     pb.finish_and_clear();
     atomic::write(
         &a.output,
@@ -136,7 +136,7 @@ pub fn run(a: FitArgs, out: &Output) -> anyhow::Result<()> {
         Overwrite::from_force(a.force),
     )?;
     if let Some(p) = &a.plot {
-        plot_activations(p, &a.rig, &names, fits.curves.clone())?;
+        plot_activations(p, &a.rig, &names, std::mem::take(&mut fits.curves))?;
     }
     say_fit(
         out,

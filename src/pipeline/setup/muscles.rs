@@ -57,31 +57,6 @@ impl MuscleDrive {
         self.activations = rest_activations(self.fitter.muscles());
     }
 
-    /// Why muscles by default should leave this rig to tracking, if they should: generated
-    /// muscles that make the rig's shapes worse than [`MUSCLE_SHAPE_LIMIT`] RMS on average
-    /// (the lattice too coarse for its shapes) do not reproduce the rig, which is what
-    /// muscles drive by default for. `None` for a muscle file (nothing to judge against).
-    pub fn cannot_make_shapes(&self) -> Option<String> {
-        if self.made.is_empty() {
-            return None;
-        }
-        let n = self.made.len() as f64;
-        let mean = self.made.iter().map(|m| m.shape_error).sum::<f64>() / n;
-        let projection = self.made.iter().map(|m| m.projection).sum::<f64>() / n;
-        (mean > MUSCLE_SHAPE_LIMIT).then(|| {
-            format!(
-                "its generated muscles make its blend shapes only within {:.1} % RMS on \
-                 average (the lattice's own projection residual: {:.1} %), beyond the {:.0} % \
-                 muscles drive by default within; a finer lattice (`interior.cell_size`) lets \
-                 muscles make them, and `[muscles] source = \"auto\"` drives it with these \
-                 anyway",
-                100.0 * mean,
-                100.0 * projection,
-                100.0 * MUSCLE_SHAPE_LIMIT
-            )
-        })
-    }
-
     /// The activations at fraction `at` of the frame interval (dimensionless): linear from
     /// the last frame's to this frame's.
     pub fn at(&self, at: f64) -> Vec<f64> {
@@ -103,6 +78,31 @@ impl MuscleDrive {
 /// clip took 969 s under them (2.7 s of skin per frame, 33 frames redone by tracking, the
 /// shape missed by 42 %) against 422 s tracked (1.1 s of skin per frame, missed by 48 %).
 pub const MUSCLE_SHAPE_LIMIT: f64 = 0.2;
+
+/// Why muscles by default should leave a rig to tracking, if they should: generated muscles
+/// whose `made` records say they make the rig's shapes worse than [`MUSCLE_SHAPE_LIMIT`] RMS
+/// on average (the lattice too coarse for its shapes) do not reproduce the rig, which is what
+/// muscles drive by default for. `None` without records (a muscle file: nothing to judge
+/// against).
+pub fn cannot_make_shapes(made: &[MuscleMade]) -> Option<String> {
+    if made.is_empty() {
+        return None;
+    }
+    let n = made.len() as f64;
+    let mean = made.iter().map(|m| m.shape_error).sum::<f64>() / n;
+    let projection = made.iter().map(|m| m.projection).sum::<f64>() / n;
+    (mean > MUSCLE_SHAPE_LIMIT).then(|| {
+        format!(
+            "its generated muscles make its blend shapes only within {:.1} % RMS on average \
+             (the lattice's own projection residual: {:.1} %), beyond the {:.0} % muscles drive \
+             by default within; a finer lattice (`interior.cell_size`) lets muscles make them, \
+             and `[muscles] source = \"auto\"` drives it with these anyway",
+            100.0 * mean,
+            100.0 * projection,
+            100.0 * MUSCLE_SHAPE_LIMIT
+        )
+    })
+}
 
 /// Each muscle's activation at rest: zero, within its bounds (dimensionless).
 fn rest_activations(muscles: &[crate::muscle::Muscle]) -> Vec<f64> {
@@ -149,7 +149,7 @@ pub struct Beside<'s> {
 /// Actuations and the fitter's J see the interior the pipeline runs: its elasticity with the
 /// tracking's coupling and, with `muscles.skin_in_fit`, the skin's force at each shape
 /// (`beside`). Muscles by default (`muscles.source` not given) that cannot make the rig's
-/// shapes ([`MuscleDrive::cannot_make_shapes`]) are an error, which `set_up` falls back on.
+/// shapes ([`cannot_make_shapes`]) are an error, which `set_up` falls back on.
 pub fn build_muscles(
     face: &MeshInstance,
     path: &str,
@@ -228,6 +228,11 @@ pub fn build_muscles(
             "{path}: no muscles ({source}): every blend shape is empty; give a muscle file or use muscles.source = \"none\""
         );
     }
+    // Muscles by default only where they make the rig's shapes (`set_up` falls back), judged
+    // before their fitter is built.
+    if let Some(why) = cannot_make_shapes(&made_by).filter(|_| scene.muscles.source.is_none()) {
+        bail!(why);
+    }
     let n = muscles.len();
     let rest = rest_activations(&muscles);
     let fitter = Fitter::coupled(
@@ -248,13 +253,6 @@ pub fn build_muscles(
         fallback: false,
         jaw: jaw_hinge,
     };
-    // Muscles by default only where they make the rig's shapes (`set_up` falls back).
-    if let Some(why) = drive
-        .cannot_make_shapes()
-        .filter(|_| scene.muscles.source.is_none())
-    {
-        anyhow::bail!(why);
-    }
     let records = [
         StagePlan::ran(
             "muscles",

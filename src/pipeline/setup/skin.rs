@@ -119,29 +119,25 @@ pub fn pin_degenerate(sim: &mut SimulatedSkin, on_degenerate: &[bool]) -> anyhow
 /// Pin the skin's slits to the interior: the sides of a slit modelled closed (lips that
 /// touch at rest, kept apart by the weld because the blend shapes part them) coincide at rest
 /// and have no contact between them, so their edge vertices follow B q, as the lattice, cut
-/// along the slit, parts them. Returns how many vertices were pinned.
-pub fn pin_slits(sim: &mut SimulatedSkin) -> anyhow::Result<usize> {
+/// along the slit, parts them. The coincident vertices are those the weld's own search
+/// would join by position alone (no shapes given).
+pub fn pin_slits(sim: &mut SimulatedSkin) -> anyhow::Result<()> {
     let rest = &sim.shell.shell.rest;
     let Some((lo, hi)) = rest.bounding_box() else {
-        return Ok(0);
+        return Ok(());
     };
     let tol = super::weld::WELD_TOLERANCE * (hi - lo).norm();
-    let key = |p: &nalgebra::Vector3<f64>| p.map(|c| (c / tol).round() as i64);
-    let mut at: std::collections::HashMap<_, Vec<usize>> = std::collections::HashMap::new();
-    for (v, p) in rest.positions.iter().enumerate() {
-        at.entry(key(p)).or_default().push(v);
-    }
-    let slit: Vec<usize> = at
-        .into_values()
-        .filter(|vs| vs.len() > 1)
-        .flatten()
-        .collect();
-    if !slit.is_empty() {
-        let mut pinned = sim.shell.pinned().to_vec();
-        pinned.extend(&slit);
+    let joined = super::weld::weld(&rest.positions, &[], &rest.triangles, tol).of_loaded;
+    let mut copies = vec![0usize; rest.positions.len()];
+    joined.iter().for_each(|&w| copies[w] += 1);
+    let slit = (0..joined.len()).filter(|&v| copies[joined[v]] > 1);
+    let mut pinned = sim.shell.pinned().to_vec();
+    let before = pinned.len();
+    pinned.extend(slit);
+    if pinned.len() > before {
         sim.shell.set_pinned(&pinned)?;
     }
-    Ok(slit.len())
+    Ok(())
 }
 
 /// The record of a run whose shell simulates nothing; `compressed` says whether any triangle
