@@ -624,16 +624,24 @@ impl EmbeddedShell {
     /// (flat, m) without solving for its wrinkles: Bᵀ F of the membrane relaxed over
     /// wrinkles ([`crate::shell::tension_field`]) at x = B q, each triangle wrinkling at
     /// `wavelength` (m, the thinnest skin's) scaled by its thickness (λ ∝ h, as the
-    /// clusters are: [`EmbeddedShell::set_thickness`]). Bending is left out: at B q it is
-    /// the smooth face's, a small part of the skin's pull.
+    /// clusters are: [`EmbeddedShell::set_thickness`]). A triangle whose corners are all
+    /// pinned sits at B q and cannot wrinkle, so it is not relaxed (N_c = ∞): it carries its
+    /// whole compression, as in the solved skin (the lips' pinned ring: the demo's pucker
+    /// force 27.2 % from the solved skin's with it relaxed, see the test). Bending is left
+    /// out: at B q it is the smooth face's, a small part of the skin's pull.
     pub fn tension_field_force(&self, q: &[f64], wavelength: f64) -> Vec<f64> {
         let material = &self.shell.material;
         let h_min = self.shell.thickness_range().0;
+        let pinned = |v: &usize| self.pinned_vertices.binary_search(v).is_ok();
         let critical: Vec<f64> = self
             .shell
             .thickness
             .iter()
-            .map(|&h| {
+            .zip(&self.shell.membrane.elements)
+            .map(|(&h, el)| {
+                if el.v.iter().all(pinned) {
+                    return f64::INFINITY;
+                }
                 let lambda = wavelength * h / h_min;
                 crate::shell::tension_field::critical_force(
                     material.young,

@@ -23,7 +23,25 @@ pub const MARGIN: f64 = 1e-2;
 /// The first pair of triangles of `mesh` (topology) at positions `x` (flat, m) that pass
 /// through each other (in the order of the grid's cell keys), or `None`.
 pub fn first_self_intersection(mesh: &TriMesh, x: &[f64]) -> Option<(usize, usize)> {
+    first_self_intersection_beyond(mesh, x, None)
+}
+
+/// [`first_self_intersection`] of positions `x`, leaving out pairs that also pass through
+/// each other at the `reference` positions (flat, m) when given: the skin's own crossings,
+/// not those of the surface it is embedded on (the interior's B q, whose closed lips cross
+/// by its miss of the artist's shape).
+pub fn first_self_intersection_beyond(
+    mesh: &TriMesh,
+    x: &[f64],
+    reference: Option<&[f64]>,
+) -> Option<(usize, usize)> {
     let p = |v: usize| V3::new(x[3 * v], x[3 * v + 1], x[3 * v + 2]);
+    let crosses_in_reference = |ts: [usize; 3], tt: [usize; 3]| {
+        reference.is_some_and(|r| {
+            let p = |v: usize| V3::new(r[3 * v], r[3 * v + 1], r[3 * v + 2]);
+            pierces(ts.map(p), tt.map(p)) || pierces(tt.map(p), ts.map(p))
+        })
+    };
     let tris = &mesh.triangles;
     if tris.is_empty() {
         return None;
@@ -74,7 +92,9 @@ pub fn first_self_intersection(mesh: &TriMesh, x: &[f64]) -> Option<(usize, usiz
                 if ts.iter().any(|v| tt.contains(v)) {
                     continue;
                 }
-                if pierces(ts.map(p), tt.map(p)) || pierces(tt.map(p), ts.map(p)) {
+                if (pierces(ts.map(p), tt.map(p)) || pierces(tt.map(p), ts.map(p)))
+                    && !crosses_in_reference(ts, tt)
+                {
                     return Some((s.min(t), s.max(t)));
                 }
             }
@@ -145,6 +165,26 @@ mod tests {
         assert_eq!(first_self_intersection(&m, &x), Some((0, 1)));
         let (m, x) = two(2.0);
         assert_eq!(first_self_intersection(&m, &x), None);
+    }
+
+    /// A crossing the reference surface has too is not the skin's own; one it has not is.
+    #[test]
+    fn a_crossing_inherited_from_the_reference_is_left_out() {
+        let (m, through) = two(0.5);
+        let (_, apart) = two(2.0);
+        let (_, less_through) = two(0.4);
+        assert_eq!(
+            first_self_intersection_beyond(&m, &through, Some(&less_through)),
+            None
+        );
+        assert_eq!(
+            first_self_intersection_beyond(&m, &through, Some(&apart)),
+            Some((0, 1))
+        );
+        assert_eq!(
+            first_self_intersection_beyond(&m, &through, None),
+            Some((0, 1))
+        );
     }
 
     #[test]
