@@ -727,9 +727,12 @@ vertices = [{corner}]
     }
 }
 
-/// `furrow fit` on rigs/face.glb: a CSV with one row per frame, the 9 generated muscles,
-/// finite activations within [0, 1] and residuals; an empty range writes the header only;
-/// a bad range names --frames; an existing output is not overwritten without --force.
+/// `furrow fit` on rigs/face.glb's whole clip: the lattice chosen for the muscles (finer than
+/// the 25.7 mm default, which holds the clip within 6.4 % only), a mean residual within the
+/// goal of 5 % of the motion (measured 3.1 % on the 21.6 mm lattice; 6.9 % on the default),
+/// a CSV with one row per frame, the 9 generated muscles, finite activations within [0, 1]
+/// and residuals; an empty range writes the header only; a bad range names --frames; an
+/// existing output is not overwritten without --force.
 #[test]
 fn fit_command_writes_activations_per_frame() {
     use std::process::Command;
@@ -738,13 +741,23 @@ fn fit_command_writes_activations_per_frame() {
     let d = tempfile::tempdir().unwrap();
     let csv = d.path().join("a.csv");
     let o = Command::new(bin)
-        .args(["fit", rig, "--frames", "40:44", "--json", "-o"])
+        .args(["fit", rig, "--json", "-o"])
         .arg(&csv)
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    assert_eq!(j["frames"], 4);
+    assert_eq!(j["frames"], 262);
+    let lattice = j["stages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|s| s["stage"] == "lattice")
+        .unwrap();
+    let why = lattice["why"].as_str().unwrap();
+    assert!(why.contains("chosen for the muscles"), "{why}");
+    let cell = j["cell_size_m"].as_f64().unwrap();
+    assert!(cell < 0.025, "{cell}");
     assert_eq!(j["muscles"].as_array().unwrap().len(), 9);
     // Fitted in the interior the pipeline runs: its set-up's stages, each muscle's shape.
     let stages: Vec<&str> = j["stages"]
@@ -766,16 +779,21 @@ fn fit_command_writes_activations_per_frame() {
         assert!(e <= furrow::muscle::generate::shape_goal(p), "{m}");
     }
     let ratio = j["residual_of_motion"].as_f64().unwrap();
-    assert!(ratio > 0.0 && ratio < 0.2, "{ratio}");
+    println!(
+        "cell {:.1} mm: the clip fitted within {:.2} % of its motion",
+        1e3 * cell,
+        100.0 * ratio
+    );
+    assert!(ratio > 0.0 && ratio <= 0.05, "{ratio}");
     let text = std::fs::read_to_string(&csv).unwrap();
     let lines: Vec<&str> = text.lines().collect();
-    assert_eq!(lines.len(), 5);
+    assert_eq!(lines.len(), 263);
     assert!(lines[0].starts_with("frame,time_s,brow_raise,"));
     assert!(lines[0].ends_with(",rms_residual_m,rms_displacement_m,status,clarabel_status"));
     for (k, l) in lines[1..].iter().enumerate() {
         let cols: Vec<&str> = l.split(',').collect();
         assert_eq!(cols.len(), 2 + 9 + 4);
-        assert_eq!(cols[0], (40 + k).to_string());
+        assert_eq!(cols[0], k.to_string());
         for c in &cols[2..11] {
             let a: f64 = c.parse().unwrap();
             assert!((0.0..=1.0).contains(&a), "{l}");
@@ -783,7 +801,11 @@ fn fit_command_writes_activations_per_frame() {
         let r: f64 = cols[11].parse().unwrap();
         assert!(r.is_finite() && r >= 0.0);
         let d: f64 = cols[12].parse().unwrap();
-        assert!(d.is_finite() && d > 0.0, "frames 40–43 move the face: {l}");
+        assert!(d.is_finite() && d >= 0.0, "{l}");
+        assert!(
+            !(40..44).contains(&k) || d > 0.0,
+            "frames 40–43 move the face: {l}"
+        );
         assert_eq!(cols[13], "Fitted");
     }
     // Refused without --force; an empty range writes the header only.
@@ -1213,9 +1235,10 @@ fn the_lattice_fit_of_a_jaw_shape_follows_the_turned_bone() {
 }
 
 /// `furrow fit` turns the jaw's bone as `animate` does: on the demo's jaw frames (140–145,
-/// jaw_open near 1) the generated jaw muscle turns 20 bone nodes about the fitted hinge,
-/// its activation is near 1, and the fit leaves at most 0.64 mm RMS (1.73 mm without the
-/// bone, 4.0 mm with a J that left the bone's turn out).
+/// jaw_open near 1) the generated jaw muscle turns 39 bone nodes of the lattice chosen for
+/// the muscles (21.6 mm; 20 on the 25.7 mm default) about the fitted hinge, its activation is
+/// near 1, and the fit leaves less than 1 mm RMS (on the 25.7 mm lattice 0.64 mm, 1.73 mm
+/// without the bone, 4.0 mm with a J that left the bone's turn out).
 #[test]
 fn fit_command_turns_the_jaws_bone() {
     use std::process::Command;
@@ -1231,10 +1254,11 @@ fn fit_command_turns_the_jaws_bone() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(j["jaw"]["muscle"], "jaw_open", "{}", j["jaw"]);
-    assert_eq!(j["jaw"]["bone_nodes"], 20);
+    assert_eq!(j["jaw"]["bone_nodes"], 39);
     let angle = j["jaw"]["angle_deg"].as_f64().unwrap();
     assert!((angle - 10.06).abs() < 0.05, "{angle}");
     let worst = j["rms_residual_max_m"].as_f64().unwrap();
+    println!("jaw frames: worst RMS residual {:.3} mm", 1e3 * worst);
     assert!(worst < 1.0e-3, "worst RMS residual {worst} m");
     let text = std::fs::read_to_string(&csv).unwrap();
     let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();

@@ -302,6 +302,7 @@ fn finish_report(
         "skin_triangles": model.skin_mesh.triangles.len(),
         "simulated_vertices": model.sim_vertices.len(),
         "lattice_elements": model.lattice.elements.len(),
+        "lattice_cell_m": model.lattice.cell_size,
         "lattice_nodes": model.lattice.node_count(),
         "bone_nodes": model.lattice.pinned_count(),
         "clusters": state.skin.as_ref().map_or(0, |s| s.cluster_stats().clusters),

@@ -44,8 +44,12 @@ impl Driver {
     /// Whether generated muscles are fitted with the skin in the loop: muscles generated from
     /// the blend shapes (`auto`), unless `muscles.skin_in_fit = false`.
     pub fn skin_in_fit(&self, scene: &Scene) -> bool {
+        self.generates_muscles() && scene.muscles.skin_in_fit != Some(false)
+    }
+
+    /// Whether muscles are generated from the blend shapes (`auto`).
+    pub fn generates_muscles(&self) -> bool {
         matches!(self, Self::Muscles { source } if source == "auto")
-            && scene.muscles.skin_in_fit != Some(false)
     }
 
     /// The driver's name in the report.

@@ -115,8 +115,14 @@ pub fn compare_drivers(
     opts: &RunOptions,
     reference_tracking: Option<f64>,
 ) -> anyhow::Result<DriverComparison> {
-    let (tracking, reference) = run_with(rig, opts, "none", reference_tracking)?;
+    // The muscles' lattice may be chosen for them (`pipeline::setup::cell`): the reference
+    // tracks on that same lattice, so the two differ by their driver alone.
     let (muscles, driven) = run_with(rig, opts, "auto", None)?;
+    let mut same_lattice = opts.clone();
+    if same_lattice.scene.interior.target_cells.is_none() {
+        same_lattice.scene.interior.cell_size = driven.report.sizes["lattice_cell_m"].as_f64();
+    }
+    let (tracking, reference) = run_with(rig, &same_lattice, "none", reference_tracking)?;
     let region = region_size(&reference);
     let (a_ref, a_run) = (
         amplitude_map(&reference, region),

@@ -49,6 +49,44 @@ pub fn build_lattice(
     Ok((lattice, record))
 }
 
+/// The `lattice` stage of a run: under generated muscles (`plan.driver`) with no cell size
+/// or cell count in the scene, the lattice chosen for them from the blend shapes of `face`
+/// on the `welded` skin and the clip's weights ([`super::cell::choose_lattice`]), which the
+/// record says; otherwise [`build_lattice`].
+pub fn lattice_for_run(
+    face: &crate::io::mesh::MeshInstance,
+    welded: &super::weld::Welded,
+    interior: &InteriorSection,
+    plan: &crate::pipeline::plan::Plan,
+    path: &str,
+) -> anyhow::Result<(Lattice, StagePlan)> {
+    let skin = &welded.mesh;
+    if !plan.driver.generates_muscles()
+        || interior.cell_size.is_some()
+        || interior.target_cells.is_some()
+        || face.targets.is_empty()
+    {
+        return build_lattice(skin, interior, path);
+    }
+    let targets = super::muscles::welded_targets(face, &welded.loaded_of);
+    let weights = &plan.weights;
+    let t = Instant::now();
+    let (lattice, choice) = super::cell::choose_lattice(skin, &targets, weights, interior, path)?;
+    let record = StagePlan::ran(
+        "lattice",
+        format!(
+            "{} elements, {} nodes ({} bone), cell {:.1} mm{}",
+            lattice.elements.len(),
+            lattice.node_count(),
+            lattice.pinned_count(),
+            lattice.cell_size * 1e3,
+            choice.summary()
+        ),
+        t.elapsed().as_secs_f64() * 1e3,
+    );
+    Ok((lattice, record))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

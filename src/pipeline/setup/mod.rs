@@ -9,6 +9,7 @@
 //! lattice, embedding, tracking energy), and the [`State`] that each frame step advances (the
 //! interior's positions and velocities, the skin, the muscle activations).
 
+pub mod cell;
 pub mod interior;
 pub mod lattice;
 pub mod muscles;
@@ -121,7 +122,7 @@ pub fn set_up(
     let (welded, record) = weld::weld_face(face, &path)?;
     log.stages.push(record);
     select::check_folds(rig, plan, &welded, &path)?;
-    let (lattice, record) = lattice::build_lattice(&welded.mesh, &scene.interior, &path)?;
+    let (lattice, record) = lattice::lattice_for_run(face, &welded, &scene.interior, plan, &path)?;
     log.stages.push(record);
     progress("setup", 1, 4);
     let (selection, record) = select::select_skin(rig, scene, plan, &welded);
