@@ -35,18 +35,24 @@ pub fn build_lattice(
         },
     )
     .with_context(|| format!("{path}: building the lattice"))?;
-    let record = StagePlan::ran(
+    let record = record(&lattice, "", t);
+    Ok((lattice, record))
+}
+
+/// The `lattice` stage's record of `lattice`, built since `start`, with `how` it was chosen
+/// appended (empty for the scene's own).
+fn record(lattice: &Lattice, how: &str, start: Instant) -> StagePlan {
+    StagePlan::ran(
         "lattice",
         format!(
-            "{} elements, {} nodes ({} bone), cell {:.1} mm",
+            "{} elements, {} nodes ({} bone), cell {:.1} mm{how}",
             lattice.elements.len(),
             lattice.node_count(),
             lattice.pinned_count(),
             lattice.cell_size * 1e3
         ),
-        t.elapsed().as_secs_f64() * 1e3,
-    );
-    Ok((lattice, record))
+        start.elapsed().as_secs_f64() * 1e3,
+    )
 }
 
 /// The `lattice` stage of a run: under generated muscles (`plan.driver`) with no cell size
@@ -68,22 +74,11 @@ pub fn lattice_for_run(
     {
         return build_lattice(skin, interior, path);
     }
+    let t = Instant::now();
     let targets = super::muscles::welded_targets(face, &welded.loaded_of);
     let weights = &plan.weights;
-    let t = Instant::now();
     let (lattice, choice) = super::cell::choose_lattice(skin, &targets, weights, interior, path)?;
-    let record = StagePlan::ran(
-        "lattice",
-        format!(
-            "{} elements, {} nodes ({} bone), cell {:.1} mm{}",
-            lattice.elements.len(),
-            lattice.node_count(),
-            lattice.pinned_count(),
-            lattice.cell_size * 1e3,
-            choice.summary()
-        ),
-        t.elapsed().as_secs_f64() * 1e3,
-    );
+    let record = record(&lattice, &choice.summary(), t);
     Ok((lattice, record))
 }
 
