@@ -14,13 +14,12 @@
 //! elements, within 16 %), and its muscles fall back to tracking as before.
 
 use crate::io::model::MorphTarget;
-use crate::lattice::{Lattice, LatticeSettings};
+use crate::lattice::Lattice;
 use crate::mesh::TriMesh;
 use crate::muscle::forward::embed_flat;
 use crate::muscle::generate::{fit_node_displacements, GenerateSettings};
 use crate::muscle::jaw::JawBone;
 use crate::scene::InteriorSection;
-use anyhow::Context;
 
 /// Ratio of one candidate cell size to the last (dimensionless).
 pub const CELL_STEP: f64 = 0.975;
@@ -108,16 +107,12 @@ pub fn choose_lattice(
 ) -> anyhow::Result<(Lattice, CellChoice)> {
     let material = interior.material()?;
     let build = |cell_size: Option<f64>| {
-        Lattice::build(
-            skin,
-            &LatticeSettings {
-                cell_size,
-                target_cells: None,
-                order: super::lattice::element_order(interior),
-                depth: interior.depth,
-            },
-        )
-        .with_context(|| format!("{path}: building the lattice"))
+        let sized = InteriorSection {
+            cell_size,
+            target_cells: None,
+            ..interior.clone()
+        };
+        super::lattice::build_lattice(skin, &sized, path).map(|(lattice, _)| lattice)
     };
     let frames = moving_frames(frames, targets.len());
     let miss = |l: &Lattice| clip_projection_miss(l, &material, skin, targets, &frames);

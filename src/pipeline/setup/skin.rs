@@ -107,9 +107,20 @@ pub fn within_mask(mesh: &TriMesh, scene: &Scene) -> Option<Vec<bool>> {
 /// the stability sweep's slivers, corners 0.25 µm apart at rest ended 0.2 mm apart, the skin
 /// through itself).
 pub fn pin_degenerate(sim: &mut SimulatedSkin, on_degenerate: &[bool]) -> anyhow::Result<()> {
+    let corners: Vec<usize> = (0..sim.vertices.len())
+        .filter(|&i| on_degenerate[sim.vertices[i]])
+        .collect();
+    pin_also(sim, corners)
+}
+
+/// Pin the shell's `vertices` to the interior beside those already pinned.
+fn pin_also(
+    sim: &mut SimulatedSkin,
+    vertices: impl IntoIterator<Item = usize>,
+) -> anyhow::Result<()> {
     let mut pinned = sim.shell.pinned().to_vec();
     let before = pinned.len();
-    pinned.extend((0..sim.vertices.len()).filter(|&i| on_degenerate[sim.vertices[i]]));
+    pinned.extend(vertices);
     if pinned.len() > before {
         sim.shell.set_pinned(&pinned)?;
     }
@@ -135,19 +146,14 @@ pub fn pin_slits(sim: &mut SimulatedSkin) -> anyhow::Result<()> {
     let mut copies = vec![0usize; rest.positions.len()];
     joined.iter().for_each(|&w| copies[w] += 1);
     let on_slit: Vec<bool> = joined.iter().map(|&w| copies[w] > 1).collect();
-    let ring = rest
+    let ring: Vec<usize> = rest
         .triangles
         .iter()
         .filter(|t| t.iter().any(|&v| on_slit[v]))
         .flatten()
-        .copied();
-    let mut pinned = sim.shell.pinned().to_vec();
-    let before = pinned.len();
-    pinned.extend(ring);
-    if pinned.len() > before {
-        sim.shell.set_pinned(&pinned)?;
-    }
-    Ok(())
+        .copied()
+        .collect();
+    pin_also(sim, ring)
 }
 
 /// The record of a run whose shell simulates nothing; `compressed` says whether any triangle
