@@ -1033,7 +1033,7 @@ fn every_muscle_makes_its_shape_against_the_skin_on_the_face_rig() {
     muscles_make_their_shapes("rigs/face.glb", true);
 }
 
-/// The capture head run with the default scene (frames 0:1).
+/// The capture head run with `scene` (frames 0:1).
 fn head_run(scene: Scene) -> (furrow::io::load::Rig, pipeline::RunOutput) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("rigs/head.glb");
     let mut loaded = furrow::io::load::load(&path, &Default::default()).unwrap();
@@ -1049,15 +1049,16 @@ fn head_run(scene: Scene) -> (furrow::io::load::Rig, pipeline::RunOutput) {
     (loaded, out)
 }
 
-/// Muscles by default only where they make the rig's shapes: on the capture-shaped head's
-/// default 36 mm lattice (a scene that sets it) its lips do not part and its eyelids are
-/// thinner than a cell, so its muscles cannot make its shapes (37 % on average) and the run
-/// is tracked, with the reason in a warning and in the `muscles` record.
+/// Muscles by default only where they make the rig's shapes: the capture-shaped head's
+/// default 36 mm lattice misses its clip by 19.6 %, beyond 3× the 4 % a lattice is chosen
+/// for, so it is kept; there its lips do not part and its eyelids are thinner than a cell,
+/// its muscles cannot make its shapes (37 % on average) and the run is tracked, with the
+/// reason in a warning and in the `muscles` record.
 #[test]
 fn default_muscles_leave_a_rig_they_cannot_shape_to_tracking() {
-    let mut scene = Scene::default();
-    scene.interior.cell_size = Some(0.0359);
-    let (_, out) = head_run(scene);
+    let (_, out) = head_run(Scene::default());
+    let lattice = out.report.stage("lattice").unwrap();
+    assert!(lattice.why.contains("the default kept"), "{}", lattice.why);
     let record = out.report.stage("muscles").unwrap();
     println!("{}", record.why);
     assert!(!record.is_ran(), "{}", record.why);
@@ -1071,20 +1072,16 @@ fn default_muscles_leave_a_rig_they_cannot_shape_to_tracking() {
     assert!(warned, "{:?}", out.report.warnings);
 }
 
-/// With the default scene the capture head gets a lattice chosen for its muscles (about
-/// 17 mm, six times the default's elements: its 48 mm mouth parts only on cells well under a
-/// third of it), and its muscles drive it: each makes its shape within the goal in the
-/// interior the pipeline runs, holding the skin's force where that fit converges.
+/// On the lattice the ladder finds for it (17.2 mm, six times the default's elements: its
+/// 48 mm mouth parts only on cells well under a third of it), the capture head's muscles,
+/// asked for, each make their shape within the goal in the interior the pipeline runs,
+/// holding the skin's force where that fit converges.
 #[test]
-fn every_muscle_makes_its_shape_on_the_capture_head_by_default() {
-    let (loaded, out) = head_run(Scene::default());
-    let lattice = out.report.stage("lattice").unwrap();
-    println!("{}", lattice.why);
-    assert!(
-        lattice.why.contains("chosen for the muscles"),
-        "{}",
-        lattice.why
-    );
+fn every_muscle_makes_its_shape_on_the_capture_head() {
+    let mut scene = Scene::default();
+    scene.interior.cell_size = Some(0.0172);
+    scene.muscles.source = Some("auto".into());
+    let (loaded, out) = head_run(scene);
     assert!(out.report.stage("fit").unwrap().is_ran());
     assert_each_makes_its_shape("rigs/head.glb", &loaded, &out);
     let record = out.report.stage("muscles").unwrap();

@@ -15,7 +15,11 @@
 //! the cells happen to fall, on 17.0 mm ones (its lip-press shapes 96 % and 82 % from the
 //! projection) but parts them on 17.2 mm ones (9 %), which hold its clip within 2.6 %
 //! (19.6 % on the default) at six times the default's elements. A rig whose default lattice
-//! misses by more than [`HOPELESS`] times the goal keeps it untried.
+//! misses by more than [`HOPELESS`] times the goal keeps it untried, and the head is one: on
+//! the 17.2 mm lattice its muscles make its shapes and fit its clip within 2.8 %, but its
+//! muscle-driven clip wrinkles its crown and forehead 3 mm deep in the blinks where tracking
+//! wrinkles only the eyes' corners (0.8 mm), which is not understood; a scene asks for that
+//! lattice with `interior.cell_size = 0.0172`.
 
 use crate::io::model::MorphTarget;
 use crate::lattice::Lattice;
@@ -36,8 +40,9 @@ pub const ELEMENT_BUDGET: f64 = 12.0;
 /// eight of their nine shapes within 1 % of the projection).
 pub const CLIP_PROJECTION_GOAL: f64 = 0.04;
 
-/// A default lattice missing the clip by more than this many times the goal is kept.
-pub const HOPELESS: f64 = 10.0;
+/// A default lattice missing the clip by more than this many times the goal is kept (see the
+/// module notes: the capture head).
+pub const HOPELESS: f64 = 3.0;
 
 /// Rungs of the ladder skipped by its coarse pass, plus one (see [`climb`]).
 pub const COARSE_STRIDE: i32 = 4;
@@ -309,7 +314,7 @@ mod tests {
         assert_eq!(c.taken, 1);
         assert!((h - 0.01 * CELL_STEP.powi(4)).abs() < 1e-12, "{h}");
         // Within the goal, or hopeless: the default, nothing else tried.
-        for miss in [0.03, 0.5] {
+        for miss in [0.03, 0.13] {
             let (h, c) = climb(0.01, (0.01, 100, miss), candidates(miss, 3)).unwrap();
             assert_eq!((h, c.tried.len(), c.taken), (0.01, 1, 0));
             assert_eq!(c.met(), miss < 0.04, "{}", c.summary());

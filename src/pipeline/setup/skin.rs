@@ -12,7 +12,7 @@ use crate::scene::Scene;
 use crate::solver::patch::PatchSettings;
 use crate::solver::statics::{HessianMode, LinearAlgebra, StaticSettings};
 use anyhow::{anyhow, Context};
-use std::collections::HashSet;
+use std::collections::{HashMap, HashSet};
 use std::time::Instant;
 
 /// Quality (2 r_in / r_circ) below which a skin triangle is left out of the shell (it still
@@ -128,24 +128,19 @@ fn pin_also(
 }
 
 /// Pin the skin's slits to the interior: the sides of a slit modelled closed (lips that
-/// touch at rest, kept apart by the weld because the blend shapes part them) coincide at rest
-/// and have no contact between them, so their edge vertices and the ring of triangles on
-/// each side follow B q, as the lattice, cut along the slit, parts them. Where the lips press
-/// together the interior holds them edge to edge, and with the edge alone pinned the first
-/// ring's wrinkles (0.01–0.4 mm) pushed each lip through the other in 35 of the demo's 262
-/// frames under the 21.6 mm lattice's muscles (redone by tracking, 222 s); contact, which
-/// the skin does not model, would hold that ring flat against the other lip. The coincident
-/// vertices are those the weld's own search would join by position alone (no shapes given).
+/// touch at rest, kept apart by the weld because the blend shapes part them, or nearly
+/// touch: closer than half the boundary's edges there) have no contact between them, so
+/// their edge vertices and the ring of triangles on each side follow B q, as the lattice,
+/// cut along the slit, parts them. Where the lips press together the interior holds them
+/// edge to edge, and with the edge alone pinned the first ring's wrinkles (0.01–0.4 mm)
+/// pushed each lip through the other in 35 of the demo's 262 frames under the 21.6 mm
+/// lattice's muscles (redone by tracking, 222 s); contact, which the skin does not model,
+/// would hold that ring flat against the other lip. The capture head's lips are 0.4 mm apart
+/// at rest: left free, its smiles' wrinkles at the mouth's corners passed one lip through
+/// the other in 38 of its 331 frames.
 pub fn pin_slits(sim: &mut SimulatedSkin) -> anyhow::Result<()> {
     let rest = &sim.shell.shell.rest;
-    let Some((lo, hi)) = rest.bounding_box() else {
-        return Ok(());
-    };
-    let tol = super::weld::WELD_TOLERANCE * (hi - lo).norm();
-    let joined = super::weld::weld(&rest.positions, &[], &rest.triangles, tol).of_loaded;
-    let mut copies = vec![0usize; rest.positions.len()];
-    joined.iter().for_each(|&w| copies[w] += 1);
-    let on_slit: Vec<bool> = joined.iter().map(|&w| copies[w] > 1).collect();
+    let on_slit = slit_vertices(rest);
     let ring: Vec<usize> = rest
         .triangles
         .iter()
@@ -154,6 +149,52 @@ pub fn pin_slits(sim: &mut SimulatedSkin) -> anyhow::Result<()> {
         .copied()
         .collect();
     pin_also(sim, ring)
+}
+
+/// The vertices of `mesh` on a slit modelled closed: boundary vertices with another boundary
+/// vertex, not joined to it by an edge, within half the shortest boundary edge at either.
+fn slit_vertices(mesh: &TriMesh) -> Vec<bool> {
+    let n = mesh.positions.len();
+    let mut slit = vec![false; n];
+    let Ok(topo) = crate::mesh::topology::Topology::new(mesh) else {
+        return slit;
+    };
+    let mut reach = vec![f64::INFINITY; n];
+    let mut joined: std::collections::HashSet<(usize, usize)> = Default::default();
+    for &e in &topo.boundary_edges {
+        let [a, b] = topo.edges[e];
+        let half = 0.5 * (mesh.positions[a] - mesh.positions[b]).norm();
+        reach[a] = reach[a].min(half);
+        reach[b] = reach[b].min(half);
+        joined.insert((a.min(b), a.max(b)));
+    }
+    let edge: Vec<usize> = (0..n).filter(|&v| reach[v].is_finite()).collect();
+    // Boundary vertices hashed on a grid of the largest reach: a pair within reach shares
+    // a cell or touches a neighbour.
+    let cell = edge
+        .iter()
+        .map(|&v| reach[v])
+        .fold(0.0f64, f64::max)
+        .max(1e-12);
+    let key = |v: usize| (mesh.positions[v] / cell).map(|c| c.floor() as i64);
+    let mut grid: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
+    for &v in &edge {
+        let k = key(v);
+        grid.entry([k.x, k.y, k.z]).or_default().push(v);
+    }
+    for &v in &edge {
+        let k = key(v);
+        for d in 0..27i64 {
+            let c = [k.x + d % 3 - 1, k.y + (d / 3) % 3 - 1, k.z + d / 9 - 1];
+            for &u in grid.get(&c).map_or(&[][..], Vec::as_slice) {
+                let close = (mesh.positions[u] - mesh.positions[v]).norm() < reach[u].min(reach[v]);
+                if u != v && close && !joined.contains(&(u.min(v), u.max(v))) {
+                    slit[v] = true;
+                }
+            }
+        }
+    }
+    slit
 }
 
 /// The record of a run whose shell simulates nothing; `compressed` says whether any triangle
@@ -501,6 +542,42 @@ mod tests {
         assert_eq!(verts, vec![1, 3, 2]);
         assert_eq!(sub.triangles, vec![[0, 1, 2]]);
         assert_eq!(sub.positions[1], two_triangles().positions[3]);
+    }
+
+    /// Two strips of triangles (unit spacing, 5 columns) facing each other across a gap:
+    /// their facing edges are a slit modelled closed when the gap is under half their
+    /// edges (0 and 0.4 here, as the face's lips and the capture head's), not when wider
+    /// (0.6); the strips' outer edges never are.
+    #[test]
+    fn a_slit_is_a_boundary_closer_to_another_than_half_its_edges() {
+        use nalgebra::Vector3;
+        let strips = |gap: f64| {
+            let mut positions = Vec::new();
+            for (y0, y1) in [(-1.0 - 0.5 * gap, -0.5 * gap), (0.5 * gap, 1.0 + 0.5 * gap)] {
+                for y in [y0, y1] {
+                    for i in 0..5 {
+                        positions.push(Vector3::new(f64::from(i), y, 0.0));
+                    }
+                }
+            }
+            let mut triangles = Vec::new();
+            for s in 0..2 {
+                let (a, b) = (10 * s, 10 * s + 5);
+                for i in 0..4 {
+                    triangles.push([a + i, a + i + 1, b + i + 1]);
+                    triangles.push([a + i, b + i + 1, b + i]);
+                }
+            }
+            TriMesh::new(positions, triangles)
+        };
+        for (gap, closed) in [(0.0, true), (0.4, true), (0.6, false)] {
+            let slit = slit_vertices(&strips(gap));
+            // The facing rows: the lower strip's upper row (5..10), the upper's lower (10..15).
+            let facing: Vec<bool> = (0..20).map(|v| (5..15).contains(&v)).collect();
+            for v in 0..20 {
+                assert_eq!(slit[v], closed && facing[v], "gap {gap}, vertex {v}");
+            }
+        }
     }
 
     /// A 7 × 7 sheet with a slit modelled closed (lips that touch at rest: the middle three
