@@ -1507,6 +1507,19 @@ mod tests {
     use crate::fem::Material;
     use nalgebra::{Rotation3, Unit};
 
+    /// Node positions (flat, m) of `lat` twisted about z (2 rad/m), stretched along x by 20 %
+    /// and squashed along z by 10 %: a state with rotations and stress in every element.
+    fn twisted(lat: &crate::lattice::Lattice) -> Vec<f64> {
+        lat.rest
+            .iter()
+            .flat_map(|p| {
+                let t = 2.0 * p.z;
+                let (c, s) = (t.cos(), t.sin());
+                [1.2 * (c * p.x - s * p.y), c * p.y + s * p.x, 0.9 * p.z]
+            })
+            .collect()
+    }
+
     /// The stiffness assembled straight into its pattern is the interior's Hessian from
     /// triplets (exact and projected rotation corrections) restricted to the free DOFs, with
     /// the extra triplets and the diagonal added, at a twisted, stretched, actuated state.
@@ -1521,15 +1534,7 @@ mod tests {
             .collect();
         int.set_actuation(offsets).unwrap();
         let pinned: Vec<bool> = lat.rest.iter().map(|p| p.z < 0.5 * h).collect();
-        let q: Vec<f64> = lat
-            .rest
-            .iter()
-            .flat_map(|p| {
-                let t = 2.0 * p.z;
-                let (c, s) = (t.cos(), t.sin());
-                [1.2 * (c * p.x - s * p.y), c * p.y + s * p.x, 0.9 * p.z]
-            })
-            .collect();
+        let q = twisted(&lat);
         // Extra triplets coupling two far nodes (outside the element pattern) and a diagonal.
         let last = int.nodes - 1;
         let extra = vec![
@@ -1598,15 +1603,7 @@ mod tests {
             })
             .collect();
         // The consistent tangent's rotation corrections at a twisted, stretched state.
-        let q: Vec<f64> = lat
-            .rest
-            .iter()
-            .flat_map(|p| {
-                let t = 2.0 * p.z;
-                let (c, s) = (t.cos(), t.sin());
-                [1.2 * (c * p.x - s * p.y), c * p.y + s * p.x, 0.9 * p.z]
-            })
-            .collect();
+        let q = twisted(&lat);
         let corrections: Vec<_> = (0..int.elements.len())
             .map(|e| int.rotation_correction(&q, e, true))
             .collect();
