@@ -407,6 +407,16 @@ impl System {
         })
     }
 
+    /// Whether this system was built for exactly the nodes `pinned`.
+    fn pins(&self, pinned: &[bool]) -> bool {
+        self.free.len() == pinned.len()
+            && self
+                .free
+                .iter()
+                .zip(pinned)
+                .all(|(&f, &p)| (f == NONE) == p)
+    }
+
     /// Copy the assembled lower-triangle matrix into the full node-block rows of `bsr`.
     fn fill_bsr(&mut self) {
         let cp = &self.colptr;
@@ -625,7 +635,6 @@ fn node_pairs(stiffness: &[(usize, usize, f64)]) -> Vec<(usize, usize)> {
 /// 27² × 9 triplets per element into a matrix at every factorisation.
 pub struct StiffnessMatrix {
     system: System,
-    pinned: Vec<bool>,
 }
 
 impl StiffnessMatrix {
@@ -646,15 +655,12 @@ impl StiffnessMatrix {
         let mut system = System::new(interior, pinned, &node_pairs(extra))?;
         system.extra_hash = triplet_layout_key(extra);
         system.place_extra(extra);
-        Ok(Self {
-            system,
-            pinned: pinned.to_vec(),
-        })
+        Ok(Self { system })
     }
 
     /// Whether `extra` triplets fit the layout this matrix was built for (else build anew).
     pub fn fits(&self, pinned: &[bool], extra: &[(usize, usize, f64)]) -> bool {
-        self.pinned == pinned && self.system.extra_hash == triplet_layout_key(extra)
+        self.system.pins(pinned) && self.system.extra_hash == triplet_layout_key(extra)
     }
 
     /// K(x) at node positions `x` (flat, m) of `interior` with its current actuation, the
@@ -851,26 +857,13 @@ impl BackwardEuler {
             None => triplet_layout_key(&[]),
         };
         if let Some(s) = &self.system {
-            if s.extra_hash == hash
-                && s.free.len() == self.pinned.len()
-                && s.free
-                    .iter()
-                    .zip(&self.pinned)
-                    .all(|(&f, &p)| (f == NONE) == p)
-            {
+            if s.extra_hash == hash && s.pins(&self.pinned) {
                 return Ok(());
             }
         }
         let sig = extra_signature(extra);
         let rebuild = match &self.system {
-            Some(s) => {
-                s.extra_sig != sig
-                    || s.free.len() != self.pinned.len()
-                    || s.free
-                        .iter()
-                        .zip(&self.pinned)
-                        .any(|(&f, &p)| (f == NONE) != p)
-            }
+            Some(s) => s.extra_sig != sig || !s.pins(&self.pinned),
             None => true,
         };
         if rebuild {

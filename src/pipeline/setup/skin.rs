@@ -160,7 +160,7 @@ fn slit_vertices(mesh: &TriMesh) -> Vec<bool> {
         return slit;
     };
     let mut reach = vec![f64::INFINITY; n];
-    let mut joined: std::collections::HashSet<(usize, usize)> = Default::default();
+    let mut joined: HashSet<(usize, usize)> = HashSet::new();
     for &e in &topo.boundary_edges {
         let [a, b] = topo.edges[e];
         let half = 0.5 * (mesh.positions[a] - mesh.positions[b]).norm();
