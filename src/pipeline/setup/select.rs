@@ -12,6 +12,7 @@
 
 use super::weld::Welded;
 use crate::io::load::Rig;
+use crate::mesh::grid::PointGrid;
 use crate::mesh::TriMesh;
 use crate::pipeline::plan::Plan;
 use crate::pipeline::record::StagePlan;
@@ -81,9 +82,6 @@ pub fn largest_compression<P: AsRef<[Vector3<f64>]>>(
 /// The triangles of `mesh` with a vertex within `margin` (m) of a vertex of a `seed` triangle
 /// (straight-line distance over the rest shape): the seeds grown by the margin.
 pub fn grow(mesh: &TriMesh, seed: &[bool], margin: f64) -> Vec<bool> {
-    let cell = margin.max(1e-12);
-    let key = |p: &Vector3<f64>| (p / cell).map(|c| c.floor() as i64);
-    let mut grid: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
     let mut seeded = vec![false; mesh.positions.len()];
     for (t, tri) in mesh.triangles.iter().enumerate() {
         if seed[t] {
@@ -92,23 +90,11 @@ pub fn grow(mesh: &TriMesh, seed: &[bool], margin: f64) -> Vec<bool> {
             }
         }
     }
-    for (v, p) in mesh.positions.iter().enumerate() {
-        if seeded[v] {
-            let k = key(p);
-            grid.entry([k.x, k.y, k.z]).or_default().push(v);
-        }
-    }
+    let seeds = (0..mesh.positions.len()).filter(|&v| seeded[v]);
+    let grid = PointGrid::new(margin, seeds.map(|v| (v, mesh.positions[v])));
     let near = |p: &Vector3<f64>| {
-        let k = key(p);
-        (-1..=1).any(|dx| {
-            (-1..=1).any(|dy| {
-                (-1..=1).any(|dz| {
-                    grid.get(&[k.x + dx, k.y + dy, k.z + dz]).is_some_and(|vs| {
-                        vs.iter().any(|&s| (mesh.positions[s] - p).norm() <= margin)
-                    })
-                })
-            })
-        })
+        grid.near(p)
+            .any(|s| (mesh.positions[s] - p).norm() <= margin)
     };
     let reached: Vec<bool> = mesh.positions.iter().map(near).collect();
     mesh.triangles

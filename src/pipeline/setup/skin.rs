@@ -6,13 +6,14 @@ use super::refine::RefinedSkin;
 use crate::coupling::clusters::Clusters;
 use crate::coupling::embedded::{sigma_for_wavelength, EmbeddedShell};
 use crate::coupling::refine;
+use crate::mesh::grid::PointGrid;
 use crate::mesh::TriMesh;
 use crate::pipeline::record::StagePlan;
 use crate::scene::Scene;
 use crate::solver::patch::PatchSettings;
 use crate::solver::statics::{HessianMode, LinearAlgebra, StaticSettings};
 use anyhow::{anyhow, Context};
-use std::collections::{HashMap, HashSet};
+use std::collections::HashSet;
 use std::time::Instant;
 
 /// Quality (2 r_in / r_circ) below which a skin triangle is left out of the shell (it still
@@ -169,30 +170,14 @@ fn slit_vertices(mesh: &TriMesh) -> Vec<bool> {
         joined.insert((a.min(b), a.max(b)));
     }
     let edge: Vec<usize> = (0..n).filter(|&v| reach[v].is_finite()).collect();
-    // Boundary vertices hashed on a grid of the largest reach: a pair within reach shares
-    // a cell or touches a neighbour.
-    let cell = edge
-        .iter()
-        .map(|&v| reach[v])
-        .fold(0.0f64, f64::max)
-        .max(1e-12);
-    let key = |v: usize| (mesh.positions[v] / cell).map(|c| c.floor() as i64);
-    let mut grid: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
+    // A pair within reach lies within the largest reach, the grid's cell.
+    let cell = edge.iter().map(|&v| reach[v]).fold(0.0f64, f64::max);
+    let grid = PointGrid::new(cell, edge.iter().map(|&v| (v, mesh.positions[v])));
     for &v in &edge {
-        let k = key(v);
-        grid.entry([k.x, k.y, k.z]).or_default().push(v);
-    }
-    for &v in &edge {
-        let k = key(v);
-        for d in 0..27i64 {
-            let c = [k.x + d % 3 - 1, k.y + (d / 3) % 3 - 1, k.z + d / 9 - 1];
-            for &u in grid.get(&c).map_or(&[][..], Vec::as_slice) {
-                let close = (mesh.positions[u] - mesh.positions[v]).norm() < reach[u].min(reach[v]);
-                if u != v && close && !joined.contains(&(u.min(v), u.max(v))) {
-                    slit[v] = true;
-                }
-            }
-        }
+        slit[v] = grid.near(&mesh.positions[v]).any(|u| {
+            let close = (mesh.positions[u] - mesh.positions[v]).norm() < reach[u].min(reach[v]);
+            u != v && close && !joined.contains(&(u.min(v), u.max(v)))
+        });
     }
     slit
 }
