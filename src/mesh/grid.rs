@@ -18,16 +18,23 @@ impl PointGrid {
             cells: HashMap::new(),
         };
         for (i, p) in points {
-            grid.cells.entry(grid.key(&p)).or_default().push(i);
+            grid.insert(i, &p);
         }
         grid
+    }
+
+    /// Add point `i` at `p` (m); [`Self::near`] lists a cell's points in insertion order.
+    pub fn insert(&mut self, i: usize, p: &Vector3<f64>) {
+        let k = self.key(p);
+        self.cells.entry(k).or_default().push(i);
     }
 
     fn key(&self, p: &Vector3<f64>) -> [i64; 3] {
         [0, 1, 2].map(|d| (p[d] / self.cell).floor() as i64)
     }
 
-    /// The points in the 27 cells about `p` (m): a superset of those within one cell size.
+    /// The points in the 27 cells about `p` (m): a superset of those within one cell size,
+    /// cell by cell in a fixed order (x slowest, z fastest), each cell's in insertion order.
     pub fn near(&self, p: &Vector3<f64>) -> impl Iterator<Item = usize> + '_ {
         let k = self.key(p);
         (0..27i64).flat_map(move |d| {

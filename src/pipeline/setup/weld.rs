@@ -5,11 +5,11 @@
 
 use crate::io::mesh::MeshInstance;
 use crate::io::model::MorphTarget;
+use crate::mesh::grid::PointGrid;
 use crate::mesh::TriMesh;
 use crate::pipeline::record::StagePlan;
 use anyhow::{bail, Context};
 use nalgebra::Vector3;
-use std::collections::HashMap;
 use std::time::Instant;
 
 /// Relative weld tolerance: vertices closer than this fraction of the face's bounding-box
@@ -82,49 +82,32 @@ pub fn weld(
     triangles: &[[usize; 3]],
     tol: f64,
 ) -> Welded {
-    let key = |p: &Vector3<f64>| {
-        [
-            (p.x / tol).floor() as i64,
-            (p.y / tol).floor() as i64,
-            (p.z / tol).floor() as i64,
-        ]
-    };
     let move_alike = |a: usize, b: usize| {
         targets
             .iter()
             .all(|t| (t.positions[a] - t.positions[b]).norm() <= tol)
     };
-    let mut cells: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
+    let mut cells = PointGrid::new(tol, []);
     let mut of_loaded = vec![usize::MAX; positions.len()];
     let mut loaded_of = Vec::new();
     let mut welded_pos: Vec<Vector3<f64>> = Vec::new();
     let mut kept_apart = 0;
     for (i, p) in positions.iter().enumerate() {
-        let k = key(p);
         let mut found = None;
         let mut parted = false;
-        'search: for dx in -1..=1 {
-            for dy in -1..=1 {
-                for dz in -1..=1 {
-                    let Some(list) = cells.get(&[k[0] + dx, k[1] + dy, k[2] + dz]) else {
-                        continue;
-                    };
-                    for &w in list.iter().filter(|&&w| (welded_pos[w] - p).norm() <= tol) {
-                        if move_alike(loaded_of[w], i) {
-                            found = Some(w);
-                            break 'search;
-                        }
-                        parted = true;
-                    }
-                }
+        for w in cells.near(p).filter(|&w| (welded_pos[w] - p).norm() <= tol) {
+            if move_alike(loaded_of[w], i) {
+                found = Some(w);
+                break;
             }
+            parted = true;
         }
         let w = found.unwrap_or_else(|| {
             kept_apart += usize::from(parted);
             let w = welded_pos.len();
             welded_pos.push(*p);
             loaded_of.push(i);
-            cells.entry(k).or_default().push(w);
+            cells.insert(w, p);
             w
         });
         of_loaded[i] = w;
