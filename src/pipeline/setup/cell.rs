@@ -18,8 +18,9 @@
 //! misses by more than [`HOPELESS`] times the goal keeps it untried, and the head is one: on
 //! the 17.2 mm lattice its muscles make its shapes and fit its clip within 2.8 %, but its
 //! muscle-driven clip wrinkles its crown and forehead 3 mm deep in the blinks where tracking
-//! wrinkles only the eyes' corners (0.8 mm), which is not understood; a scene asks for that
-//! lattice with `interior.cell_size = 0.0172`.
+//! wrinkles only the eyes' corners (0.8 mm): the blinks stretch its 1 mm lid skin by a third,
+//! which pulls the muscle-driven flesh about the eyes past the skin's onset. Thin lids (0.5
+//! mm) keep the crown smooth; `examples/head_muscles.toml` asks for that lattice and them.
 
 use crate::io::model::MorphTarget;
 use crate::lattice::Lattice;
