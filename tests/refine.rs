@@ -302,3 +302,64 @@ fn levels_come_from_the_region_and_the_refusal_names_them() {
     let err = refine_region(&m, Some(&region), 1e-3, &s).unwrap_err();
     assert!(err.to_string().contains("max_levels = 3"), "{err}");
 }
+
+/// A thin patch inside a thicker skin: the face's forehead refined for a wavelength half the
+/// rest's takes one level more than the rest, the levels change by at most one between
+/// triangles sharing a vertex, the mesh is conforming (green closures where the patch meets
+/// the rest), and it has fewer vertices than refining everything for the thin patch; the
+/// report counts the triangles refined less and the least vertices per wavelength of either.
+#[test]
+fn a_thin_patch_is_refined_further_than_the_skin_around_it() {
+    use furrow::coupling::refine::{refine_for_wavelengths, DEFAULT_VERTICES_PER_WAVELENGTH};
+    let m = welded_face();
+    let (lo, hi) = m.bounding_box().unwrap();
+    let patch = above(&m, lo.y + 0.75 * (hi.y - lo.y));
+    let thick = 8e-3;
+    let lambda: Vec<f64> = patch
+        .iter()
+        .map(|&p| if p { 0.5 * thick } else { thick })
+        .collect();
+    let mid = RefineSettings {
+        smoothing: Smoothing::Midpoint,
+        ..RefineSettings::default()
+    };
+    let r = refine_for_wavelengths(&m, None, &lambda, &mid).unwrap();
+    let uniform = refine_region(&m, None, 0.5 * thick, &mid).unwrap();
+    let coarse = refine_region(&m, None, thick, &mid).unwrap();
+    let (l, rep) = (&r.subdivision.level, &r.report);
+    println!("{rep:?}");
+    assert!(coarse.report.levels >= 1);
+    assert_eq!(rep.levels, coarse.report.levels + 1);
+    assert_eq!(rep.levels, uniform.report.levels);
+    for t in 0..m.triangles.len() {
+        let want = if patch[t] { rep.levels } else { rep.levels - 1 };
+        assert_eq!(l[t], want, "triangle {t}");
+    }
+    assert_eq!(
+        rep.fewer_levels,
+        patch.iter().filter(|&&p| !p).count(),
+        "the thick skin is refined less"
+    );
+    assert!(rep.vertices_per_wavelength >= DEFAULT_VERTICES_PER_WAVELENGTH * 0.9);
+    assert!(rep.wavelength == 0.5 * thick);
+    assert!(r.subdivision.green.iter().any(|&g| g));
+    assert_conforming(&m, &r.subdivision.mesh);
+    let (n, n_thin) = (
+        r.subdivision.mesh.positions.len(),
+        uniform.subdivision.mesh.positions.len(),
+    );
+    assert!(n < n_thin / 2, "{n} vertices against {n_thin}");
+    // Levels of triangles sharing a vertex differ by at most one (here: a patch two levels
+    // above the unrefined rest, graded).
+    let target: Vec<usize> = patch.iter().map(|&p| if p { 2 } else { 0 }).collect();
+    let (level, _) = redgreen::graded_levels_by_triangle(&m, &target);
+    let mut at: Vec<Vec<usize>> = vec![Vec::new(); m.positions.len()];
+    for (t, tri) in m.triangles.iter().enumerate() {
+        tri.iter().for_each(|&v| at[v].push(level[t]));
+    }
+    for ls in at.iter().filter(|ls| !ls.is_empty()) {
+        let (a, b) = (ls.iter().min().unwrap(), ls.iter().max().unwrap());
+        assert!(b - a <= 1, "levels {ls:?} at one vertex");
+    }
+    assert!(level.contains(&1) && level.contains(&0));
+}

@@ -628,12 +628,84 @@ fn pipeline_reports_thickness_and_wavelength_ranges() {
     );
     assert!((l1 / l0 - 2.0).abs() < 1e-12);
     assert_eq!(out.report.wavelength_m, l0);
+    let shell = out
+        .report
+        .stages
+        .iter()
+        .find(|s| s.stage == "shell")
+        .unwrap();
     assert!(
-        out.report
-            .warnings
-            .iter()
-            .any(|w| w.contains("clusters widen with the thickness")),
-        "{:?}",
-        out.report.warnings
+        shell.why.contains("each triangle refined for its own λ"),
+        "{}",
+        shell.why
     );
+    assert!(!out.report.warnings.iter().any(|w| w.contains("thickness")));
+}
+
+/// The lids of the capture-shaped head: the triangles its two blink shapes move (a tenth of
+/// their largest displacement or more) are about the eyes, on both sides, and take half the
+/// skin's thickness by default (`lid_thickness` sets it, `lids = "off"` and a thickness
+/// attribute leave them as the rest); the face rig, which has no blink shape, has none; a
+/// bad value is named.
+#[test]
+fn the_lids_are_the_skin_the_blinks_move_and_are_thinner() {
+    use furrow::scene::thickness::{lid_triangles, rig_face_thickness, LID_MOTION_SHARE};
+    let head =
+        furrow::io::load::load(std::path::Path::new("rigs/head.glb"), &Default::default()).unwrap();
+    let face = head.face();
+    let (lid, names) = lid_triangles(face);
+    assert_eq!(names, ["eyeBlinkLeft", "eyeBlinkRight"]);
+    let n = lid.iter().filter(|&&l| l).count();
+    println!("head: {n} lid triangles of {}", lid.len());
+    assert!((40..400).contains(&n), "{n} lid triangles");
+    // Each lid triangle has a vertex a blink moves by a tenth of its most; none other does.
+    let blinks: Vec<_> = face
+        .targets
+        .iter()
+        .filter(|t| t.name.contains("Blink"))
+        .collect();
+    let moved = |v: usize| {
+        blinks.iter().any(|t| {
+            let most = t.positions.iter().map(|d| d.norm()).fold(0.0, f64::max);
+            t.positions[v].norm() > LID_MOTION_SHARE * most
+        })
+    };
+    let (mut left, mut right) = (0usize, 0usize);
+    for (t, tri) in face.triangles.iter().enumerate() {
+        assert_eq!(lid[t], tri.iter().any(|&v| moved(v)), "triangle {t}");
+        if lid[t] {
+            let x: f64 = tri.iter().map(|&v| face.positions[v].x).sum();
+            if x > 0.0 {
+                left += 1
+            } else {
+                right += 1
+            }
+        }
+    }
+    assert!(left > 10 && right > 10 && left.abs_diff(right) <= n / 10);
+    let h = rig_face_thickness(&head, &skin_section(""), 1e-3, None).unwrap();
+    for (t, &l) in lid.iter().enumerate() {
+        assert_eq!(h[t], if l { 0.5e-3 } else { 1e-3 });
+    }
+    let h = rig_face_thickness(
+        &head,
+        &skin_section("[skin]\nlid_thickness = 3e-4\n"),
+        1e-3,
+        None,
+    );
+    assert!(h
+        .unwrap()
+        .iter()
+        .zip(&lid)
+        .all(|(&h, &l)| h == if l { 3e-4 } else { 1e-3 }));
+    let off = rig_face_thickness(&head, &skin_section("[skin]\nlids = \"off\"\n"), 1e-3, None);
+    assert!(off.unwrap().iter().all(|&h| h == 1e-3));
+    let face_rig =
+        furrow::io::load::load(std::path::Path::new("rigs/face.glb"), &Default::default()).unwrap();
+    assert!(!lid_triangles(face_rig.face()).0.contains(&true));
+    for bad in ["lids = \"on\"", "lid_thickness = -1.0"] {
+        let e = furrow::scene::Scene::parse(&format!("[skin]\n{bad}\n"), "t.toml").unwrap_err();
+        let msg = format!("{e:#}");
+        assert!(msg.contains("skin.lid"), "{msg}");
+    }
 }

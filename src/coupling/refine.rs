@@ -59,8 +59,12 @@ impl Default for RefineSettings {
 /// What refinement did (for the user's report).
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct RefineReport {
-    /// Subdivision levels applied to the refined region (0 when it was fine enough).
+    /// Most subdivision levels applied to a triangle of the region (0 when it was fine
+    /// enough).
     pub levels: usize,
+    /// Triangles of the region refined fewer than `levels` times: thicker skin, whose longer
+    /// wavelength needs fewer (0 when the skin is uniform).
+    pub fewer_levels: usize,
     /// Vertex count before.
     pub vertices_before: usize,
     /// Vertex count after refinement.
@@ -80,9 +84,10 @@ pub struct RefineReport {
     pub mean_edge_before: f64,
     /// Mean edge length of the region after (m).
     pub mean_edge_after: f64,
-    /// The wrinkle wavelength λ the mesh was refined for (m).
+    /// The shortest wrinkle wavelength λ the mesh was refined for (m).
     pub wavelength: f64,
-    /// λ / mean edge of the region after refinement (vertices per wavelength).
+    /// λ / mean edge after refinement, the least over the region's triangles refined alike
+    /// (vertices per wavelength).
     pub vertices_per_wavelength: f64,
     /// How new vertices were placed.
     pub smoothing: Smoothing,
@@ -166,24 +171,45 @@ pub fn refine_region(
     lambda: f64,
     settings: &RefineSettings,
 ) -> anyhow::Result<Refined> {
-    check_inputs(mesh, lambda, settings)?;
+    refine_for_wavelengths(mesh, region, &vec![lambda; mesh.triangles.len()], settings)
+}
+
+/// [`refine_region`] with a wavelength per triangle (m; a thinner skin's is shorter): triangle
+/// t of the region is refined ⌈log₂(N ā / λ_t)⌉ levels, ā the region's mean edge, so a thin
+/// patch is refined further than the thick skin around it (graded between, see
+/// [`crate::mesh::redgreen::refine_by_triangle`]) instead of all of the skin for the thinnest.
+pub fn refine_for_wavelengths(
+    mesh: &TriMesh,
+    region: Option<&[bool]>,
+    lambda: &[f64],
+    settings: &RefineSettings,
+) -> anyhow::Result<Refined> {
+    let shortest = lambda.iter().copied().fold(f64::INFINITY, f64::min);
+    check_inputs(mesh, shortest, settings)?;
     let all = vec![true; mesh.triangles.len()];
     let region = region.unwrap_or(&all);
-    if region.len() != mesh.triangles.len() {
+    if region.len() != mesh.triangles.len() || lambda.len() != mesh.triangles.len() {
         bail!(
-            "{} region flags for a skin of {} triangles",
+            "{} region flags and {} wavelengths for a skin of {} triangles",
             region.len(),
+            lambda.len(),
             mesh.triangles.len()
         );
     }
     let npl = settings.vertices_per_wavelength;
     let edge0 = mean_edge_of(mesh, |t| region[t]);
     // Each level halves every edge: levels = ⌈log₂(N ā / λ)⌉.
-    let need = if edge0 > 0.0 {
-        (npl * edge0 / lambda).log2().ceil().max(0.0) as usize
-    } else {
-        0
+    let levels_for = |l: f64| {
+        if edge0 > 0.0 {
+            (npl * edge0 / l).log2().ceil().max(0.0) as usize
+        } else {
+            0
+        }
     };
+    let target: Vec<usize> = (0..region.len())
+        .map(|t| if region[t] { levels_for(lambda[t]) } else { 0 })
+        .collect();
+    let need = target.iter().copied().max().unwrap_or(0);
     if need > settings.max_levels {
         let region_vertices = mesh.positions.len() as f64 * region_share(region);
         bail!(
@@ -191,38 +217,73 @@ pub fn refine_region(
              is {:.3} mm ({:.2} vertices per λ, {npl} needed), which takes {need} levels of \
              1-to-4 subdivision (about {:.0} vertices) but max_levels = {}; raise the limit, \
              give a finer skin mesh, or use a thicker or stiffer skin (larger λ)",
-            lambda * 1e3,
+            shortest * 1e3,
             edge0 * 1e3,
-            lambda / edge0,
+            shortest / edge0,
             region_vertices * 4f64.powi(need as i32),
             settings.max_levels
         );
     }
-    let rg = redgreen::refine(mesh, region, need, settings.smoothing);
-    let edge1 = mean_edge_of(&rg.mesh, |f| region[rg.ancestor[f].triangle]);
-    let in_band =
-        |f: usize| !region[rg.ancestor[f].triangle] && rg.level[rg.ancestor[f].triangle] > 0;
-    let report = RefineReport {
+    let rg = redgreen::refine_by_triangle(mesh, &target, settings.smoothing);
+    let report = report_of(mesh, region, lambda, &target, &rg, settings);
+    Ok(Refined {
+        subdivision: rg,
+        report,
+    })
+}
+
+/// What [`refine_for_wavelengths`] did: counts, and the mean edges and vertices per
+/// wavelength of the region (the least over its triangles' levels).
+fn report_of(
+    mesh: &TriMesh,
+    region: &[bool],
+    lambda: &[f64],
+    target: &[usize],
+    rg: &RedGreen,
+    settings: &RefineSettings,
+) -> RefineReport {
+    let need = target.iter().copied().max().unwrap_or(0);
+    let edge0 = mean_edge_of(mesh, |t| region[t]);
+    let in_region = |f: usize| region[rg.ancestor[f].triangle];
+    let edge1 = mean_edge_of(&rg.mesh, in_region);
+    // Per target level: the shortest wavelength asked of it over its refined edge.
+    let per_level = (0..=need).filter_map(|l| {
+        let of = |f: usize| in_region(f) && target[rg.ancestor[f].triangle] == l;
+        let edge = mean_edge_of(&rg.mesh, of);
+        let shortest = (0..region.len())
+            .filter(|&t| region[t] && target[t] == l)
+            .map(|t| lambda[t])
+            .fold(f64::INFINITY, f64::min);
+        (edge > 0.0 && shortest.is_finite()).then(|| shortest / edge)
+    });
+    let in_band = |f: usize| !in_region(f) && rg.level[rg.ancestor[f].triangle] > 0;
+    let region_triangles = region.iter().filter(|&&r| r).count();
+    let shortest = (0..region.len())
+        .filter(|&t| region[t] || region_triangles == 0)
+        .map(|t| lambda[t])
+        .fold(f64::INFINITY, f64::min);
+    RefineReport {
         levels: need,
+        fewer_levels: (0..region.len())
+            .filter(|&t| region[t] && target[t] < need)
+            .count(),
         vertices_before: mesh.positions.len(),
         vertices_after: rg.mesh.positions.len(),
         triangles_before: mesh.triangles.len(),
         triangles_after: rg.mesh.triangles.len(),
-        region_triangles: region.iter().filter(|&&r| r).count(),
+        region_triangles,
         band_triangles: (0..rg.mesh.triangles.len())
             .filter(|&f| in_band(f) || rg.green[f])
             .count(),
         transition_triangles: rg.green.iter().filter(|&&g| g).count(),
         mean_edge_before: edge0,
         mean_edge_after: edge1,
-        wavelength: lambda,
-        vertices_per_wavelength: if edge1 > 0.0 { lambda / edge1 } else { 0.0 },
+        wavelength: shortest,
+        vertices_per_wavelength: Some(per_level.fold(f64::INFINITY, f64::min))
+            .filter(|v| v.is_finite())
+            .unwrap_or(0.0),
         smoothing: settings.smoothing,
-    };
-    Ok(Refined {
-        subdivision: rg,
-        report,
-    })
+    }
 }
 
 /// Share of the triangles flagged in `region` (0–1).

@@ -413,10 +413,39 @@ pub fn graded_levels(mesh: &TriMesh, region: &[bool], levels: usize) -> (Vec<usi
     (level, fade)
 }
 
+/// [`graded_levels`] for a target level per triangle (0: not refined for itself): each
+/// level's triangles graded as a region of their own, and per triangle the most levels and
+/// per vertex the largest fade any of them asks for. Each grading changes by at most one
+/// level between triangles sharing a vertex, so their maximum does too.
+pub fn graded_levels_by_triangle(mesh: &TriMesh, target: &[usize]) -> (Vec<usize>, Vec<f64>) {
+    let mut level = vec![0; mesh.triangles.len()];
+    let mut fade = vec![0.0f64; mesh.positions.len()];
+    let top = target.iter().copied().max().unwrap_or(0);
+    for l in 1..=top {
+        let region: Vec<bool> = target.iter().map(|&t| t == l).collect();
+        if !region.contains(&true) {
+            continue;
+        }
+        let (lv, fd) = graded_levels(mesh, &region, l);
+        level.iter_mut().zip(lv).for_each(|(a, b)| *a = (*a).max(b));
+        fade.iter_mut().zip(fd).for_each(|(a, b)| *a = a.max(b));
+    }
+    (level, fade)
+}
+
 /// Refine the `region` triangles of `mesh` (one flag per triangle) `levels` times with a
 /// graded band and green closure around them, placing new vertices by `smoothing`.
 pub fn refine(mesh: &TriMesh, region: &[bool], levels: usize, smoothing: Smoothing) -> RedGreen {
-    let (level, fade) = graded_levels(mesh, region, levels);
+    let target: Vec<usize> = region.iter().map(|&r| if r { levels } else { 0 }).collect();
+    refine_by_triangle(mesh, &target, smoothing)
+}
+
+/// Refine each triangle of `mesh` its own `target` number of levels (0: only as the grading
+/// around its neighbours asks), with graded bands and green closure, placing new vertices by
+/// `smoothing`: a thin patch of skin inside a thicker one is refined further than the rest.
+pub fn refine_by_triangle(mesh: &TriMesh, target: &[usize], smoothing: Smoothing) -> RedGreen {
+    let levels = target.iter().copied().max().unwrap_or(0);
+    let (level, fade) = graded_levels_by_triangle(mesh, target);
     let n = mesh.positions.len();
     let mut work = Work {
         coarse: mesh,

@@ -111,9 +111,6 @@ pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<R
     let mut log = Log::default();
     log.stages.push(plan.load_stage(rig));
     let (model, mut state) = setup::set_up(rig, scene, &mut plan, &mut log, progress)?;
-    if let Some(w) = thickness_warning(&plan, &model, &state) {
-        log.warnings.push(w);
-    }
     if state.skin.is_some() {
         log.stages.push(shell_stage(&plan, &model));
     }
@@ -233,27 +230,31 @@ struct Frames {
     smooth: Vec<Vec<Vector3<f64>>>,
 }
 
-/// The warning of a skin whose thickness varies: refined for the thinnest, clusters widening.
-fn thickness_warning(plan: &Plan, model: &Model, state: &State) -> Option<String> {
+/// The `shell` stage's record: the skin statics and its scales; where the thickness varies,
+/// its range (each triangle refined for its own wavelength, the clusters widening with it).
+fn shell_stage(plan: &Plan, model: &Model) -> StagePlan {
     let [h_min, h_max] = plan.skin.thickness;
-    (h_max > h_min && state.skin.is_some()).then(|| {
+    let varies = if h_max > h_min {
         format!(
-            "skin thickness varies from {:.3} to {:.3} mm (λ {:.2} to {:.2} mm); the skin is refined for the thinnest skin and the constraint clusters widen with the thickness (σ = {:.2} mm where thinnest)",
+            " where thinnest; the thickness varies from {:.3} to {:.3} mm (λ to {:.2} mm), each triangle refined for its own λ and the constraint clusters widening with it",
             h_min * 1e3,
             h_max * 1e3,
-            plan.skin.lambda * 1e3,
             plan.skin.lambda_max * 1e3,
-            model.sigma * 1e3
         )
-    })
-}
-
-/// The `shell` stage's record: the skin statics and its scales.
-fn shell_stage(plan: &Plan, model: &Model) -> StagePlan {
+    } else {
+        String::new()
+    };
+    let lids = match plan.skin.lids {
+        Some((n, h)) => format!(
+            "; the lids ({n} face triangles the blink shapes move) are {:.2} mm thick (`skin.lids`)",
+            h * 1e3
+        ),
+        None => String::new(),
+    };
     StagePlan::ran(
         "shell",
         format!(
-            "quasi-static skin with H x = H B q, λ = {:.2} mm, σ = {:.2} mm",
+            "quasi-static skin with H x = H B q, λ = {:.2} mm, σ = {:.2} mm{varies}{lids}",
             plan.skin.lambda * 1e3,
             model.sigma * 1e3
         ),

@@ -80,6 +80,17 @@ pub struct SkinScale {
     pub lambda: f64,
     /// Critical wavelength of the thickest skin (m).
     pub lambda_max: f64,
+    /// The lids given their own thickness ([`crate::scene::thickness::rig_lids`]): how
+    /// many face triangles, and how thick (m).
+    pub lids: Option<(usize, f64)>,
+}
+
+impl SkinScale {
+    /// Critical wavelength (m) of skin `h` thick (m): λ grows in proportion to the thickness
+    /// ([`Bilayer::critical_wavelength`], the materials fixed).
+    pub fn wavelength_of(&self, h: f64) -> f64 {
+        self.lambda * h / self.thickness[0]
+    }
 }
 
 /// A checked run: what to simulate and with what.
@@ -232,18 +243,16 @@ pub fn substeps_per_frame(fps: f64, dt: f64) -> usize {
 /// Backward Euler's largest time step when the scene gives none (s).
 pub const DEFAULT_DT: f64 = 0.02;
 
-/// Skin thickness per loaded face triangle when the scene varies it (regions, attribute,
-/// texture), and the critical wavelengths of the thinnest and thickest skin (λ ∝ h): the
-/// refinement and the clusters use the thinnest skin's λ, the most demanding.
+/// Skin thickness per loaded face triangle when it varies (regions, attribute, texture, the
+/// lids), and the critical wavelengths of the thinnest and thickest skin (λ ∝ h).
 fn skin_scale(rig: &Rig, scene: &Scene, materials: &Materials) -> anyhow::Result<SkinScale> {
+    use crate::scene::thickness;
     let h0 = materials.skin.thickness;
-    let face_thickness = if crate::scene::thickness::varies(&scene.skin) {
-        Some(crate::scene::thickness::rig_face_thickness(
-            rig,
-            &scene.skin,
-            h0,
-            None,
-        )?)
+    // The lids ([`thickness::rig_lids`]) vary it where the scene does not.
+    let lids = thickness::rig_lids(rig, &scene.skin, h0)
+        .map(|(h, lid)| (lid.iter().filter(|&&l| l).count(), h));
+    let face_thickness = if thickness::varies(&scene.skin) || lids.is_some() {
+        Some(thickness::rig_face_thickness(rig, &scene.skin, h0, None)?)
     } else {
         None
     };
@@ -268,6 +277,7 @@ fn skin_scale(rig: &Rig, scene: &Scene, materials: &Materials) -> anyhow::Result
         thickness: [h_min, h_max],
         lambda: wavelength_of(h_min),
         lambda_max: wavelength_of(h_max),
+        lids,
     })
 }
 

@@ -75,6 +75,13 @@ pub struct SkinSection {
     pub thickness_attribute: Option<String>,
     /// A grey texture sampled at TEXCOORD_0 giving the thickness (grey 0..1 → min..max m).
     pub thickness_texture: Option<ThicknessTexture>,
+    /// The eyelids: `auto` (default) gives the skin the rig's blink shapes move (see
+    /// [`thickness::lid_triangles`]) the thickness `lid_thickness`; `off` leaves it as the rest
+    /// of the skin. Only where no attribute or texture gives the thickness; regions still win.
+    pub lids: Option<String>,
+    /// Thickness of the eyelids' skin (m); default half of `thickness` (eyelid skin, about
+    /// 0.5 mm, is the body's thinnest, about half the face's).
+    pub lid_thickness: Option<f64>,
     /// Most subdivision levels the skin may be refined by to hold enough vertices per
     /// wavelength (default 2).
     pub refine_limit: Option<usize>,
@@ -395,6 +402,16 @@ impl Scene {
         }
         if let Some(t) = &s.thickness_texture {
             t.validate()?;
+        }
+        if let Some(l) = s.lids.as_deref() {
+            if !matches!(l, "auto" | "off") {
+                bail!("`skin.lids` = {l:?}: use \"auto\" (thin skin where the blink shapes move it) or \"off\"");
+            }
+        }
+        if let Some(h) = s.lid_thickness {
+            if !(h.is_finite() && h > 0.0) {
+                bail!("`skin.lid_thickness` must be a positive number of metres, got {h}");
+            }
         }
         if let Some(n) = s.refine_limit {
             if n > 4 {

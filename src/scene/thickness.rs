@@ -3,7 +3,8 @@
 //! (`skin.thickness_texture`, grey 0..1 → min..max metres), with `[[skin.regions]]` (boxes
 //! or spheres in model metres) on top. The result is one thickness per triangle of the face:
 //! a triangle takes the mean of its vertices' values, then the last region containing its
-//! centroid, if any, overrides it.
+//! centroid, if any, overrides it. Where neither attribute nor texture gives it, the eyelids
+//! (`skin.lids`, on by default) are thinner than the rest ([`lid_triangles`]).
 
 use super::SkinSection;
 use crate::io::load::Rig;
@@ -226,26 +227,45 @@ pub fn vertex_thickness(
     Ok(None)
 }
 
-/// Thickness per triangle (m): the mean of its vertices' `vertex_h` (or `uniform` without
-/// it), then the last of `regions` that contains the triangle's centroid overrides it.
-/// Refuses a value not below `model_size` (m), the face's bounding-box diagonal: a skin
+/// The thickness under the regions: per vertex, or uniform with the lids' own.
+#[derive(Debug, Clone, Copy)]
+pub struct Base<'a> {
+    /// Per-vertex thickness (m) from an attribute or texture; the others are unused with it.
+    pub vertex_h: Option<&'a [f64]>,
+    /// The skin's thickness (m).
+    pub uniform: f64,
+    /// The lids' thickness (m) and a flag per triangle ([`rig_lids`]).
+    pub lids: Option<(f64, &'a [bool])>,
+}
+
+impl Base<'_> {
+    /// The thickness of triangle `t` (m) with corners `tri`.
+    fn of(&self, t: usize, tri: &[usize; 3]) -> f64 {
+        match (self.vertex_h, self.lids) {
+            (Some(vh), _) => tri.iter().map(|&v| vh[v]).sum::<f64>() / 3.0,
+            (None, Some((h, lid))) if lid[t] => h,
+            _ => self.uniform,
+        }
+    }
+}
+
+/// Thickness per triangle (m): its `base` (the mean of its vertices' thickness, the lids' or the
+/// uniform one), then the last of `regions` that contains the triangle's centroid overrides
+/// it. Refuses a value not below `model_size` (m), the face's bounding-box diagonal: a skin
 /// thicker than the model it covers is a unit mistake.
 pub fn face_thickness(
     positions: &[Vector3<f64>],
     triangles: &[[usize; 3]],
-    vertex_h: Option<&[f64]>,
-    uniform: f64,
+    base: Base,
     regions: &[ThicknessRegion],
     model_size: f64,
 ) -> anyhow::Result<Vec<f64>> {
     let h: Vec<f64> = triangles
         .iter()
-        .map(|t| {
+        .enumerate()
+        .map(|(i, t)| {
             let c = t.iter().map(|&v| positions[v]).sum::<Vector3<f64>>() / 3.0;
-            let base = match vertex_h {
-                Some(vh) => t.iter().map(|&v| vh[v]).sum::<f64>() / 3.0,
-                None => uniform,
-            };
+            let base = base.of(i, t);
             regions
                 .iter()
                 .rev()
@@ -261,8 +281,62 @@ pub fn face_thickness(
     Ok(h)
 }
 
+/// Share of a blink shape's largest displacement beyond which it moves a vertex of the lid
+/// (dimensionless): as the muscles' own "vertices a shape moves" measure.
+pub const LID_MOTION_SHARE: f64 = 0.1;
+
+/// The eyelids of a face: the triangles with a vertex that one of its blink shapes (a morph
+/// target whose name holds "blink", any case: ARKit's `eyeBlinkLeft`/`eyeBlinkRight`) moves by
+/// more than [`LID_MOTION_SHARE`] of that shape's largest displacement. Empty without blink
+/// shapes. Why they matter: a blink stretches the lid's skin by about a third, and skin as
+/// thick as the face's elsewhere would pull the muscle-driven flesh about the eyes with it
+/// until the forehead buckles; real eyelid skin is about half as thick (see the README).
+/// Returns one flag per triangle and the names of the shapes used.
+pub fn lid_triangles(face: &crate::io::mesh::MeshInstance) -> (Vec<bool>, Vec<String>) {
+    let mut moved = vec![false; face.positions.len()];
+    let mut names = Vec::new();
+    for target in face
+        .targets
+        .iter()
+        .filter(|t| t.name.to_lowercase().contains("blink"))
+    {
+        let most = target
+            .positions
+            .iter()
+            .map(|d| d.norm())
+            .fold(0.0, f64::max);
+        if most <= 0.0 {
+            continue;
+        }
+        for (m, d) in moved.iter_mut().zip(&target.positions) {
+            *m |= d.norm() > LID_MOTION_SHARE * most;
+        }
+        names.push(target.name.clone());
+    }
+    let lid = face
+        .triangles
+        .iter()
+        .map(|t| t.iter().any(|&v| moved[v]))
+        .collect();
+    (lid, names)
+}
+
+/// The lids' thickness (m) and flags per face triangle when `skin.lids` is on (default), no
+/// attribute or texture gives the thickness, and the face has blink shapes; `uniform` is the
+/// skin's thickness (m).
+pub fn rig_lids(rig: &Rig, skin: &SkinSection, uniform: f64) -> Option<(f64, Vec<bool>)> {
+    let on = skin.lids.as_deref().unwrap_or("auto") == "auto";
+    if !on || skin.thickness_attribute.is_some() || skin.thickness_texture.is_some() {
+        return None;
+    }
+    let (lid, names) = lid_triangles(rig.face());
+    (!names.is_empty() && lid.contains(&true))
+        .then(|| (skin.lid_thickness.unwrap_or(0.5 * uniform), lid))
+}
+
 /// Thickness of every triangle of the rig's face (m), from the scene's skin section and the
-/// uniform thickness `uniform` (m). `scene_dir` anchors a relative texture path.
+/// uniform thickness `uniform` (m), with the lids' ([`rig_lids`]) before the regions.
+/// `scene_dir` anchors a relative texture path.
 pub fn rig_face_thickness(
     rig: &Rig,
     skin: &SkinSection,
@@ -279,11 +353,15 @@ pub fn rig_face_thickness(
         |(lo, hi), p| (lo.inf(p), hi.sup(p)),
     );
     let size = (hi - lo).norm();
+    let lids = rig_lids(rig, skin, uniform);
     face_thickness(
         &face.positions,
         &face.triangles,
-        vh.as_deref(),
-        uniform,
+        Base {
+            vertex_h: vh.as_deref(),
+            uniform,
+            lids: lids.as_ref().map(|(h, l)| (*h, l.as_slice())),
+        },
         &skin.regions,
         size,
     )
@@ -293,6 +371,15 @@ pub fn rig_face_thickness(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A base without lids.
+    fn base(vertex_h: Option<&[f64]>, uniform: f64) -> Base<'_> {
+        Base {
+            vertex_h,
+            uniform,
+            lids: None,
+        }
+    }
 
     #[test]
     fn bilinear_sampling_interpolates_and_wraps() {
@@ -333,13 +420,13 @@ mod tests {
             ..Default::default()
         };
         let vh = [1e-3, 1e-3, 1e-3, 3e-3, 3e-3];
-        let h = face_thickness(&p, &t, Some(&vh), 9.0, &[], 10.0).unwrap();
+        let h = face_thickness(&p, &t, base(Some(&vh), 9.0), &[], 10.0).unwrap();
         assert_eq!(h, vec![1e-3, (1e-3 + 6e-3) / 3.0]);
-        let h = face_thickness(&p, &t, None, 1e-3, &[boxr, sphere], 10.0).unwrap();
+        let h = face_thickness(&p, &t, base(None, 1e-3), &[boxr, sphere], 10.0).unwrap();
         assert_eq!(h, vec![5e-4, 2e-3]);
-        let h = face_thickness(&p, &t, None, 1e-3, &[sphere, boxr], 10.0).unwrap();
+        let h = face_thickness(&p, &t, base(None, 1e-3), &[sphere, boxr], 10.0).unwrap();
         assert_eq!(h, vec![2e-3, 2e-3]);
-        let e = face_thickness(&p, &t, None, 20.0, &[], 10.0).unwrap_err();
+        let e = face_thickness(&p, &t, base(None, 20.0), &[], 10.0).unwrap_err();
         assert!(format!("{e}").contains("metres"), "{e}");
         let both = ThicknessRegion {
             radius: Some(1.0),

@@ -17,10 +17,12 @@
 //! (19.6 % on the default) at six times the default's elements. A rig whose default lattice
 //! misses by more than [`HOPELESS`] times the goal keeps it untried, and the head is one: on
 //! the 17.2 mm lattice its muscles make its shapes and fit its clip within 2.8 %, but its
-//! muscle-driven clip wrinkles its crown and forehead 3 mm deep in the blinks where tracking
-//! wrinkles only the eyes' corners (0.8 mm): the blinks stretch its 1 mm lid skin by a third,
-//! which pulls the muscle-driven flesh about the eyes past the skin's onset. Thin lids (0.5
-//! mm) keep the crown smooth; `examples/head_muscles.toml` asks for that lattice and them.
+//! muscle-driven clip wrinkles its crown and forehead in the blinks where tracking wrinkles
+//! only the eyes' corners: the blinks stretch its lid skin by a third, which pulls the
+//! muscle-driven flesh about the eyes past the skin's onset. The lids' own thinner skin
+//! (`skin.lids`, 0.5 mm) halves that (frames 22–25: forehead 1.2 mm deep and crown 0.6 mm,
+//! against 2.0 and 1.1 mm with 1 mm lids and 0.2 and 0.06 mm tracked), not enough to drive
+//! it by default; `examples/head_muscles.toml` asks for that lattice and muscles.
 
 use crate::io::model::MorphTarget;
 use crate::lattice::Lattice;

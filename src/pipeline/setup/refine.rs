@@ -54,8 +54,9 @@ pub struct RefineInput<'a> {
     pub region: Option<&'a [bool]>,
 }
 
-/// The `refine` stage: subdivide the simulated skin for the thinnest skin's wavelength
-/// (`skin.vertices_per_wavelength`, at most `skin.refine_limit` levels), embed, and record;
+/// The `refine` stage: subdivide each simulated triangle for its skin's wavelength
+/// (`skin.vertices_per_wavelength`, at most `skin.refine_limit` levels; thin skin further than
+/// thick), embed, and record;
 /// `path` names the rig in errors.
 pub fn refine_skin(
     input: &RefineInput,
@@ -63,11 +64,16 @@ pub fn refine_skin(
     path: &str,
 ) -> anyhow::Result<(RefinedSkin, StagePlan)> {
     let t = Instant::now();
-    let lambda = input.scale.lambda;
-    let refined = refine::refine_region(
+    let lambda: Vec<f64> = match input.scale.face_thickness.as_deref() {
+        Some(h) => (input.welded.loaded_triangle.iter())
+            .map(|&t| input.scale.wavelength_of(h[t]))
+            .collect(),
+        None => vec![input.scale.lambda; input.welded.mesh.triangles.len()],
+    };
+    let refined = refine::refine_for_wavelengths(
         &input.welded.mesh,
         input.region,
-        lambda,
+        &lambda,
         &RefineSettings {
             vertices_per_wavelength: skin
                 .vertices_per_wavelength
@@ -138,12 +144,17 @@ fn refine_record(r: &RefineReport, t: Instant) -> StagePlan {
         );
     }
     let whole = r.region_triangles == r.triangles_before;
+    let graded = match r.fewer_levels {
+        0 => String::new(),
+        n => format!(" ({n} of them, of thicker skin, fewer levels for its longer wavelength)"),
+    };
     let region = if whole {
-        "the whole skin".to_string()
+        format!("the whole skin{graded}")
     } else {
         format!(
-            "the {} simulated of {} triangles, with a transition band of {} triangles ({} green \
-             closures) fading the smoothing to plain midpoints; the skin left out stays coarse",
+            "the {} simulated of {} triangles{graded}, with a transition band of {} triangles \
+             ({} green closures) fading the smoothing to plain midpoints; the skin left out \
+             stays coarse",
             r.region_triangles, r.triangles_before, r.band_triangles, r.transition_triangles
         )
     };
@@ -235,6 +246,7 @@ mod tests {
             thickness: [2e-4; 2],
             lambda: 0.01,
             lambda_max: 0.01,
+            lids: None,
         };
         let input = RefineInput {
             face: &face,
