@@ -229,7 +229,7 @@ pub fn vertex_thickness(
 
 /// The thickness under the regions: per vertex, or uniform with the lids' own.
 #[derive(Debug, Clone, Copy)]
-pub struct Base<'a> {
+pub struct BaseThickness<'a> {
     /// Per-vertex thickness (m) from an attribute or texture; the others are unused with it.
     pub vertex_h: Option<&'a [f64]>,
     /// The skin's thickness (m).
@@ -238,7 +238,7 @@ pub struct Base<'a> {
     pub lids: Option<(f64, &'a [bool])>,
 }
 
-impl Base<'_> {
+impl BaseThickness<'_> {
     /// The thickness of triangle `t` (m) with corners `tri`.
     fn of(&self, t: usize, tri: &[usize; 3]) -> f64 {
         match (self.vertex_h, self.lids) {
@@ -256,7 +256,7 @@ impl Base<'_> {
 pub fn face_thickness(
     positions: &[Vector3<f64>],
     triangles: &[[usize; 3]],
-    base: Base,
+    base: BaseThickness,
     regions: &[ThicknessRegion],
     model_size: f64,
 ) -> anyhow::Result<Vec<f64>> {
@@ -357,7 +357,7 @@ pub fn rig_face_thickness(
     face_thickness(
         &face.positions,
         &face.triangles,
-        Base {
+        BaseThickness {
             vertex_h: vh.as_deref(),
             uniform,
             lids: lids.as_ref().map(|(h, l)| (*h, l.as_slice())),
@@ -373,8 +373,8 @@ mod tests {
     use super::*;
 
     /// A base without lids.
-    fn base(vertex_h: Option<&[f64]>, uniform: f64) -> Base<'_> {
-        Base {
+    fn base(vertex_h: Option<&[f64]>, uniform: f64) -> BaseThickness<'_> {
+        BaseThickness {
             vertex_h,
             uniform,
             lids: None,

@@ -21,8 +21,10 @@
 //! only the eyes' corners: the blinks stretch its lid skin by a third, which pulls the
 //! muscle-driven flesh about the eyes past the skin's onset. The lids' own thinner skin
 //! (`skin.lids`, 0.5 mm) halves that (frames 22–25: forehead 1.2 mm deep and crown 0.6 mm,
-//! against 2.0 and 1.1 mm with 1 mm lids and 0.2 and 0.06 mm tracked), not enough to drive
-//! it by default; `examples/head_muscles.toml` asks for that lattice and muscles.
+//! against 2.0 and 1.1 mm with 1 mm lids and 0.2 and 0.06 mm tracked). Fitted against the
+//! flesh alone (`muscles.skin_in_fit = false`: each shape's held skin force, summed over a
+//! frame's shapes, overdrives the flesh) the held blink is as smooth as tracked, but its
+//! closing still creases the brows 1.3 mm deep; `examples/head_muscles.toml` asks for that.
 
 use crate::io::model::MorphTarget;
 use crate::lattice::Lattice;
