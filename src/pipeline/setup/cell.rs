@@ -22,9 +22,10 @@
 //! muscle-driven flesh about the eyes past the skin's onset. The lids' own thinner skin
 //! (`skin.lids`, 0.5 mm) halves that (frames 22–25: forehead 1.2 mm deep and crown 0.6 mm,
 //! against 2.0 and 1.1 mm with 1 mm lids and 0.2 and 0.06 mm tracked). Fitted against the
-//! flesh alone (`muscles.skin_in_fit = false`: each shape's held skin force, summed over a
-//! frame's shapes, overdrives the flesh) the held blink is as smooth as tracked, but its
-//! closing still creases the brows 1.3 mm deep; `examples/head_muscles.toml` asks for that.
+//! flesh alone (`muscles.skin_in_fit = false`: the skin's force held as at each shape is
+//! 2.2–2.8× what it pulls where the interior gets, and overdrives the flesh) the held blink
+//! is as smooth as tracked, but its closing still creases the brows 1.3 mm deep;
+//! `examples/head_muscles.toml` asks for that.
 
 use crate::io::model::MorphTarget;
 use crate::lattice::Lattice;
