@@ -225,7 +225,7 @@ pub fn refine_for_wavelengths(
         );
     }
     let rg = redgreen::refine_by_triangle(mesh, &target, settings.smoothing);
-    let report = report_of(mesh, region, lambda, &target, &rg, settings);
+    let report = report_of(mesh, (region, edge0), lambda, &target, &rg, settings);
     Ok(Refined {
         subdivision: rg,
         report,
@@ -233,17 +233,17 @@ pub fn refine_for_wavelengths(
 }
 
 /// What [`refine_for_wavelengths`] did: counts, and the mean edges and vertices per
-/// wavelength of the region (the least over its triangles' levels).
+/// wavelength of the region (the least over its triangles' levels); `edge0` is the region's
+/// mean edge before (m).
 fn report_of(
     mesh: &TriMesh,
-    region: &[bool],
+    (region, edge0): (&[bool], f64),
     lambda: &[f64],
     target: &[usize],
     rg: &RedGreen,
     settings: &RefineSettings,
 ) -> RefineReport {
     let need = target.iter().copied().max().unwrap_or(0);
-    let edge0 = mean_edge_of(mesh, |t| region[t]);
     let in_region = |f: usize| region[rg.ancestor[f].triangle];
     let edge1 = mean_edge_of(&rg.mesh, in_region);
     // Per target level: the shortest wavelength asked of it over its refined edge.

@@ -249,13 +249,19 @@ fn skin_scale(rig: &Rig, scene: &Scene, materials: &Materials) -> anyhow::Result
     use crate::scene::thickness;
     let h0 = materials.skin.thickness;
     // The lids ([`thickness::rig_lids`]) vary it where the scene does not.
-    let lids = thickness::rig_lids(rig, &scene.skin, h0)
-        .map(|(h, lid)| (lid.iter().filter(|&&l| l).count(), h));
-    let face_thickness = if thickness::varies(&scene.skin) || lids.is_some() {
-        Some(thickness::rig_face_thickness(rig, &scene.skin, h0, None)?)
+    let found = thickness::rig_lids(rig, &scene.skin, h0);
+    let face_thickness = if thickness::varies(&scene.skin) || found.is_some() {
+        Some(thickness::rig_face_thickness_with(
+            rig,
+            &scene.skin,
+            h0,
+            None,
+            found.as_ref(),
+        )?)
     } else {
         None
     };
+    let lids = found.map(|(h, lid)| (lid.iter().filter(|&&l| l).count(), h));
     let (h_min, h_max) = face_thickness.as_deref().map_or((h0, h0), |h| {
         h.iter()
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &x| {

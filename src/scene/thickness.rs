@@ -343,6 +343,19 @@ pub fn rig_face_thickness(
     uniform: f64,
     scene_dir: Option<&Path>,
 ) -> anyhow::Result<Vec<f64>> {
+    let lids = rig_lids(rig, skin, uniform);
+    rig_face_thickness_with(rig, skin, uniform, scene_dir, lids.as_ref())
+}
+
+/// [`rig_face_thickness`] with the lids already found (`lids`: [`rig_lids`]'s result), for a
+/// caller that also needs them.
+pub fn rig_face_thickness_with(
+    rig: &Rig,
+    skin: &SkinSection,
+    uniform: f64,
+    scene_dir: Option<&Path>,
+    lids: Option<&(f64, Vec<bool>)>,
+) -> anyhow::Result<Vec<f64>> {
     let face = rig.face();
     let vh = vertex_thickness(rig, skin, scene_dir)?;
     let (lo, hi) = face.positions.iter().fold(
@@ -353,14 +366,13 @@ pub fn rig_face_thickness(
         |(lo, hi), p| (lo.inf(p), hi.sup(p)),
     );
     let size = (hi - lo).norm();
-    let lids = rig_lids(rig, skin, uniform);
     face_thickness(
         &face.positions,
         &face.triangles,
         BaseThickness {
             vertex_h: vh.as_deref(),
             uniform,
-            lids: lids.as_ref().map(|(h, l)| (*h, l.as_slice())),
+            lids: lids.map(|(h, l)| (*h, l.as_slice())),
         },
         &skin.regions,
         size,
