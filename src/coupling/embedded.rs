@@ -410,6 +410,17 @@ impl EmbeddedShell {
     /// Returns the solver's report; the state is kept only if it stayed finite (otherwise
     /// the previous state is restored and the report's status says `NotFinite`).
     pub fn solve(&mut self, q: &[f64]) -> Result<SolveReport, SolverError> {
+        self.solve_accepting(q, &mut |_| true)
+    }
+
+    /// [`EmbeddedShell::solve`], with an equilibrium `accept` refuses (given the skin's
+    /// positions, flat, m) redone in increments as one that does not converge is
+    /// ([`StaticSolver::solve_in_increments`]; only with continuation levels above 0).
+    pub fn solve_accepting(
+        &mut self,
+        q: &[f64],
+        accept: &mut dyn FnMut(&[f64]) -> bool,
+    ) -> Result<SolveReport, SolverError> {
         self.check_q(q)?;
         let bq = self.embedded_flat(q);
         // Where a continuation would start (only when one may run): the current state's own
@@ -432,6 +443,7 @@ impl EmbeddedShell {
                 rhs_from,
                 pinned_from,
                 self.continuation_levels,
+                accept,
             )?,
             None => self.solver.solve(&self.shell, &self.problem, &mut self.x)?,
         };
@@ -449,9 +461,20 @@ impl EmbeddedShell {
         q: &[f64],
         loosening: f64,
     ) -> Result<SolveReport, SolverError> {
+        self.solve_loosened_accepting(q, loosening, &mut |_| true)
+    }
+
+    /// [`EmbeddedShell::solve_loosened`] with an `accept` test of the equilibrium, as
+    /// [`EmbeddedShell::solve_accepting`].
+    pub fn solve_loosened_accepting(
+        &mut self,
+        q: &[f64],
+        loosening: f64,
+        accept: &mut dyn FnMut(&[f64]) -> bool,
+    ) -> Result<SolveReport, SolverError> {
         let tolerance = self.tolerance();
         self.set_tolerance(tolerance * loosening);
-        let report = self.solve(q);
+        let report = self.solve_accepting(q, accept);
         self.set_tolerance(tolerance);
         report
     }

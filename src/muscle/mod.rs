@@ -30,7 +30,7 @@
 //!    Cholesky factorisation serves all shapes (one solve per shape). ‖B u − Δ‖ is the
 //!    lattice's own projection residual: no muscle on this lattice can do better.
 //! 2. Fit the actuation that makes u the equilibrium of the interior the pipeline runs with
-//!    its tracking ([`actuation`]) and, with `muscles.skin_in_fit`, the skin's force at the
+//!    its tracking ([`actuation`]) and, with `muscles.skin_hold = "shapes"`, the skin's force at the
 //!    shape: the rest change is u plus K_int⁻¹ (K_t u − Bᵀ k Δ − f_skin), what the tracking's
 //!    pull leaves to the muscle (on the jaw's bone nodes the bone's own turn), and
 //!    nonlinear corrections remove the corotational interior's departure from the

@@ -24,6 +24,27 @@ pub enum Driver {
     },
 }
 
+/// How the muscles hold the skin's pull on the lattice (`muscles.skin_hold`).
+///
+/// The blend shapes are the face's equilibria with its skin on, so the muscles that make them
+/// also hold the skin there. The skin's force is not linear in the activations (wrinkling
+/// relieves its compression), so a per-shape hold summed over a frame's shapes mispredicts it
+/// while the state reached carries it exactly.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SkinHold {
+    /// The muscles hold the skin's pull at the state the interior reaches, every step: an
+    /// active force equal and opposite to it, so the skin rides on the flesh the muscles shape
+    /// and does not load it (the actuations are fitted against the flesh alone, as the
+    /// interior they drive then is).
+    Reached,
+    /// Each generated muscle's actuation holds the skin's force at its own blend shape, a
+    /// constant load in its fit; the skin's actual force loads the interior.
+    AtShapes,
+    /// Nothing holds the skin: its force loads the muscle-driven interior, which the muscles,
+    /// fitted against the flesh alone, do not expect.
+    None,
+}
+
 impl Driver {
     /// The driver a scene asks for on `rig`: `muscles.source` when given (`none` is
     /// tracking); by default muscles generated from the blend shapes (`auto`) when the rig's
@@ -41,10 +62,24 @@ impl Driver {
         }
     }
 
-    /// Whether generated muscles are fitted with the skin in the loop: muscles generated from
-    /// the blend shapes (`auto`), unless `muscles.skin_in_fit = false`.
+    /// How muscles hold the skin under this driver (`muscles.skin_hold`; `None` when
+    /// tracking drives). Holding it at each shape needs generated muscles: a muscle file's
+    /// muscles are not fitted to shapes, so they hold it at the state reached instead.
+    pub fn skin_hold(&self, scene: &Scene) -> Option<SkinHold> {
+        let Self::Muscles { .. } = self else {
+            return None;
+        };
+        Some(match scene.muscles.skin_hold.as_deref() {
+            Some("none") => SkinHold::None,
+            Some("shapes") if self.generates_muscles() => SkinHold::AtShapes,
+            _ => SkinHold::Reached,
+        })
+    }
+
+    /// Whether generated muscles are fitted with the skin in the loop, each actuation holding
+    /// the skin's force at its shape (`muscles.skin_hold = "shapes"`).
     pub fn skin_in_fit(&self, scene: &Scene) -> bool {
-        self.generates_muscles() && scene.muscles.skin_in_fit != Some(false)
+        self.skin_hold(scene) == Some(SkinHold::AtShapes)
     }
 
     /// Whether muscles are generated from the blend shapes (`auto`).
@@ -332,19 +367,22 @@ mod tests {
             source: "auto".into(),
         };
         assert_eq!(Driver::of(&scene, &rig), auto, "muscles by default");
-        assert!(auto.skin_in_fit(&scene));
-        scene.muscles.skin_in_fit = Some(false);
+        assert_eq!(auto.skin_hold(&scene), Some(SkinHold::Reached));
         assert!(!auto.skin_in_fit(&scene));
+        scene.muscles.skin_hold = Some("shapes".into());
+        assert!(auto.skin_in_fit(&scene));
+        scene.muscles.skin_hold = Some("none".into());
+        assert_eq!(auto.skin_hold(&scene), Some(SkinHold::None));
+        scene.muscles.skin_hold = Some("shapes".into());
         scene.muscles.source = Some("none".into());
         assert_eq!(Driver::of(&scene, &rig), Driver::Tracking);
         assert!(!Driver::Tracking.skin_in_fit(&scene));
         scene.muscles.source = Some("m.toml".into());
         let file = Driver::of(&scene, &rig);
         assert_eq!(file.name(), "muscle activations");
-        assert!(
-            !file.skin_in_fit(&Scene::default()),
-            "only generated muscles"
-        );
+        assert!(!file.skin_in_fit(&scene), "only generated muscles");
+        assert_eq!(file.skin_hold(&scene), Some(SkinHold::Reached));
+        assert_eq!(Driver::Tracking.skin_hold(&scene), None);
         // A rig whose only shape moves nothing has nothing to make muscles of.
         let mut still = face;
         still.targets[0]

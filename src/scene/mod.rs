@@ -172,19 +172,32 @@ pub struct MuscleSection {
     /// tracks the blended surface directly, no QP; the default for a rig without blend
     /// shapes), or the path of a muscle TOML file.
     pub source: Option<String>,
-    /// Fit each generated muscle's actuation with the skin in the loop (default true with
-    /// generated muscles, `source = "auto"`; false fits the muscles against the flesh alone): the actuation
-    /// holds the force the skin puts on the lattice at the blend shape (`skin_at_shapes` says
-    /// how it is found), so that the muscle makes its shape against the skin's resistance.
-    /// Makes `solver.coupling_iterations` default to 2.
+    /// How the muscles hold the skin (default `reached` under muscles; see
+    /// [`SKIN_HOLDS`]): `reached`: the muscles hold the skin's pull on the lattice at the
+    /// state the interior reaches, every step, so the skin rides on the flesh the muscles
+    /// shape and does not load it; `shapes`: each generated muscle's actuation is fitted
+    /// holding the skin's force at its blend shape (`skin_at_shapes` says how it is found),
+    /// which makes `solver.coupling_iterations` default to 2; `none`: the skin pulls on the
+    /// muscle-driven interior and nothing holds it.
+    pub skin_hold: Option<String>,
+    /// The older name of `skin_hold = "shapes"` (true) and `"none"` (false): an error that
+    /// says so.
     pub skin_in_fit: Option<bool>,
-    /// How the skin's force at each blend shape is found for `skin_in_fit`:
+    /// Gauss–Newton re-linearisations of each frame's activation fit (default 0: the QP on
+    /// the muscles' responses at rest alone): each solves the muscle-driven interior's
+    /// nonlinear equilibrium at the fitted activations, takes the responses there and fits
+    /// again, so that the corotational flesh's departure from the linear model is corrected.
+    pub gauss_newton: Option<usize>,
+    /// How the skin's force at each blend shape is found for `skin_hold = "shapes"`:
     /// `tension_field` (default: the membrane relaxed over wrinkles at the shape's smooth
     /// surface, each wrinkled direction carrying the wrinkles' critical force D (2π/λ)²;
     /// milliseconds per shape) or `solved` (the reference: the skin solved quasi-statically
     /// from rest with its clusters on the shape's lattice fit; seconds per shape).
     pub skin_at_shapes: Option<String>,
 }
+
+/// The values of `muscles.skin_hold`, the default first.
+pub const SKIN_HOLDS: [&str; 3] = ["reached", "shapes", "none"];
 
 /// The values of `muscles.skin_at_shapes`.
 pub const SKIN_AT_SHAPES: [&str; 2] = ["tension_field", "solved"];
@@ -215,7 +228,7 @@ pub struct SolverSection {
     /// rest; default, the force Bᵀ F_x is always current) or `every_frame` (the paper).
     pub skin_stiffness: Option<String>,
     /// Most solves of the interior and the skin per frame (default 2 with generated muscles
-    /// fitted with the skin in the loop, `muscles.skin_in_fit`; 1 otherwise): the staggered coupling (interior with the skin's force
+    /// fitted holding the skin at their shapes, `muscles.skin_hold = "shapes"`; 1 otherwise): the staggered coupling (interior with the skin's force
     /// linearised, then the skin on the interior) is repeated from the frame's start, each
     /// time linearised about the last skin, until the interior moves by less than a
     /// thousandth of the frame's motion. 1 is the paper's one pass per frame, whose coupling
@@ -510,6 +523,24 @@ impl Scene {
                 bail!("`muscles.source` is empty: use \"auto\", \"none\" or a file path");
             }
         }
+        if let Some(old) = self.muscles.skin_in_fit {
+            let now = if old { "shapes" } else { "none" };
+            bail!(
+                "`muscles.skin_in_fit` is replaced by `muscles.skin_hold`: write `skin_hold = \"{now}\"` (the default, \"reached\", holds the skin at the state the interior reaches)"
+            );
+        }
+        if let Some(n) = self.muscles.gauss_newton {
+            if n > 50 {
+                bail!("`muscles.gauss_newton` must be at most 50 re-linearisations per frame, got {n}");
+            }
+        }
+        if let Some(h) = &self.muscles.skin_hold {
+            if !SKIN_HOLDS.contains(&h.as_str()) {
+                bail!(
+                    "`muscles.skin_hold` must be \"reached\", \"shapes\" or \"none\", got \"{h}\""
+                );
+            }
+        }
         if let Some(m) = &self.muscles.skin_at_shapes {
             if !SKIN_AT_SHAPES.contains(&m.as_str()) {
                 bail!(
@@ -647,6 +678,18 @@ mod tests {
         let e = err("[muscles]\nskin_at_shapes = \"exact\"\n");
         assert!(
             e.contains("muscles.skin_at_shapes") && e.contains("exact"),
+            "{e}"
+        );
+        let e = err("[muscles]\nskin_in_fit = false\n");
+        assert!(e.contains("skin_hold = \"none\""), "{e}");
+        let e = err("[muscles]\ngauss_newton = 51\n");
+        assert!(
+            e.contains("muscles.gauss_newton") && e.contains("51"),
+            "{e}"
+        );
+        let e = err("[muscles]\nskin_hold = \"always\"\n");
+        assert!(
+            e.contains("muscles.skin_hold") && e.contains("always"),
             "{e}"
         );
         let ok = Scene::parse("[muscles]\nskin_at_shapes = \"solved\"\n", "t").unwrap();

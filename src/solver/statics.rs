@@ -1234,14 +1234,18 @@ impl StaticSolver {
         Ok(rep)
     }
     /// [`StaticSolver::solve`] with load continuation: when the direct solve stops at the
-    /// iteration limit or in a failed line search, start again from the same state (`x` and
-    /// multipliers as given) and apply the change of load, from `rhs_from` (the constraint
-    /// right-hand side of that state) and `pinned_from` (its pinned dof values, in the order
-    /// of `p.pinned`) to those of `p` and `x`, in 2, then 4, … up to 2^`levels` equal
-    /// increments, each solved to equilibrium. Large target jumps (a frame that moves the
-    /// skin's clusters far, or a buckling event) converge along such a path where Newton from
-    /// the far start does not. The report sums the work of every attempt; its status and
-    /// residual are those of the last solve, and `increments` says how many were needed.
+    /// iteration limit or in a failed line search, or converges to a state `accept` refuses
+    /// (an equilibrium through itself: the skin has no contact), start again from the same
+    /// state (`x` and multipliers as given) and apply the change of load, from `rhs_from`
+    /// (the constraint right-hand side of that state) and `pinned_from` (its pinned dof
+    /// values, in the order of `p.pinned`) to those of `p` and `x`, in 2, then 4, … up to
+    /// 2^`levels` equal increments, each solved to equilibrium, until the end is accepted.
+    /// Large target jumps (a frame that moves the skin's clusters far, or a buckling event)
+    /// converge along such a path where Newton from the far start does not, and wrinkles
+    /// grown along it may stay clear of each other where Newton's long steps pass them
+    /// through. The report sums the work of every attempt; its status and residual are those
+    /// of the last solve, and `increments` says how many were needed.
+    #[allow(clippy::too_many_arguments)]
     pub fn solve_in_increments(
         &mut self,
         e: &dyn Energy,
@@ -1250,6 +1254,7 @@ impl StaticSolver {
         rhs_from: &[f64],
         pinned_from: &[f64],
         levels: usize,
+        accept: &mut dyn FnMut(&[f64]) -> bool,
     ) -> Result<SolveReport, SolverError> {
         if rhs_from.len() != p.constraints.rhs.len() || pinned_from.len() != p.pinned.len() {
             return Err(SolverError::Problem(format!(
@@ -1269,10 +1274,11 @@ impl StaticSolver {
         let last_pinned_start = self.last_pinned.clone();
         let target_pinned: Vec<f64> = p.pinned.iter().map(|&d| x[d]).collect();
         let mut total = self.solve(e, p, x)?;
-        let retry = matches!(
-            total.status,
-            SolveStatus::IterationLimit | SolveStatus::LineSearchFailed
-        );
+        let retry = match total.status {
+            SolveStatus::IterationLimit | SolveStatus::LineSearchFailed => true,
+            SolveStatus::Converged => !accept(x),
+            _ => false,
+        };
         if !retry {
             return Ok(total);
         }
@@ -1317,7 +1323,7 @@ impl StaticSolver {
                     break;
                 }
             }
-            if done || total.status == SolveStatus::NotFinite {
+            if (done && accept(x)) || total.status == SolveStatus::NotFinite {
                 break;
             }
         }
@@ -1825,6 +1831,7 @@ mod tests {
                 &[x_start[4]],
                 &[x_start[0]],
                 4,
+                &mut |_| true,
             )
             .unwrap();
         assert_eq!(rep.status, SolveStatus::Converged, "{rep:?}");
@@ -1859,8 +1866,42 @@ mod tests {
         }
         // A start of the wrong size is an error, not a guess.
         assert!(solver
-            .solve_in_increments(&chain, &problem(30.0), &mut x, &[], &[0.0], 2)
+            .solve_in_increments(&chain, &problem(30.0), &mut x, &[], &[0.0], 2, &mut |_| {
+                true
+            })
             .is_err());
+        // A small jump converges directly; an end `accept` refuses (here the first) is
+        // redone in increments and lands on the same equilibrium.
+        let (mut direct, _, mut x_direct) = start();
+        let (mut refused, x_start, mut x) = start();
+        x_direct[0] = -0.01;
+        x[0] = -0.01;
+        let rep = direct.solve(&chain, &problem(1.0), &mut x_direct).unwrap();
+        assert_eq!((rep.status, rep.increments), (SolveStatus::Converged, 1));
+        let mut seen = 0;
+        let rep = refused
+            .solve_in_increments(
+                &chain,
+                &problem(1.0),
+                &mut x,
+                &[x_start[4]],
+                &[x_start[0]],
+                2,
+                &mut |_| {
+                    seen += 1;
+                    seen > 1
+                },
+            )
+            .unwrap();
+        assert_eq!(
+            (rep.status, rep.increments, seen),
+            (SolveStatus::Converged, 2, 2)
+        );
+        let apart = x
+            .iter()
+            .zip(&x_direct)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        assert!(apart < 1e-8, "{x:?} vs {x_direct:?}");
     }
 
     /// Six double wells (E = Σ (x_i² − 1)² / 4) started on their hills, where the exact

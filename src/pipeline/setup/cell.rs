@@ -22,10 +22,13 @@
 //! muscle-driven flesh about the eyes past the skin's onset. The lids' own thinner skin
 //! (`skin.lids`, 0.5 mm) halves that (frames 22–25: forehead 1.2 mm deep and crown 0.6 mm,
 //! against 2.0 and 1.1 mm with 1 mm lids and 0.2 and 0.06 mm tracked). Fitted against the
-//! flesh alone (`muscles.skin_in_fit = false`: the skin's force held as at each shape is
-//! 2.2–2.8× what it pulls where the interior gets, and overdrives the flesh) the held blink
-//! is as smooth as tracked, but its closing still creases the brows 1.3 mm deep;
-//! `examples/head_muscles.toml` asks for that.
+//! flesh alone with nothing holding the skin (`muscles.skin_hold = "none"`: the skin's force
+//! held as at each shape is 2.2–2.8× what it pulls where the interior gets, and overdrives
+//! the flesh) the held blink is as smooth as tracked, but its closing still creases the
+//! brows 1.3 mm deep; `examples/head_muscles.toml` asks for that. With the skin held where
+//! the interior gets (the default since) frames 0–21 make the shape as tracking at κ = 1000
+//! does, but the blink's closing creases the forehead 1.2 mm (the κ = 1000 reference:
+//! 0.3–0.7 mm) and two frames are redone by tracking, so the head stays tracked.
 
 use crate::io::model::MorphTarget;
 use crate::lattice::Lattice;

@@ -18,7 +18,7 @@ pub mod select;
 pub mod skin;
 pub mod weld;
 
-use super::plan::{Driver, Plan};
+use super::plan::{Driver, Plan, SkinHold};
 use super::record::StagePlan;
 use super::Progress;
 use crate::coupling::embedded::EmbeddedShell;
@@ -180,6 +180,7 @@ pub fn set_up(
                     .filter(|_| plan.driver.skin_in_fit(scene))
                     .map(|s| &mut s.shell),
                 wavelength: plan.skin.lambda,
+                hold: plan.driver.skin_hold(scene).unwrap_or(SkinHold::Reached),
             },
         )
         .map(Some),
@@ -240,7 +241,7 @@ pub fn set_up(
 }
 
 /// What the interior carries besides its elasticity, as the muscles' fit sees it: the
-/// tracking (the skin's force at each shape joins it with `muscles.skin_in_fit`, see
+/// tracking (the skin's force at each shape joins it with `muscles.skin_hold = "shapes"`, see
 /// [`crate::muscle::actuation`]).
 fn muscle_coupling(tracking: &Tracking) -> crate::muscle::Coupling {
     crate::muscle::Coupling {

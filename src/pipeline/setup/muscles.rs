@@ -11,6 +11,7 @@ use crate::lattice::Lattice;
 use crate::mesh::TriMesh;
 use crate::muscle::jaw::{Hinge, JawBone};
 use crate::muscle::{Coupling, FitSettings, Fitter, GenerateSettings, Generated, MuscleError};
+use crate::pipeline::plan::SkinHold;
 use crate::pipeline::record::StagePlan;
 use crate::scene::Scene;
 use crate::solver::SolveStatus;
@@ -141,13 +142,15 @@ pub struct Beside<'s> {
     pub skin: Option<&'s mut EmbeddedShell>,
     /// The wavelength the skin wrinkles at (m, its thinnest part's).
     pub wavelength: f64,
+    /// How the muscles hold the skin (`muscles.skin_hold`), for the record.
+    pub hold: SkinHold,
 }
 
 /// The muscles from `source` (`auto`: generated from the blend shapes of `face` (from the rig
 /// at `path`) on the welded skin, whose vertex `i` is loaded vertex `welded_loaded[i]`;
 /// otherwise a muscle TOML file), with their fitter and the `muscles` and `fit` records.
 /// Actuations and the fitter's J see the interior the pipeline runs: its elasticity with the
-/// tracking's coupling and, with `muscles.skin_in_fit`, the skin's force at each shape
+/// tracking's coupling and, with `muscles.skin_hold = "shapes"`, the skin's force at each shape
 /// (`beside`). Muscles by default (`muscles.source` not given) that cannot make the rig's
 /// shapes ([`cannot_make_shapes`]) are an error, which `set_up` falls back on.
 pub fn build_muscles(
@@ -163,6 +166,7 @@ pub fn build_muscles(
         coupling,
         skin,
         wavelength,
+        hold,
     } = beside;
     let t = Instant::now();
     // Before any fit: a lattice without bone (a closed surface) cannot carry muscles.
@@ -239,7 +243,10 @@ pub fn build_muscles(
         lattice,
         &material,
         muscles,
-        FitSettings::default(),
+        FitSettings {
+            gauss_newton: scene.muscles.gauss_newton.unwrap_or(0),
+            ..FitSettings::default()
+        },
         Some(coupling),
         calibration,
         bone,
@@ -257,9 +264,10 @@ pub fn build_muscles(
         StagePlan::ran(
             "muscles",
             format!(
-                "{n} muscles {}{made}{}; a weak tracking (κ = {MUSCLE_TRACKING}) carries what they cannot make",
+                "{n} muscles {}{made}{}{}; a weak tracking (κ = {MUSCLE_TRACKING}) carries what they cannot make",
                 drive.origin,
                 bone_summary(&drive),
+                hold_summary(hold),
             ),
             t.elapsed().as_secs_f64() * 1e3,
         ),
@@ -270,6 +278,18 @@ pub fn build_muscles(
         ),
     ];
     Ok((drive, records))
+}
+
+/// What the muscles' record says of how they hold the skin (`muscles.skin_hold`).
+fn hold_summary(hold: SkinHold) -> &'static str {
+    match hold {
+        SkinHold::Reached => {
+            "; they hold the skin's pull at the state the interior reaches, so the skin rides on the flesh they shape and does not load it"
+        }
+        // The fit's own summary says how.
+        SkinHold::AtShapes => "",
+        SkinHold::None => "; nothing holds the skin's pull on the flesh they drive",
+    }
 }
 
 /// What the muscles' record says of the jaw's bone (empty without one).
@@ -315,7 +335,7 @@ enum SkinWay {
     Solved,
 }
 
-/// The skin's force at each blend shape, for the actuation fit (`muscles.skin_in_fit`).
+/// The skin's force at each blend shape, for the actuation fit (`muscles.skin_hold = "shapes"`).
 struct SkinAtShapes<'s> {
     shell: &'s mut EmbeddedShell,
     way: SkinWay,

@@ -25,6 +25,18 @@ pub struct InteriorSchedule {
     pub frame_interval: f64,
     /// Most interior–skin passes per frame (≥ 1; `solver.coupling_iterations`).
     pub coupling_iterations: usize,
+    /// The muscles hold the skin's pull at the state the interior reaches
+    /// ([`crate::pipeline::plan::SkinHold::Reached`]): while they drive, the skin does not
+    /// load the interior.
+    pub skin_held: bool,
+}
+
+/// Whether the skin's pull on the interior is held by the muscles this frame: under
+/// [`InteriorSchedule::skin_held`] while the muscles drive (a frame redone by tracking feels
+/// the skin again). Held, the pull cancels against the muscles' hold at every state, so
+/// neither its force nor its stiffness enters the interior's solves.
+pub fn skin_is_held(schedule: InteriorSchedule, state: &State) -> bool {
+    schedule.skin_held && state.muscles.as_ref().is_some_and(|m| !m.fallback)
 }
 
 /// Halvings of one sub-step at most: a backward Euler step whose Newton solve does not
@@ -59,7 +71,13 @@ pub fn advance(
     let q = about.unwrap_or(&state.interior.q);
     // A later coupling pass of the frame (`about` given) keeps the frame's first tangent.
     let refresh = about.is_none();
-    let skin_force = coupling_terms(model, state.skin.as_ref(), q, scratch, schedule, refresh);
+    let held = skin_is_held(schedule, state);
+    let skin_force = if held {
+        held_coupling(model, scratch);
+        None
+    } else {
+        coupling_terms(model, state.skin.as_ref(), q, scratch, schedule, refresh)
+    };
     let mut starts = match about {
         Some(_) => std::mem::take(&mut scratch.substep_ends),
         None => Vec::new(),
@@ -69,7 +87,11 @@ pub fn advance(
     let keep_ends = schedule.coupling_iterations > 1;
     let from = state.last_target.take().unwrap_or_else(|| target.to_vec());
     let simulated = scratch.skin_stiffness.as_deref();
-    let skin_parts = skin_parts(model, simulated.filter(|_| state.skin.is_some()));
+    let skin_parts = if held {
+        [None, None]
+    } else {
+        skin_parts(model, simulated.filter(|_| state.skin.is_some()))
+    };
     let mut load = StepLoad {
         frame_q: q.to_vec(),
         skin_parts,
@@ -350,6 +372,11 @@ fn coupling_terms(
     refresh: bool,
 ) -> Option<Vec<f64>> {
     let every = schedule.every_frame_stiffness && refresh;
+    if scratch.combined_is_held {
+        // The last frame's muscles held the skin: its stiffness is not in `combined`.
+        scratch.combined = None;
+        scratch.combined_is_held = false;
+    }
     if let Some(skin) = skin {
         if every {
             scratch.skin_stiffness = Some(skin.coupling_terms().0);
@@ -383,6 +410,17 @@ fn coupling_terms(
             Some(f)
         }
         (None, force) => force,
+    }
+}
+
+/// The coupling of a frame whose skin the muscles hold ([`skin_is_held`]): the tracking's
+/// stiffness alone in `scratch`'s combined stiffness, and no skin force.
+fn held_coupling(model: &Model, scratch: &mut Scratch) {
+    if scratch.combined.is_none() || !scratch.combined_is_held {
+        let combined = aggregate(model.tracking.stiffness.clone());
+        scratch.combined_layout = crate::fem::triplet_layout_key(&combined);
+        scratch.combined = Some(combined);
+        scratch.combined_is_held = true;
     }
 }
 
