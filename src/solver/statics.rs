@@ -1234,12 +1234,13 @@ impl StaticSolver {
         Ok(rep)
     }
     /// [`StaticSolver::solve`] with load continuation: when the direct solve stops at the
-    /// iteration limit or in a failed line search, or converges to a state `accept` refuses
-    /// (an equilibrium through itself: the skin has no contact), start again from the same
-    /// state (`x` and multipliers as given) and apply the change of load, from `rhs_from`
-    /// (the constraint right-hand side of that state) and `pinned_from` (its pinned dof
-    /// values, in the order of `p.pinned`) to those of `p` and `x`, in 2, then 4, … up to
-    /// 2^`levels` equal increments, each solved to equilibrium, until the end is accepted.
+    /// iteration limit or in a failed line search, or converges after taking a step to a
+    /// state `accept` refuses (an equilibrium through itself: the skin has no contact), start
+    /// again from the same state (`x` and multipliers as given) and apply the change of load,
+    /// from `rhs_from` (the constraint right-hand side of that state) and `pinned_from` (its
+    /// pinned dof values, in the order of `p.pinned`) to those of `p` and `x`, in 2, then 4,
+    /// … up to 2^`levels` equal increments, each solved to equilibrium, until the end is
+    /// accepted.
     /// Large target jumps (a frame that moves the skin's clusters far, or a buckling event)
     /// converge along such a path where Newton from the far start does not, and wrinkles
     /// grown along it may stay clear of each other where Newton's long steps pass them
@@ -1274,9 +1275,10 @@ impl StaticSolver {
         let last_pinned_start = self.last_pinned.clone();
         let target_pinned: Vec<f64> = p.pinned.iter().map(|&d| x[d]).collect();
         let mut total = self.solve(e, p, x)?;
+        // A solve that took no step ends where it started, which its caller had accepted.
         let retry = match total.status {
             SolveStatus::IterationLimit | SolveStatus::LineSearchFailed => true,
-            SolveStatus::Converged => !accept(x),
+            SolveStatus::Converged => total.iterations > 0 && !accept(x),
             _ => false,
         };
         if !retry {

@@ -72,12 +72,8 @@ pub fn advance(
     // A later coupling pass of the frame (`about` given) keeps the frame's first tangent.
     let refresh = about.is_none();
     let held = skin_is_held(schedule, state);
-    let skin_force = if held {
-        held_coupling(model, scratch);
-        None
-    } else {
-        coupling_terms(model, state.skin.as_ref(), q, scratch, schedule, refresh)
-    };
+    let skin = state.skin.as_ref().filter(|_| !held);
+    let skin_force = coupling_terms(model, skin, q, scratch, schedule, (refresh, held));
     let mut starts = match about {
         Some(_) => std::mem::take(&mut scratch.substep_ends),
         None => Vec::new(),
@@ -180,7 +176,14 @@ pub fn linear_pass(
     let Some(first) = scratch.first_pass.take() else {
         return false;
     };
-    let force = coupling_terms(model, state.skin.as_ref(), about, scratch, schedule, false);
+    let force = coupling_terms(
+        model,
+        state.skin.as_ref(),
+        about,
+        scratch,
+        schedule,
+        (false, false),
+    );
     let Some(mut c) = force else {
         return false;
     };
@@ -362,21 +365,18 @@ fn note(record: &mut StageRecord, rep: &SolveReport) {
 /// The skin's pull on the interior: its force Bᵀ F_x now (returned; the left-out skin's at
 /// x = B q), and the combined stiffness of tracking and skin in `scratch`. The skin's
 /// stiffness Bᵀ K_x B (element projected, the expensive part) is the model's, taken at the
-/// rest state, or re-taken at each frame's first coupling pass (`refresh`) when asked.
+/// rest state, or re-taken at each frame's first coupling pass (`refresh`) when asked. When
+/// the muscles hold the skin (`held`, [`skin_is_held`]; `skin` is then `None`) there is no
+/// pull: the combined stiffness is the tracking's alone and no force is returned.
 fn coupling_terms(
     model: &Model,
     skin: Option<&EmbeddedShell>,
     q: &[f64],
     scratch: &mut Scratch,
     schedule: InteriorSchedule,
-    refresh: bool,
+    (refresh, held): (bool, bool),
 ) -> Option<Vec<f64>> {
-    let every = schedule.every_frame_stiffness && refresh;
-    if scratch.combined_is_held {
-        // The last frame's muscles held the skin: its stiffness is not in `combined`.
-        scratch.combined = None;
-        scratch.combined_is_held = false;
-    }
+    let every = schedule.every_frame_stiffness && refresh && !held;
     if let Some(skin) = skin {
         if every {
             scratch.skin_stiffness = Some(skin.coupling_terms().0);
@@ -384,9 +384,11 @@ fn coupling_terms(
             scratch.skin_stiffness = Some(model.skin_stiffness.clone());
         }
     }
-    if scratch.combined.is_none() || every {
+    // Rebuilt when stale, or when the last frame held the skin and this one does not (or
+    // the other way round).
+    if scratch.combined.is_none() || every || scratch.combined_is_held != held {
         let mut all = model.tracking.stiffness.clone();
-        if let Some((_, ks)) = &model.left_out {
+        if let Some((_, ks)) = model.left_out.as_ref().filter(|_| !held) {
             all.extend_from_slice(ks);
         }
         if let (Some(_), Some(ks)) = (skin, &scratch.skin_stiffness) {
@@ -395,6 +397,10 @@ fn coupling_terms(
         let combined = aggregate(all);
         scratch.combined_layout = crate::fem::triplet_layout_key(&combined);
         scratch.combined = Some(combined);
+        scratch.combined_is_held = held;
+    }
+    if held {
+        return None;
     }
     let nd = scratch.zero_force.len();
     let force = skin.map(|s| skin_force(s, &model.sim_vertices, &model.rows, nd));
@@ -410,17 +416,6 @@ fn coupling_terms(
             Some(f)
         }
         (None, force) => force,
-    }
-}
-
-/// The coupling of a frame whose skin the muscles hold ([`skin_is_held`]): the tracking's
-/// stiffness alone in `scratch`'s combined stiffness, and no skin force.
-fn held_coupling(model: &Model, scratch: &mut Scratch) {
-    if scratch.combined.is_none() || !scratch.combined_is_held {
-        let combined = aggregate(model.tracking.stiffness.clone());
-        scratch.combined_layout = crate::fem::triplet_layout_key(&combined);
-        scratch.combined = Some(combined);
-        scratch.combined_is_held = true;
     }
 }
 

@@ -317,9 +317,10 @@ fn advance_coupled(
     start: Option<&FrameStart>,
 ) -> anyhow::Result<(StageRecord, Option<StageRecord>)> {
     // A held skin does not load the interior: a later pass would find the same interior.
-    let passes = match interior::skin_is_held(schedule, state) {
-        true => 1,
-        false => schedule.coupling_iterations.max(1),
+    let passes = if interior::skin_is_held(schedule, state) {
+        1
+    } else {
+        schedule.coupling_iterations.max(1)
     };
     let start = start.filter(|_| passes > 1);
     let mut interior = interior::advance(model, state, scratch, schedule, target, k, None)?;
