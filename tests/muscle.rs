@@ -1183,7 +1183,7 @@ fn the_jaw_bone_turns_with_its_muscle_and_its_response_is_the_equilibriums_deriv
     let interior = Interior::new(&lat, &Material::default()).unwrap();
     let mut fwd = Forward::new(interior, muscles, rest.clone(), lat.pinned.clone()).unwrap();
     fwd.bone = Some((0, bone.clone()));
-    let m = fwd.muscles.len();
+    let m = fwd.muscles().len();
     let mut a = vec![0.0; m];
     (a[0], a[1]) = (0.6, 0.3);
     let (q, rep) = fwd.equilibrium(&a, &rest).unwrap();

@@ -212,6 +212,55 @@ impl Interior {
         out
     }
 
+    /// Element `e`'s local displacements at positions `x` (flat, m) as a rest state, whatever
+    /// the interior's own actuation: u = R(x)ᵀ (x_a − x_0) − (X_a − X_0) (3K, m, into `u`),
+    /// and, when `rate` is given, their derivative along node velocities `dx` (flat, m per
+    /// unit; into `rate`): R(x)ᵀ (δx_a − δx_0) − \[ω\]× y_a with δR = R \[ω\]×,
+    /// ω = 2 (tr S · I − S)⁻¹ axial(skew(Rᵀ δF_c)), S = sym(Rᵀ F_c).
+    pub fn element_local_displacements(
+        &self,
+        x: &[f64],
+        e: usize,
+        u: &mut [f64],
+        rate: Option<(&[f64], &mut [f64])>,
+    ) {
+        let nodes = &self.elements[e];
+        let fc = self.center_def_grad(x, e);
+        let r = rotation(&fc);
+        let rt = r.transpose();
+        let at = |v: &[f64], n: usize| Vector3::new(v[3 * n], v[3 * n + 1], v[3 * n + 2]);
+        let x0 = at(x, nodes[0]);
+        for (a, &n) in nodes.iter().enumerate() {
+            let ya = rt * (at(x, n) - x0);
+            for i in 0..3 {
+                u[3 * a + i] = ya[i] - self.x_ref[3 * a + i];
+            }
+        }
+        let Some((dx, out)) = rate else {
+            return;
+        };
+        let dfc = self.center_def_grad(dx, e);
+        let m = rt * dfc;
+        let axial = Vector3::new(
+            m[(2, 1)] - m[(1, 2)],
+            m[(0, 2)] - m[(2, 0)],
+            m[(1, 0)] - m[(0, 1)],
+        );
+        let s = rt * fc;
+        let s = (s + s.transpose()) * 0.5;
+        let omega = (M3::identity() * s.trace() - s)
+            .try_inverse()
+            .map_or_else(Vector3::zeros, |gi| gi * axial);
+        let dx0 = at(dx, nodes[0]);
+        for (a, &n) in nodes.iter().enumerate() {
+            let ya = rt * (at(x, n) - x0);
+            let d = rt * (at(dx, n) - dx0) - omega.cross(&ya);
+            for i in 0..3 {
+                out[3 * a + i] = d[i];
+            }
+        }
+    }
+
     /// The node force (N, flat over node dofs, added into `force`) of a unit rate of
     /// actuation: −∂/∂s ∇E at `x` when the offsets of elements `elements` grow by s times
     /// `offsets` (3K per listed element, m). Exact, with the derivative of the rotations;

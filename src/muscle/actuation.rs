@@ -84,6 +84,9 @@ pub struct FittedActuation {
     pub elements: Vec<usize>,
     /// Their offsets (3K per element, m).
     pub offsets: Vec<f64>,
+    /// The lattice's rest change the offsets are of (node, m), on every node it moves
+    /// ([`Muscle::rest_change`]).
+    pub rest_change: Vec<(usize, [f64; 3])>,
     /// RMS miss of the muscle's surface at activation 1 against the lattice fit B u_m, over
     /// the moved vertices, relative to the shape's RMS displacement there.
     pub miss: f64,
@@ -190,6 +193,7 @@ impl<'a> Plant<'a> {
         let mut fitted = FittedActuation {
             elements: Vec::new(),
             offsets: Vec::new(),
+            rest_change: Vec::new(),
             miss: f64::INFINITY,
             shape_error: f64::INFINITY,
             projection: rms_over(&bu, Some(delta), moved) / norm,
@@ -216,7 +220,12 @@ impl<'a> Plant<'a> {
             if trial.elements.is_empty() {
                 return Ok(trial);
             }
-            one.muscles = vec![actuation_muscle("fit", &trial.elements, &trial.offsets)];
+            trial.rest_change = Self::rest_change_of(&shift);
+            one.set_muscles(vec![actuation_muscle(
+                "fit",
+                &trial.elements,
+                &trial.offsets,
+            )])?;
             // Start where the actuation should put the interior: a good actuation makes the
             // first Newton residual small there (from rest it takes ten iterations more).
             let start = best.as_ref().map_or_else(
@@ -263,6 +272,19 @@ impl<'a> Plant<'a> {
         Ok(fitted)
     }
 
+    /// Rest change `shift` (flat, m) on every node it moves (sorted by node): the whole
+    /// field, so that where muscles' elements meet, each element's rest shape comes from a
+    /// smooth change (cut at a muscle's last element, a change that moves nodes far from the
+    /// shape rigidly would step there).
+    fn rest_change_of(shift: &[f64]) -> Vec<(usize, [f64; 3])> {
+        shift
+            .chunks_exact(3)
+            .enumerate()
+            .filter(|(_, s)| s.iter().any(|&v| v != 0.0))
+            .map(|(n, s)| (n, [s[0], s[1], s[2]]))
+            .collect()
+    }
+
     /// The element offsets of rest change `shift` (flat, m): the elements whose largest
     /// offset reaches `coverage` of the largest, and their offsets.
     fn offsets(&self, rest: &[f64], shift: &[f64], coverage: f64) -> (Vec<usize>, Vec<f64>) {
@@ -297,6 +319,7 @@ pub fn actuation_muscle(name: &str, elements: &[usize], offsets: &[f64]) -> Musc
         max_contraction: DEFAULT_MAX_CONTRACTION,
         bounds: [0.0, 1.0],
         actuation: offsets.to_vec(),
+        rest_change: Vec::new(),
     }
 }
 

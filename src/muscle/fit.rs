@@ -191,7 +191,7 @@ impl Fitter {
             forward = forward.with_coupling(c);
         }
         forward.bone = bone;
-        let m = forward.muscles.len();
+        let m = forward.muscles().len();
         if !responses.is_empty() && responses.len() != m {
             return Err(MuscleError::Input(format!(
                 "{} responses for {m} muscles",
@@ -216,7 +216,7 @@ impl Fitter {
         };
         f.rest_surface = f.surface(&rest);
         let t = Instant::now();
-        let m = f.forward.muscles.len();
+        let m = f.forward.muscles().len();
         let a0 = vec![0.0; m];
         let cols = if responses.is_empty() {
             f.forward.response(&rest, &a0)?
@@ -235,7 +235,7 @@ impl Fitter {
         f.lambda_time = settings.time_weight * mean;
         f.prev_a = f
             .forward
-            .muscles
+            .muscles()
             .iter()
             .map(|mu| 0.0f64.clamp(mu.bounds[0], mu.bounds[1]))
             .collect();
@@ -244,7 +244,7 @@ impl Fitter {
 
     /// The muscles.
     pub fn muscles(&self) -> &[Muscle] {
-        &self.forward.muscles
+        self.forward.muscles()
     }
 
     /// Number of surface vertices.
@@ -256,7 +256,7 @@ impl Fitter {
     pub fn reset(&mut self) {
         self.prev_a = self
             .forward
-            .muscles
+            .muscles()
             .iter()
             .map(|mu| 0.0f64.clamp(mu.bounds[0], mu.bounds[1]))
             .collect();
@@ -376,7 +376,7 @@ impl Fitter {
                 self.vertices
             )));
         }
-        let bounds = bounds_of(&self.forward.muscles);
+        let bounds = bounds_of(self.forward.muscles());
         let mut fit = FrameFit {
             activations: self.prev_a.clone(),
             rms_residual: f64::NAN,

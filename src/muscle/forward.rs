@@ -18,7 +18,8 @@
 //! at rest) and f_m the unit force of muscle m ([`super::model::unit_forces`]): one
 //! factorisation and one solve per muscle.
 
-use super::model::{unit_forces, ActiveEnergy, Muscle};
+use super::blend::ActuationBlend;
+use super::model::{actuation_field, full_forces, unit_forces, ActiveEnergy, Muscle};
 use super::MuscleError;
 use crate::fem::dynamics::StiffnessMatrix;
 use crate::fem::Interior;
@@ -116,8 +117,12 @@ pub struct ForwardReport {
 pub struct Forward {
     /// Interior elasticity.
     pub interior: Interior,
-    /// The muscles acting on it.
-    pub muscles: Vec<Muscle>,
+    /// The muscles acting on it ([`Self::muscles`], [`Self::set_muscles`]).
+    muscles: Vec<Muscle>,
+    /// The actuation muscles' per-Gauss-point blend, built on first use.
+    blend: std::sync::OnceLock<ActuationBlend>,
+    /// The activations the interior's rest state is actuated for (none yet: empty).
+    actuated_for: Vec<f64>,
     /// Bone nodes (held at rest).
     pub pinned: Vec<bool>,
     /// Rest node positions (flat, m).
@@ -178,6 +183,8 @@ impl Forward {
         Ok(Self {
             interior,
             muscles,
+            blend: std::sync::OnceLock::new(),
+            actuated_for: Vec::new(),
             pinned,
             rest,
             max_newton: 40,
@@ -200,10 +207,37 @@ impl Forward {
         self
     }
 
-    /// Set the interior's rest state to the actuation at activations `a`.
+    /// The muscles acting on the interior.
+    pub fn muscles(&self) -> &[Muscle] {
+        &self.muscles
+    }
+
+    /// Replace the muscles (validated against the interior's elements).
+    pub fn set_muscles(&mut self, muscles: Vec<Muscle>) -> Result<(), MuscleError> {
+        for m in &muscles {
+            m.validate(self.interior.elements.len())
+                .map_err(MuscleError::Input)?;
+        }
+        self.muscles = muscles;
+        self.blend = std::sync::OnceLock::new();
+        self.actuated_for.clear();
+        Ok(())
+    }
+
+    /// How the actuation muscles combine ([`ActuationBlend`], built on first use).
+    pub fn blend(&self) -> &ActuationBlend {
+        self.blend
+            .get_or_init(|| ActuationBlend::new(&self.interior, &self.muscles, &self.rest))
+    }
+
+    /// Set the interior's rest state to the actuation at activations `a` (kept when it is
+    /// already that).
     fn actuate(&mut self, a: &[f64]) -> Result<(), MuscleError> {
-        let d = super::model::actuation_field(&self.interior, &self.muscles, a);
-        self.interior.set_actuation(d)?;
+        if self.actuated_for.as_slice() != a {
+            let d = actuation_field(self.blend(), &self.interior, &self.muscles, a);
+            self.interior.set_actuation(d)?;
+            self.actuated_for = a.to_vec();
+        }
         Ok(())
     }
 
@@ -384,7 +418,7 @@ impl Forward {
         }
         let mut q = q0.to_vec();
         self.place_bone(a, &mut q);
-        let forces = unit_forces(&self.interior, &self.muscles, &q);
+        let forces = full_forces(&self.interior, &self.muscles, &q);
         let mut applied = load.map_or_else(|| vec![0.0; q.len()], <[f64]>::to_vec);
         for (f, &am) in forces.iter().zip(a) {
             applied.iter_mut().zip(f).for_each(|(s, v)| *s += am * v);
@@ -466,7 +500,7 @@ impl Forward {
     pub fn response(&mut self, q: &[f64], a: &[f64]) -> Result<Vec<Vec<f64>>, MuscleError> {
         self.check_activations(a)?;
         self.factorise_robust(q, a)?;
-        let mut forces = unit_forces(&self.interior, &self.muscles, q);
+        let mut forces = unit_forces(&self.interior, &self.muscles, self.blend(), a, q);
         let turn = self.bone.as_ref().map(|(m, bone)| {
             let dp = bone.velocity(a.get(*m).copied().unwrap_or(0.0), self.interior.nodes);
             (*m, dp)

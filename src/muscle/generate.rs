@@ -381,8 +381,10 @@ pub fn generate_muscles_with_skin(
                     out.without_skin.push((t.name.clone(), why));
                 }
                 let name = unique_name(&t.name, out.source.len(), &mut used);
-                out.muscles
-                    .push(actuation_muscle(&name, &f.elements, &f.offsets));
+                out.muscles.push(Muscle {
+                    rest_change: f.rest_change.clone(),
+                    ..actuation_muscle(&name, &f.elements, &f.offsets)
+                });
                 if bone.is_some_and(|b| b.shape == ti) {
                     out.bone_muscle = Some(out.muscles.len() - 1);
                 }

@@ -3,13 +3,15 @@
 //!
 //! * [`model`]: a muscle is a named set of lattice elements with activation bounds (default
 //!   [0, 1]) that acts in one of two ways. An *actuation* muscle changes the interior's rest
-//!   state (Phace-style: offsets of each element's rest nodes, d(a) = Σ a_m d_m; a compatible
+//!   state (Phace-style: offsets of each element's rest nodes, those of the summed lattice
+//!   rest change X + Σ a_m s_m ([`blend`]); a compatible
 //!   actuation makes its shape whatever the stiffness). A *fibre* muscle (from a muscle file)
 //!   adds the active energy a σ Σ w [(‖F f‖ − 1) − (det F − 1)/3], σ = 3 μ c (Pa): a fibre
 //!   tension made deviatoric so the tissue shortens along the fibre with its volume kept.
 //! * [`forward`]: quasi-static equilibrium of interior + muscles (bone pinned), with the
 //!   pipeline's tracking when given ([`Coupling`]), and its linear response to activations.
 //! * [`actuation`]: a shape's actuation fitted with that interior in the loop.
+//! * [`blend`]: how actuation muscles combine at partial and mixed activations.
 //! * [`rigfile`]: muscles from a TOML rig file.
 //! * [`generate`]: muscles from the blend-shape basis when there is no file.
 //! * [`qp`]: the per-frame convex QP (clarabel) with exact active-set polishing.
@@ -45,6 +47,7 @@
 
 pub mod actuation;
 pub mod bench;
+pub mod blend;
 pub mod fit;
 pub mod forward;
 pub mod generate;
@@ -57,7 +60,8 @@ pub use fit::{FitSettings, Fitter, FrameFit, FrameStatus};
 pub use forward::{Coupling, Forward, ForwardReport, ForwardStatus};
 pub use generate::{generate_muscles, GenerateSettings, Generated};
 pub use model::{
-    actuation_field, linearised_terms, unit_forces, ActiveEnergy, Muscle, DEFAULT_MAX_CONTRACTION,
+    actuation_field, full_forces, linearised_terms, unit_forces, ActiveEnergy, Muscle,
+    DEFAULT_MAX_CONTRACTION,
 };
 pub use qp::{solve_qp, QpProblem, QpSolution, QpStatus};
 

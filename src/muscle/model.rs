@@ -5,16 +5,18 @@
 //! # Actuation muscles
 //!
 //! An actuation muscle holds, for each of its elements, an offset d_m,e of the element's rest
-//! node positions in its own rotated frame (3K numbers, m). At activations a the interior's
-//! rest state is actuated by d(a) = Σ_m a_m d_m ([`actuation_field`],
-//! [`crate::fem::Interior::set_actuation`]): element e stores ½ (u_e − d_e(a))ᵀ K₀ (u_e −
-//! d_e(a)). This is Phace's rest-state actuation (Ichim et al. 2017, ψ = min_R ‖F − R A(a)‖²
+//! node positions in its own rotated frame (3K numbers, m), and (generated muscles) the
+//! lattice rest change s_m those offsets are of. At activations a the interior's rest state
+//! is actuated by d(a) ([`actuation_field`], [`crate::fem::Interior::set_actuation`]): the
+//! offsets of the summed change X + Σ_m a_m s_m ([`super::blend`]: muscles combine as the
+//! blend shapes they make, linearly in position), or Σ_m a_m d_m for muscles given as offsets
+//! alone; element e stores ½ (u_e − d_e(a))ᵀ K₀ (u_e − d_e(a)). This is Phace's rest-state actuation (Ichim et al. 2017, ψ = min_R ‖F − R A(a)‖²
 //! with A(a) = I + Σ a_m (A_m − I)) written per element of the corotational interior: the
 //! offsets carry a symmetric stretch that varies across the 27-node element. A compatible
 //! actuation makes its shape at zero energy whatever the stiffness, so a muscle does not have
 //! to out-pull passive flesh; where the tracking resists, its offsets are fitted
-//! with it in the loop ([`super::actuation`]). Its unit force −∂∇E/∂a_m at rest is
-//! Σ_e K₀ d_m,e.
+//! with it in the loop ([`super::actuation`]). Its unit force is −∂∇E/∂a_m through
+//! ∂d/∂a_m ([`super::blend::ActuationBlend::tangent`]).
 //!
 //! # Fibre muscles
 //!
@@ -39,6 +41,7 @@
 //! of ‖F f‖ is (f·g_a)(f·g_b)(I − n nᵀ)/‖F f‖ per node pair (a, b), that of det F is
 //! −[F (g_a × g_b)]× (g the shape-function gradients).
 
+use super::blend::ActuationBlend;
 use crate::fem::Interior;
 use crate::math::Energy;
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
@@ -75,6 +78,11 @@ pub struct Muscle {
     /// fibre muscle (then `fibres` acts).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub actuation: Vec<f64>,
+    /// The lattice's rest change at activation 1 that `actuation` is the element offsets of
+    /// (node, displacement m), on every node it moves; muscles with one combine by
+    /// adding these ([`super::blend`]). Empty: the offsets add linearly.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub rest_change: Vec<(usize, [f64; 3])>,
 }
 
 impl Muscle {
@@ -92,12 +100,18 @@ impl Muscle {
             max_contraction: DEFAULT_MAX_CONTRACTION,
             bounds: [0.0, 1.0],
             actuation: Vec::new(),
+            rest_change: Vec::new(),
         }
     }
 
     /// Whether the muscle acts by changing the rest state (else along its fibres).
     pub fn is_actuation(&self) -> bool {
         !self.actuation.is_empty()
+    }
+
+    /// Whether the actuation comes with the lattice rest change it was made from.
+    pub fn has_rest_change(&self) -> bool {
+        self.is_actuation() && !self.rest_change.is_empty()
     }
 
     /// Check the muscle against a lattice of `element_count` elements; the message names the
@@ -118,6 +132,13 @@ impl Muscle {
             }
             if self.actuation.iter().any(|v| !v.is_finite()) {
                 return Err(format!("muscle '{n}': an actuation offset is not finite"));
+            }
+            if self
+                .rest_change
+                .iter()
+                .any(|(_, s)| s.iter().any(|v| !v.is_finite()))
+            {
+                return Err(format!("muscle '{n}': a rest change is not finite"));
             }
         } else if self.fibres.len() != self.elements.len() {
             return Err(format!(
@@ -475,33 +496,49 @@ impl Energy for ActiveEnergy<'_> {
     }
 }
 
-/// The interior's actuation at activations `a` (one per muscle): d(a) = Σ_m a_m d_m over the
-/// actuation muscles, 3K per element of `interior` (m); empty when no actuation muscle acts.
-pub fn actuation_field(interior: &Interior, muscles: &[Muscle], a: &[f64]) -> Vec<f64> {
-    if !muscles.iter().any(Muscle::is_actuation) {
-        return Vec::new();
-    }
-    let n3 = 3 * interior.nodes_per_element();
-    let mut d = vec![0.0; n3 * interior.elements.len()];
-    for (m, &am) in muscles.iter().zip(a) {
-        if !m.is_actuation() || am == 0.0 {
-            continue;
-        }
-        for (j, &e) in m.elements.iter().enumerate() {
-            let src = &m.actuation[j * n3..(j + 1) * n3];
-            for (o, v) in d[e * n3..(e + 1) * n3].iter_mut().zip(src) {
-                *o += am * v;
-            }
-        }
-    }
-    d
+/// The interior's actuation at activations `a` (one per muscle): the actuation muscles'
+/// rest changes combined as [`ActuationBlend`] says, 3K per element of the interior (m);
+/// empty when no actuation muscle acts.
+pub fn actuation_field(
+    blend: &ActuationBlend,
+    interior: &Interior,
+    muscles: &[Muscle],
+    a: &[f64],
+) -> Vec<f64> {
+    assert_eq!(muscles.len(), a.len(), "one activation per muscle");
+    blend.field(interior, muscles, a)
 }
 
-/// The generalised force of each muscle at unit activation at `x` (flat over node DOFs, N):
-/// −∂E_m/∂q for a fibre muscle (E_m is linear in a, so its force at activation a is a times
-/// this), −∂∇E/∂a_m of the actuated interior for an actuation muscle (exact at rest, where it
-/// is Σ_e K₀ d_m,e; elsewhere the derivative at the interior's current actuation).
-pub fn unit_forces(interior: &Interior, muscles: &[Muscle], x: &[f64]) -> Vec<Vec<f64>> {
+/// The generalised force of each muscle at unit activation at `x` (flat over node DOFs, N),
+/// at activations `a`: −∂E_m/∂q for a fibre muscle (E_m is linear in a, so its force at
+/// activation a is a times this), −∂∇E/∂a_m of the actuated interior for an actuation
+/// muscle (the rest change's derivative [`ActuationBlend::tangent`] at `a`, through the
+/// interior's current actuation).
+pub fn unit_forces(
+    interior: &Interior,
+    muscles: &[Muscle],
+    blend: &ActuationBlend,
+    a: &[f64],
+    x: &[f64],
+) -> Vec<Vec<f64>> {
+    (0..muscles.len())
+        .into_par_iter()
+        .map(|m| {
+            if muscles[m].is_actuation() {
+                let (elements, rates) = blend.tangent(interior, muscles, a, m);
+                let mut f = vec![0.0; x.len()];
+                interior.actuation_force(x, &elements, &rates, &mut f);
+                return f;
+            }
+            fibre_force(interior, &muscles[m], x)
+        })
+        .collect()
+}
+
+/// The force each muscle's whole change makes at `x` (flat, N): a fibre muscle's unit force,
+/// an actuation muscle's −∂∇E/∂s for its rest change d_m scaled by s (at rest: Σ_e K₀ d_m,e).
+/// The scale of the forces an equilibrium balances.
+pub fn full_forces(interior: &Interior, muscles: &[Muscle], x: &[f64]) -> Vec<Vec<f64>> {
     muscles
         .par_iter()
         .map(|m| {
@@ -510,14 +547,18 @@ pub fn unit_forces(interior: &Interior, muscles: &[Muscle], x: &[f64]) -> Vec<Ve
                 interior.actuation_force(x, &m.elements, &m.actuation, &mut f);
                 return f;
             }
-            let one = std::slice::from_ref(m);
-            let e = ActiveEnergy::new(interior, one, &[1.0]);
-            let mut g = vec![0.0; x.len()];
-            e.eval(x, Some(&mut g), None, false);
-            g.iter_mut().for_each(|v| *v = -*v);
-            g
+            fibre_force(interior, m, x)
         })
         .collect()
+}
+
+/// −∂E_m/∂q of fibre muscle `m` at activation 1 (flat, N).
+fn fibre_force(interior: &Interior, m: &Muscle, x: &[f64]) -> Vec<f64> {
+    let e = ActiveEnergy::new(interior, std::slice::from_ref(m), &[1.0]);
+    let mut g = vec![0.0; x.len()];
+    e.eval(x, Some(&mut g), None, false);
+    g.iter_mut().for_each(|v| *v = -*v);
+    g
 }
 
 /// The active energy linearised at node positions `q` (flat, m), in the form of

@@ -59,7 +59,8 @@ pub fn fallback_tracking(
 }
 
 /// Actuate the interior's rest state for `activations` (the muscles' at a step's end,
-/// [`MuscleDrive::at`]: the actuation muscles' Σ a_m d_m; fibre muscles act through
+/// [`MuscleDrive::at`]: the actuation muscles' combined rest change, [`crate::muscle::blend`];
+/// fibre muscles act through
 /// [`add_muscle_terms`]) and turn the jaw's bone nodes by its muscle's activation (pinned,
 /// they hold that through the step).
 pub fn actuate(
@@ -67,8 +68,13 @@ pub fn actuate(
     activations: &[f64],
     stepper: &mut BackwardEuler,
 ) -> anyhow::Result<()> {
-    let d =
-        crate::muscle::actuation_field(&stepper.interior, muscles.fitter.muscles(), activations);
+    let forward = &muscles.fitter.forward;
+    let d = crate::muscle::actuation_field(
+        forward.blend(),
+        &stepper.interior,
+        forward.muscles(),
+        activations,
+    );
     stepper.interior.set_actuation(d)?;
     if let Some((m, bone)) = &muscles.fitter.forward.bone {
         bone.place(activations[*m], &mut stepper.q);
