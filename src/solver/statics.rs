@@ -299,6 +299,9 @@ pub struct StaticSolver {
     /// directions beyond the constraints' and no direction has skipped the exact Hessian
     /// since: the next direction's inertia correction starts at a shift.
     expect_indefinite: bool,
+    /// The next solve's directions are factorised afresh until an exact factor passes the
+    /// inertia test ([`StaticSolver::factorise_next_solve`]).
+    fresh_next: bool,
     /// GMRES iterations of the last lagged direction (0 after a fresh factorisation).
     lag_last_iterations: usize,
     /// The patches of the current KKT layout (with `settings.patches`), and the count of
@@ -577,6 +580,14 @@ impl StaticSolver {
         })
     }
 
+    /// Have the next solve factorise its directions afresh, each checked by the inertia
+    /// test, until an exact factor passes it: a lagged factor made at a stable state cannot
+    /// show that the state it is now used at has become a saddle (a flat skin compressed past
+    /// its onset), and converges there.
+    pub fn factorise_next_solve(&mut self) {
+        self.fresh_next = true;
+    }
+
     /// Number of symbolic analyses done so far (1 while the problem's structure is fixed).
     pub fn symbolic_analyses(&self) -> usize {
         self.kkt.symbolic_count
@@ -764,6 +775,7 @@ impl StaticSolver {
     fn factor_fresh(&mut self, shift: f64, projected: bool, m: &Model) -> KktFactorInfo {
         let info = self.kkt.factor(shift);
         self.lag_last_iterations = 0;
+        self.fresh_next &= !(info.inertia_ok && !projected && shift == 0.0);
         if let Some((p, _)) = &mut self.patches {
             p.clear();
         }
@@ -806,6 +818,7 @@ impl StaticSolver {
     fn lag_usable(&self, m: &Model) -> bool {
         let cap = self.settings.lagged_solves;
         cap > 0
+            && !self.fresh_next
             && self.kkt.is_factored()
             && (self.settings.patches.is_some() || 2 * self.lag_last_iterations <= cap)
             && self.lag_layout.as_ref().is_some_and(|l| {
@@ -1230,6 +1243,7 @@ impl StaticSolver {
         rep.status = record.status;
         rep.iterations += record.iterations;
         self.finish(&m, end, x, &mut rep);
+        self.fresh_next = false;
         rep.total_s = t_start.elapsed().as_secs_f64();
         Ok(rep)
     }
