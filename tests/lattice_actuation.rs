@@ -240,7 +240,7 @@ fn muscles_combine_as_their_rest_changes_add() {
     }
 }
 
-/// A muscle's unit actuation at activations a, ∂d/∂a_m ([`ActuationBlend::tangent`]: the
+/// A muscle's unit actuation at activations a, ∂d/∂a_m ([`ActuationBlend::tangents`]: the
 /// derivative of the elements' local displacements, rotation included), matches central
 /// differences of the blended offsets, and so does the force it makes, −∂∇E/∂a_m
 /// ([`furrow::muscle::unit_forces`]), against differences of the actuated interior's gradient.
@@ -270,8 +270,8 @@ fn blend_tangent_and_unit_force_match_finite_differences() {
             .sqrt()
             / y.iter().map(|v| v * v).sum::<f64>().sqrt()
     };
-    for m in 0..2 {
-        let (elements, rates) = blend.tangent(&int, &muscles, &a, m);
+    let tangents = blend.tangents(&int, &muscles, &a);
+    for (m, (elements, rates)) in tangents.iter().enumerate() {
         let (mut ap, mut am) = (a, a);
         ap[m] += h;
         am[m] -= h;
@@ -283,7 +283,7 @@ fn blend_tangent_and_unit_force_match_finite_differences() {
             .iter()
             .flat_map(|&e| (e * n3..(e + 1) * n3).map(|i| (dp[i] - dm[i]) / (2.0 * h)))
             .collect();
-        let err = rel(&rates, &fd);
+        let err = rel(rates, &fd);
         let grad_at = |int: &mut Interior, d: Vec<f64>| {
             int.set_actuation(d).unwrap();
             let mut g = vec![0.0; x.len()];

@@ -202,12 +202,7 @@ impl Interior {
         let mut out = vec![0.0; n3 * self.elements.len()];
         out.par_chunks_mut(n3).enumerate().for_each(|(e, u)| {
             let mut y = [0.0; 81];
-            self.element_prepare(x, e, None, &mut y[..n3], u);
-            if !self.actuation.is_empty() {
-                for (ui, di) in u.iter_mut().zip(&self.actuation[e * n3..(e + 1) * n3]) {
-                    *ui += di;
-                }
-            }
+            self.element_frame(x, e, None, &mut y[..n3], u);
         });
         out
     }
@@ -224,23 +219,14 @@ impl Interior {
         u: &mut [f64],
         rate: Option<(&[f64], &mut [f64])>,
     ) {
-        let nodes = &self.elements[e];
-        let fc = self.center_def_grad(x, e);
-        let r = rotation(&fc);
-        let rt = r.transpose();
-        let at = |v: &[f64], n: usize| Vector3::new(v[3 * n], v[3 * n + 1], v[3 * n + 2]);
-        let x0 = at(x, nodes[0]);
-        for (a, &n) in nodes.iter().enumerate() {
-            let ya = rt * (at(x, n) - x0);
-            for i in 0..3 {
-                u[3 * a + i] = ya[i] - self.x_ref[3 * a + i];
-            }
-        }
-        let Some((dx, out)) = rate else {
+        let mut y = [0.0; 81];
+        let y = &mut y[..u.len()];
+        let (r, fc) = self.element_frame(x, e, None, y, u);
+        let (Some((dx, out)), Some(fc)) = (rate, fc) else {
             return;
         };
-        let dfc = self.center_def_grad(dx, e);
-        let m = rt * dfc;
+        let rt = r.transpose();
+        let m = rt * self.center_def_grad(dx, e);
         let axial = Vector3::new(
             m[(2, 1)] - m[(1, 2)],
             m[(0, 2)] - m[(2, 0)],
@@ -251,13 +237,13 @@ impl Interior {
         let omega = (M3::identity() * s.trace() - s)
             .try_inverse()
             .map_or_else(Vector3::zeros, |gi| gi * axial);
-        let dx0 = at(dx, nodes[0]);
+        let nodes = &self.elements[e];
+        let at = |n: usize| Vector3::new(dx[3 * n], dx[3 * n + 1], dx[3 * n + 2]);
+        let dx0 = at(nodes[0]);
         for (a, &n) in nodes.iter().enumerate() {
-            let ya = rt * (at(x, n) - x0);
-            let d = rt * (at(dx, n) - dx0) - omega.cross(&ya);
-            for i in 0..3 {
-                out[3 * a + i] = d[i];
-            }
+            let ya = Vector3::new(y[3 * a], y[3 * a + 1], y[3 * a + 2]);
+            let d = rt * (at(n) - dx0) - omega.cross(&ya);
+            out[3 * a..3 * a + 3].copy_from_slice(d.as_slice());
         }
     }
 
@@ -370,10 +356,28 @@ impl Interior {
         }
     }
 
-    /// First half of [`Self::element_energy`]: the rotation R_e (and the centre deformation
-    /// gradient F_c unless `frozen`), the rotated node positions y_a = Rᵀ(x_a − x_0) (m)
-    /// and the displacements u = y − (X − X_0) (m), both written into slices of length 3K.
+    /// First half of [`Self::element_energy`]: [`Self::element_frame`], with the actuation's
+    /// offsets taken from the displacements (u = y − (X − X_0) − d_e).
     fn element_prepare(
+        &self,
+        x: &[f64],
+        e: usize,
+        frozen: Option<&M3>,
+        y: &mut [f64],
+        u: &mut [f64],
+    ) -> (M3, Option<M3>) {
+        let frame = self.element_frame(x, e, frozen, y, u);
+        if !self.actuation.is_empty() {
+            let d = &self.actuation[e * u.len()..(e + 1) * u.len()];
+            u.iter_mut().zip(d).for_each(|(ui, di)| *ui -= di);
+        }
+        frame
+    }
+
+    /// The rotation R_e (and the centre deformation gradient F_c unless `frozen`), the
+    /// rotated node positions y_a = Rᵀ(x_a − x_0) (m) and the lattice's own local
+    /// displacements u = y − (X − X_0) (m), both written into slices of length 3K.
+    fn element_frame(
         &self,
         x: &[f64],
         e: usize,
@@ -398,10 +402,6 @@ impl Interior {
                 y[3 * a + i] = ya[i];
                 u[3 * a + i] = ya[i] - self.x_ref[3 * a + i];
             }
-        }
-        if !self.actuation.is_empty() {
-            let d = &self.actuation[e * u.len()..(e + 1) * u.len()];
-            u.iter_mut().zip(d).for_each(|(ui, di)| *ui -= di);
         }
         (r, fc)
     }

@@ -33,16 +33,14 @@ use rayon::prelude::*;
 pub struct ActuationBlend {
     /// Rest node positions X (flat, m).
     rest: Vec<f64>,
-    /// Elements whose rest shape follows the summed node change (sorted): those of every
-    /// muscle with a rest change.
-    followers: Vec<usize>,
-    /// Per muscle with a rest change, the elements of `followers` that its change moves a
-    /// node of (indices into `followers`).
+    /// Per interior element, whether its rest shape follows the summed node change: true
+    /// for the elements of every muscle with a rest change.
+    follows: Vec<bool>,
+    /// Per muscle with a rest change, the following elements its change moves a node of
+    /// (sorted).
     moved: Vec<Vec<usize>>,
     /// Nodes per element.
     nodes: usize,
-    /// Number of elements of the interior.
-    elements: usize,
 }
 
 impl ActuationBlend {
@@ -53,7 +51,6 @@ impl ActuationBlend {
         for m in muscles.iter().filter(|m| m.has_rest_change()) {
             m.elements.iter().for_each(|&e| follows[e] = true);
         }
-        let followers: Vec<usize> = (0..follows.len()).filter(|&e| follows[e]).collect();
         let moved = muscles
             .iter()
             .map(|m| {
@@ -62,17 +59,16 @@ impl ActuationBlend {
                 }
                 let mut touched = vec![false; interior.nodes];
                 m.rest_change.iter().for_each(|&(n, _)| touched[n] = true);
-                (0..followers.len())
-                    .filter(|&j| interior.elements[followers[j]].iter().any(|&n| touched[n]))
+                (0..follows.len())
+                    .filter(|&e| follows[e] && interior.elements[e].iter().any(|&n| touched[n]))
                     .collect()
             })
             .collect();
         Self {
             rest: rest.to_vec(),
-            followers,
+            follows,
             moved,
             nodes: interior.nodes_per_element(),
-            elements: interior.elements.len(),
         }
     }
 
@@ -94,25 +90,18 @@ impl ActuationBlend {
     /// The interior's actuation at activations `a` (one per muscle): offsets d(a), 3K per
     /// element of the interior (m, element frame); empty when no actuation muscle exists.
     pub fn field(&self, interior: &Interior, muscles: &[Muscle], a: &[f64]) -> Vec<f64> {
+        assert_eq!(muscles.len(), a.len(), "one activation per muscle");
         if !muscles.iter().any(Muscle::is_actuation) {
             return Vec::new();
         }
         let n3 = 3 * self.nodes;
-        let mut d = vec![0.0; n3 * self.elements];
-        if !self.followers.is_empty() {
+        let mut d = vec![0.0; n3 * self.follows.len()];
+        if self.follows.contains(&true) {
             let x = self.changed_rest(muscles, a);
-            let local: Vec<Vec<f64>> = self
-                .followers
-                .par_iter()
-                .map(|&e| {
-                    let mut u = vec![0.0; n3];
-                    interior.element_local_displacements(&x, e, &mut u, None);
-                    u
-                })
-                .collect();
-            for (&e, u) in self.followers.iter().zip(&local) {
-                d[e * n3..(e + 1) * n3].copy_from_slice(u);
-            }
+            d.par_chunks_mut(n3)
+                .enumerate()
+                .filter(|(e, _)| self.follows[*e])
+                .for_each(|(e, u)| interior.element_local_displacements(&x, e, u, None));
         }
         for (m, &am) in muscles.iter().zip(a) {
             if !m.is_actuation() || m.has_rest_change() || am == 0.0 {
@@ -128,35 +117,38 @@ impl ActuationBlend {
         d
     }
 
-    /// ∂d/∂a_m at activations `a`, muscle `m`'s unit actuation: the elements it changes and
-    /// their offsets' rates (3K per element, m per unit activation); empty for a fibre
-    /// muscle.
-    pub fn tangent(
+    /// ∂d/∂a_m at activations `a` for every actuation muscle m, its unit actuation: the
+    /// elements it changes and their offsets' rates (3K per element, m per unit
+    /// activation); empty for a fibre muscle.
+    pub fn tangents(
         &self,
         interior: &Interior,
         muscles: &[Muscle],
         a: &[f64],
-        m: usize,
-    ) -> (Vec<usize>, Vec<f64>) {
-        let mu = &muscles[m];
-        if !mu.has_rest_change() {
-            return (mu.elements.clone(), mu.actuation.clone());
-        }
+    ) -> Vec<(Vec<usize>, Vec<f64>)> {
         let n3 = 3 * self.nodes;
         let x = self.changed_rest(muscles, a);
-        let mut dx = vec![0.0; x.len()];
-        for &(n, s) in &mu.rest_change {
-            dx[3 * n..3 * n + 3].copy_from_slice(&s);
-        }
-        let elements: Vec<usize> = self.moved[m].iter().map(|&j| self.followers[j]).collect();
-        let mut rates = vec![0.0; n3 * elements.len()];
-        rates
-            .par_chunks_mut(n3)
-            .zip(&elements)
-            .for_each(|(out, &e)| {
-                let mut u = vec![0.0; n3];
-                interior.element_local_displacements(&x, e, &mut u, Some((&dx, out)));
-            });
-        (elements, rates)
+        muscles
+            .iter()
+            .zip(&self.moved)
+            .map(|(mu, elements)| {
+                if !mu.has_rest_change() {
+                    return (mu.elements.clone(), mu.actuation.clone());
+                }
+                let mut dx = vec![0.0; x.len()];
+                for &(n, s) in &mu.rest_change {
+                    dx[3 * n..3 * n + 3].copy_from_slice(&s);
+                }
+                let mut rates = vec![0.0; n3 * elements.len()];
+                rates
+                    .par_chunks_mut(n3)
+                    .zip(elements)
+                    .for_each(|(out, &e)| {
+                        let mut u = [0.0; 81];
+                        interior.element_local_displacements(&x, e, &mut u[..n3], Some((&dx, out)));
+                    });
+                (elements.clone(), rates)
+            })
+            .collect()
     }
 }

@@ -19,7 +19,7 @@
 //! factorisation and one solve per muscle.
 
 use super::blend::ActuationBlend;
-use super::model::{actuation_field, full_forces, unit_forces, ActiveEnergy, Muscle};
+use super::model::{full_forces, unit_forces, ActiveEnergy, Muscle};
 use super::MuscleError;
 use crate::fem::dynamics::StiffnessMatrix;
 use crate::fem::Interior;
@@ -119,7 +119,7 @@ pub struct Forward {
     pub interior: Interior,
     /// The muscles acting on it ([`Self::muscles`], [`Self::set_muscles`]).
     muscles: Vec<Muscle>,
-    /// The actuation muscles' per-Gauss-point blend, built on first use.
+    /// How the actuation muscles combine ([`ActuationBlend`]), built on first use.
     blend: std::sync::OnceLock<ActuationBlend>,
     /// The activations the interior's rest state is actuated for (none yet: empty).
     actuated_for: Vec<f64>,
@@ -234,7 +234,7 @@ impl Forward {
     /// already that).
     fn actuate(&mut self, a: &[f64]) -> Result<(), MuscleError> {
         if self.actuated_for.as_slice() != a {
-            let d = actuation_field(self.blend(), &self.interior, &self.muscles, a);
+            let d = self.blend().field(&self.interior, &self.muscles, a);
             self.interior.set_actuation(d)?;
             self.actuated_for = a.to_vec();
         }

@@ -60,8 +60,7 @@ pub use fit::{FitSettings, Fitter, FrameFit, FrameStatus};
 pub use forward::{Coupling, Forward, ForwardReport, ForwardStatus};
 pub use generate::{generate_muscles, GenerateSettings, Generated};
 pub use model::{
-    actuation_field, full_forces, linearised_terms, unit_forces, ActiveEnergy, Muscle,
-    DEFAULT_MAX_CONTRACTION,
+    full_forces, linearised_terms, unit_forces, ActiveEnergy, Muscle, DEFAULT_MAX_CONTRACTION,
 };
 pub use qp::{solve_qp, QpProblem, QpSolution, QpStatus};
 

@@ -7,7 +7,7 @@
 //! An actuation muscle holds, for each of its elements, an offset d_m,e of the element's rest
 //! node positions in its own rotated frame (3K numbers, m), and (generated muscles) the
 //! lattice rest change s_m those offsets are of. At activations a the interior's rest state
-//! is actuated by d(a) ([`actuation_field`], [`crate::fem::Interior::set_actuation`]): the
+//! is actuated by d(a) ([`ActuationBlend::field`], [`crate::fem::Interior::set_actuation`]): the
 //! offsets of the summed change X + Σ_m a_m s_m ([`super::blend`]: muscles combine as the
 //! blend shapes they make, linearly in position), or Σ_m a_m d_m for muscles given as offsets
 //! alone; element e stores ½ (u_e − d_e(a))ᵀ K₀ (u_e − d_e(a)). This is Phace's rest-state actuation (Ichim et al. 2017, ψ = min_R ‖F − R A(a)‖²
@@ -16,7 +16,7 @@
 //! actuation makes its shape at zero energy whatever the stiffness, so a muscle does not have
 //! to out-pull passive flesh; where the tracking resists, its offsets are fitted
 //! with it in the loop ([`super::actuation`]). Its unit force is −∂∇E/∂a_m through
-//! ∂d/∂a_m ([`super::blend::ActuationBlend::tangent`]).
+//! ∂d/∂a_m ([`ActuationBlend::tangents`]).
 //!
 //! # Fibre muscles
 //!
@@ -496,23 +496,10 @@ impl Energy for ActiveEnergy<'_> {
     }
 }
 
-/// The interior's actuation at activations `a` (one per muscle): the actuation muscles'
-/// rest changes combined as [`ActuationBlend`] says, 3K per element of the interior (m);
-/// empty when no actuation muscle acts.
-pub fn actuation_field(
-    blend: &ActuationBlend,
-    interior: &Interior,
-    muscles: &[Muscle],
-    a: &[f64],
-) -> Vec<f64> {
-    assert_eq!(muscles.len(), a.len(), "one activation per muscle");
-    blend.field(interior, muscles, a)
-}
-
 /// The generalised force of each muscle at unit activation at `x` (flat over node DOFs, N),
 /// at activations `a`: −∂E_m/∂q for a fibre muscle (E_m is linear in a, so its force at
 /// activation a is a times this), −∂∇E/∂a_m of the actuated interior for an actuation
-/// muscle (the rest change's derivative [`ActuationBlend::tangent`] at `a`, through the
+/// muscle (the rest change's derivative [`ActuationBlend::tangents`] at `a`, through the
 /// interior's current actuation).
 pub fn unit_forces(
     interior: &Interior,
@@ -521,16 +508,17 @@ pub fn unit_forces(
     a: &[f64],
     x: &[f64],
 ) -> Vec<Vec<f64>> {
-    (0..muscles.len())
-        .into_par_iter()
-        .map(|m| {
-            if muscles[m].is_actuation() {
-                let (elements, rates) = blend.tangent(interior, muscles, a, m);
+    let tangents = blend.tangents(interior, muscles, a);
+    muscles
+        .par_iter()
+        .zip(&tangents)
+        .map(|(m, (elements, rates))| {
+            if m.is_actuation() {
                 let mut f = vec![0.0; x.len()];
-                interior.actuation_force(x, &elements, &rates, &mut f);
+                interior.actuation_force(x, elements, rates, &mut f);
                 return f;
             }
-            fibre_force(interior, &muscles[m], x)
+            fibre_force(interior, m, x)
         })
         .collect()
 }

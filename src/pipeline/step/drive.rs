@@ -69,12 +69,9 @@ pub fn actuate(
     stepper: &mut BackwardEuler,
 ) -> anyhow::Result<()> {
     let forward = &muscles.fitter.forward;
-    let d = crate::muscle::actuation_field(
-        forward.blend(),
-        &stepper.interior,
-        forward.muscles(),
-        activations,
-    );
+    let d = forward
+        .blend()
+        .field(&stepper.interior, forward.muscles(), activations);
     stepper.interior.set_actuation(d)?;
     if let Some((m, bone)) = &muscles.fitter.forward.bone {
         bone.place(activations[*m], &mut stepper.q);
