@@ -16,7 +16,7 @@ fn example_scenes_parse() {
             n += 1;
         }
     }
-    assert!(n >= 5);
+    assert!(n >= 4);
 }
 
 /// The cubes example runs (its first frame): it was once refused by its own check (λ of its

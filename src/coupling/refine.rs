@@ -291,7 +291,7 @@ fn region_share(region: &[bool]) -> f64 {
     region.iter().filter(|&&r| r).count() as f64 / region.len().max(1) as f64
 }
 
-/// Material points of the vertices of `refined` in `lattice`, whose `vertex_points` embed the
+/// Material points of the vertices of the `subdivision` of `coarse` in `lattice`, whose `vertex_points` embed the
 /// unrefined mesh `coarse`, at their rest (smoothed) positions. An unrefined vertex stays in its own
 /// element; a new vertex goes into the element of one of its ancestor triangle's corners
 /// (nearest corner first, the one whose cell contains it, else the least outside), so
@@ -299,7 +299,7 @@ fn region_share(region: &[bool]) -> f64 {
 pub fn embed_refined(
     lattice: &Lattice,
     coarse: &TriMesh,
-    refined: &Refined,
+    subdivision: &RedGreen,
 ) -> anyhow::Result<Vec<MaterialPoint>> {
     let n0 = lattice.vertex_points.len();
     if n0 != coarse.positions.len() {
@@ -309,17 +309,17 @@ pub fn embed_refined(
             coarse.positions.len()
         );
     }
-    let n = refined.subdivision.mesh.positions.len();
+    let n = subdivision.mesh.positions.len();
     // Each vertex's first triangle and its corner there.
     let mut first: Vec<Option<(usize, usize)>> = vec![None; n];
-    for (f, tri) in refined.subdivision.mesh.triangles.iter().enumerate() {
+    for (f, tri) in subdivision.mesh.triangles.iter().enumerate() {
         for (k, &v) in tri.iter().enumerate() {
             first[v].get_or_insert((f, k));
         }
     }
     let mut out = Vec::with_capacity(n);
     for (v, at) in first.iter().enumerate() {
-        let p = refined.subdivision.mesh.positions[v];
+        let p = subdivision.mesh.positions[v];
         if v < n0 {
             out.push(lattice.locate_in_element(lattice.vertex_points[v].element, &p));
             continue;
@@ -327,7 +327,7 @@ pub fn embed_refined(
         let Some((f, k)) = *at else {
             bail!("refined vertex {v} is on no triangle");
         };
-        let anc = &refined.subdivision.ancestor[f];
+        let anc = &subdivision.ancestor[f];
         let corners = coarse.triangles[anc.triangle];
         let mut order = [0, 1, 2];
         order.sort_by(|&i, &j| anc.bary[k][j].total_cmp(&anc.bary[k][i]));
@@ -569,7 +569,7 @@ mod tests {
         );
         assert!(moved > 0.0 && moved < 0.5 * edge, "{moved}");
         let lat = Lattice::build(m, &LatticeSettings::default()).unwrap();
-        let pts = embed_refined(&lat, m, &r).unwrap();
+        let pts = embed_refined(&lat, m, &r.subdivision).unwrap();
         let q = lat.rest_flat();
         let mut worst: f64 = 0.0;
         for (v, mp) in pts.iter().enumerate() {

@@ -2,7 +2,8 @@
 //! elements.
 
 use super::fit::{FitSettings, Fitter};
-use super::generate::{generate_muscles, synthetic_arkit_targets, GenerateSettings};
+use super::generate::{generate_muscles, synthetic_arkit_targets, BlendShapes, GenerateSettings};
+use super::samples::{ShapeSamples, SAMPLE_LEVELS};
 use crate::fem::{Interior, Material};
 use crate::lattice::{Lattice, LatticeSettings};
 use crate::math::rng::Lcg;
@@ -59,11 +60,15 @@ pub fn bench_fit(target_cells: usize, gn_frames: usize) -> anyhow::Result<serde_
     let material = Material::default();
     let interior = Interior::new(&lattice, &material)?;
     let targets = synthetic_arkit_targets(&rig.mesh, 0.002, 0.02, 7);
+    let samples = ShapeSamples::subdivided(&lattice, &rig.mesh, SAMPLE_LEVELS)?;
     let t = Instant::now();
     let generated = generate_muscles(
         &lattice,
         &interior,
-        &targets,
+        BlendShapes {
+            targets: &targets,
+            samples: &samples,
+        },
         None,
         &GenerateSettings::default(),
     )?;

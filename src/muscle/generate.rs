@@ -8,6 +8,7 @@ use super::fit::Calibration;
 use super::forward::Coupling;
 use super::jaw::JawBone;
 use super::model::Muscle;
+use super::samples::ShapeSamples;
 use super::MuscleError;
 use crate::fem::Interior;
 use crate::io::model::MorphTarget;
@@ -124,12 +125,14 @@ pub fn shape_goal(projection: f64) -> f64 {
 }
 
 /// Lattice node displacements (flat, m) fitted to each target (see the module notes, step
-/// 1): least squares through the embedding with an elastic regulariser, bone nodes fixed
-/// (the jaw's `bone`, when given, turned by its shape's full angle for that shape).
+/// 1): least squares through the embedding of the `samples` (the vertices, and the
+/// subdivided surface between them) with an elastic regulariser, bone nodes fixed (the
+/// jaw's `bone`, when given, turned by its shape's full angle for that shape).
 pub fn fit_node_displacements(
     lattice: &Lattice,
     interior: &Interior,
     targets: &[MorphTarget],
+    samples: &ShapeSamples,
     regulariser: f64,
     bone: Option<&JawBone>,
 ) -> Result<Vec<Vec<f64>>, MuscleError> {
@@ -150,35 +153,7 @@ pub fn fit_node_displacements(
             nfree += 1;
         }
     }
-    // BᵀB per element (vertices grouped by their element), node level.
-    let k = lattice.order.nodes_per_element();
-    let mut by_elem: Vec<Vec<usize>> = vec![Vec::new(); lattice.elements.len()];
-    for (v, mp) in lattice.vertex_points.iter().enumerate() {
-        by_elem[mp.element].push(v);
-    }
-    let mut btb: Vec<(usize, usize, f64)> = Vec::new();
-    let mut trace_btb = 0.0;
-    for (e, verts) in by_elem.iter().enumerate() {
-        if verts.is_empty() {
-            continue;
-        }
-        let mut loc = vec![0.0; k * k];
-        for &v in verts {
-            let s = crate::lattice::shape(lattice.order, lattice.vertex_points[v].xi);
-            for a in 0..k {
-                for b in 0..k {
-                    loc[a * k + b] += s.val[a] * s.val[b];
-                }
-            }
-        }
-        let nodes = &lattice.elements[e].nodes;
-        for a in 0..k {
-            trace_btb += 3.0 * loc[a * k + a];
-            for b in 0..k {
-                btb.push((nodes[a], nodes[b], loc[a * k + b]));
-            }
-        }
-    }
+    let (btb, trace_btb) = samples_gram(lattice, samples);
     let rest = lattice.rest_flat();
     let mut kt = Vec::new();
     interior.eval(&rest, None, Some(&mut kt), false);
@@ -205,7 +180,7 @@ pub fn fit_node_displacements(
     let pat = Pattern::new(n3, &trip)?;
     let mut solver = SpdSolver::new();
     solver.factorize(&pat.assemble(&trip)?)?;
-    let embed = lattice.embedding_triplets();
+    let embed = samples.embedding_triplets(lattice);
     // (α K + BᵀB) y over all dofs: what bone displacements y put on the free rows.
     let system_times = |y: &[f64]| {
         let mut out = vec![0.0; 3 * nn];
@@ -226,11 +201,12 @@ pub fn fit_node_displacements(
                 .filter(|b| b.shape == ti)
                 .map(|b| b.displacement(1.0, nn));
             let mut rhs = vec![0.0; n3];
+            let at_samples = samples.displacement(&t.positions);
             for &(v, n, w) in &embed {
                 let f = free[n];
                 if f != usize::MAX {
                     for i in 0..3 {
-                        rhs[3 * f + i] += w * t.positions[v][i];
+                        rhs[3 * f + i] += w * at_samples[3 * v + i];
                     }
                 }
             }
@@ -254,16 +230,56 @@ pub fn fit_node_displacements(
         .collect())
 }
 
+/// BᵀB of the `samples`' embedding at node level (node, node, Σ w w), assembled per element,
+/// and its trace over the three coordinates (dimensionless).
+fn samples_gram(lattice: &Lattice, samples: &ShapeSamples) -> (Vec<(usize, usize, f64)>, f64) {
+    let k = lattice.order.nodes_per_element();
+    let mut by_elem: Vec<Vec<usize>> = vec![Vec::new(); lattice.elements.len()];
+    for (s, mp) in samples.points.iter().enumerate() {
+        by_elem[mp.element].push(s);
+    }
+    let mut btb: Vec<(usize, usize, f64)> = Vec::new();
+    let mut trace = 0.0;
+    for (e, on) in by_elem.iter().enumerate().filter(|(_, on)| !on.is_empty()) {
+        let mut loc = vec![0.0; k * k];
+        for &s in on {
+            let n = crate::lattice::shape(lattice.order, samples.points[s].xi);
+            for a in 0..k {
+                for b in 0..k {
+                    loc[a * k + b] += n.val[a] * n.val[b];
+                }
+            }
+        }
+        let nodes = &lattice.elements[e].nodes;
+        for a in 0..k {
+            trace += 3.0 * loc[a * k + a];
+            for b in 0..k {
+                btb.push((nodes[a], nodes[b], loc[a * k + b]));
+            }
+        }
+    }
+    (btb, trace)
+}
+
+/// The blend shapes muscles are generated from, and where their lattice fit is held.
+#[derive(Debug, Clone, Copy)]
+pub struct BlendShapes<'a> {
+    /// Each shape's vertex displacements (m) on the lattice's embedded surface.
+    pub targets: &'a [MorphTarget],
+    /// The points each shape's lattice fit is held at ([`ShapeSamples::subdivided`]).
+    pub samples: &'a ShapeSamples,
+}
+
 /// Generate one actuation muscle per blend shape (see the module notes of [`super`]), fitted
 /// in the interior with the pipeline's `coupling` (its tracking) when given.
 pub fn generate_muscles(
     lattice: &Lattice,
     interior: &Interior,
-    targets: &[MorphTarget],
+    shapes: BlendShapes,
     coupling: Option<&Coupling>,
     settings: &GenerateSettings,
 ) -> Result<Generated, MuscleError> {
-    generate_muscles_with_skin(lattice, interior, targets, coupling, settings, None, None)
+    generate_muscles_with_skin(lattice, interior, shapes, coupling, settings, None, None)
 }
 
 /// The skin's force on the lattice nodes (flat, N) when the interior stands at node
@@ -275,14 +291,22 @@ pub type SkinForce<'s> = &'s mut dyn FnMut(&[f64]) -> Result<Vec<f64>, MuscleErr
 pub fn generate_muscles_with_skin(
     lattice: &Lattice,
     interior: &Interior,
-    targets: &[MorphTarget],
+    shapes: BlendShapes,
     coupling: Option<&Coupling>,
     settings: &GenerateSettings,
     skin_force: Option<SkinForce>,
     bone: Option<&JawBone>,
 ) -> Result<Generated, MuscleError> {
     settings.validate()?;
-    let u = fit_node_displacements(lattice, interior, targets, settings.regulariser, bone)?;
+    let BlendShapes { targets, samples } = shapes;
+    let u = fit_node_displacements(
+        lattice,
+        interior,
+        targets,
+        samples,
+        settings.regulariser,
+        bone,
+    )?;
     // Only shapes strained enough to make a muscle get a (costly) skin solve.
     let strained = |ut: &[f64]| {
         let strain = ut.iter().fold(0.0f64, |m, v| m.max(v.abs())) / lattice.cell_size;

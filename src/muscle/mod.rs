@@ -14,6 +14,8 @@
 //! * [`blend`]: how actuation muscles combine at partial and mixed activations.
 //! * [`rigfile`]: muscles from a TOML rig file.
 //! * [`generate`]: muscles from the blend-shape basis when there is no file.
+//! * [`samples`]: where each shape's lattice fit is held: the face's vertices and its
+//!   subdivided surface between them.
 //! * [`qp`]: the per-frame convex QP (clarabel) with exact active-set polishing.
 //! * [`fit`]: the per-frame fit with Gauss–Newton re-linearisations.
 //! * [`jaw`]: the jaw's hinge, fitted from the shape that opens it, and the bone nodes that
@@ -25,12 +27,16 @@
 //!
 //! 1. Fit the lattice to each blend shape: node displacements u minimise
 //!    ‖B u − Δ‖² + α uᵀ K u over the free (non-bone) nodes (the jaw's bone nodes turned by
-//!    the jaw shape's full angle for that shape, the other bone at rest), with B the embedding of the
-//!    surface in the lattice, Δ the shape's vertex displacements and K the interior's rest
-//!    stiffness; α = β · tr(BᵀB)/tr(K) (β = [`generate::GenerateSettings::regulariser`],
-//!    default 10⁻³) makes the elastic term a light smoothness regulariser. One sparse
-//!    Cholesky factorisation serves all shapes (one solve per shape). ‖B u − Δ‖ is the
-//!    lattice's own projection residual: no muscle on this lattice can do better.
+//!    the jaw shape's full angle for that shape, the other bone at rest), with B the embedding
+//!    of the [`samples`] in the lattice (the rig's vertices and its once-subdivided surface
+//!    between them), Δ the shape's displacements there (the subdivision's rows of the
+//!    vertices' displacements) and K the interior's rest stiffness; α = β · tr(BᵀB)/tr(K)
+//!    (β = [`generate::GenerateSettings::regulariser`], default 10⁻³) makes the elastic term a
+//!    light smoothness regulariser. Held at the vertices alone, a coarse lattice swings
+//!    between them, and the refined skin there creases where the shape is still (the capture
+//!    head's brow under its blink). One sparse Cholesky factorisation serves all shapes (one
+//!    solve per shape). ‖B u − Δ‖ over the vertices is the lattice's own projection residual:
+//!    no muscle on this lattice can do better there.
 //! 2. Fit the actuation that makes u the equilibrium of the interior the pipeline runs with
 //!    its tracking ([`actuation`]) and, with `muscles.skin_hold = "shapes"`, the skin's force at the
 //!    shape: the rest change is u plus K_int⁻¹ (K_t u − Bᵀ k Δ − f_skin), what the tracking's
@@ -55,6 +61,7 @@ pub mod jaw;
 pub mod model;
 pub mod qp;
 pub mod rigfile;
+pub mod samples;
 
 pub use fit::{FitSettings, Fitter, FrameFit, FrameStatus};
 pub use forward::{Coupling, Forward, ForwardReport, ForwardStatus};

@@ -169,7 +169,7 @@ pub fn set_up(
             &path,
             scene,
             &lattice,
-            &welded.loaded_of,
+            &welded,
             &source,
             muscles::Beside {
                 coupling: muscle_coupling(&tracking),

@@ -9,17 +9,20 @@ use crate::io::mesh::MeshInstance;
 use crate::io::model::MorphTarget;
 use crate::lattice::Lattice;
 use crate::mesh::TriMesh;
+use crate::muscle::generate::BlendShapes;
 use crate::muscle::jaw::{Hinge, JawBone};
+use crate::muscle::samples::{ShapeSamples, SAMPLE_LEVELS};
 use crate::muscle::{Coupling, FitSettings, Fitter, GenerateSettings, Generated, MuscleError};
 use crate::pipeline::plan::SkinHold;
 use crate::pipeline::record::StagePlan;
 use crate::scene::Scene;
 use crate::solver::SolveStatus;
-use anyhow::bail;
+use anyhow::{bail, Context};
 use std::path::Path;
 use std::time::Instant;
 
 use super::interior::MUSCLE_TRACKING;
+use super::weld::Welded;
 
 /// Muscles of a run and their current activations.
 pub struct MuscleDrive {
@@ -74,8 +77,9 @@ impl MuscleDrive {
 /// displacement) beyond which generated muscles do not drive a rig by default: they do not
 /// reproduce it. Measured (2026-11-26): on `rigs/face.glb` the muscles make its shapes within
 /// 7.3 % on average and drive its clip in 113 s (tracking 85 s), missing the shape by 24 % of
-/// the motion against tracking's 30 %; on `rigs/head.glb`, whose 36 mm lattice cannot resolve
-/// its 52 capture shapes (projection residual 37 % on average), within 37.4 %, and its whole
+/// the motion against tracking's 30 %; on `rigs/head.glb` on its 36 mm default lattice (now
+/// only when a scene sets it: the ladder takes 17.2 mm), which cannot resolve its 52 capture
+/// shapes (projection residual 37 % on average), within 37.4 %, and its whole
 /// clip took 969 s under them (2.7 s of skin per frame, 33 frames redone by tracking, the
 /// shape missed by 42 %) against 422 s tracked (1.1 s of skin per frame, missed by 48 %).
 pub const MUSCLE_SHAPE_LIMIT: f64 = 0.2;
@@ -132,6 +136,21 @@ pub struct MuscleMade {
     pub corrections: usize,
 }
 
+impl MuscleMade {
+    /// The records of each of the `generated` muscles.
+    pub fn of(generated: &Generated) -> Vec<MuscleMade> {
+        (generated.muscles.iter().zip(&generated.fits))
+            .map(|(m, f)| MuscleMade {
+                name: m.name.clone(),
+                shape_error: f.shape_error,
+                projection: f.projection,
+                elements: f.elements.len(),
+                corrections: f.corrections,
+            })
+            .collect()
+    }
+}
+
 /// What the muscles' fit sees in the interior besides the flesh.
 pub struct Beside<'s> {
     /// The tracking's stiffness and pull.
@@ -147,7 +166,7 @@ pub struct Beside<'s> {
 }
 
 /// The muscles from `source` (`auto`: generated from the blend shapes of `face` (from the rig
-/// at `path`) on the welded skin, whose vertex `i` is loaded vertex `welded_loaded[i]`;
+/// at `path`) on the `welded` skin, their lattice fit held on its subdivided surface;
 /// otherwise a muscle TOML file), with their fitter and the `muscles` and `fit` records.
 /// Actuations and the fitter's J see the interior the pipeline runs: its elasticity with the
 /// tracking's coupling and, with `muscles.skin_hold = "shapes"`, the skin's force at each shape
@@ -158,7 +177,7 @@ pub fn build_muscles(
     path: &str,
     scene: &Scene,
     lattice: &Lattice,
-    welded_loaded: &[usize],
+    welded: &Welded,
     source: &str,
     beside: Beside,
 ) -> anyhow::Result<(MuscleDrive, [StagePlan; 2])> {
@@ -177,8 +196,14 @@ pub fn build_muscles(
     let mut made_by = Vec::new();
     let (mut bone, mut jaw_hinge) = (None, None);
     let (muscles, origin) = if source == "auto" {
-        let targets = welded_targets(face, welded_loaded);
-        let rest: Vec<_> = welded_loaded.iter().map(|&i| face.positions[i]).collect();
+        let targets = welded_targets(face, &welded.loaded_of);
+        let samples = ShapeSamples::subdivided(lattice, &welded.mesh, SAMPLE_LEVELS)
+            .with_context(|| format!("{path}: the muscles' shape samples"))?;
+        let rest: Vec<_> = welded
+            .loaded_of
+            .iter()
+            .map(|&i| face.positions[i])
+            .collect();
         let jaw = JawBone::find(lattice, &rest, &targets);
         let interior = Interior::new(lattice, &material)?;
         let way = match scene.muscles.skin_at_shapes.as_deref() {
@@ -190,7 +215,10 @@ pub fn build_muscles(
         let g = crate::muscle::generate::generate_muscles_with_skin(
             lattice,
             &interior,
-            &targets,
+            BlendShapes {
+                targets: &targets,
+                samples: &samples,
+            },
             Some(&coupling),
             &GenerateSettings::default(),
             force
@@ -203,23 +231,16 @@ pub fn build_muscles(
         if let Some(a) = &at_shapes {
             made.push_str(&a.summary(&g.without_skin));
         }
-        made_by = g
-            .muscles
-            .iter()
-            .zip(&g.fits)
-            .map(|(m, f)| MuscleMade {
-                name: m.name.clone(),
-                shape_error: f.shape_error,
-                projection: f.projection,
-                elements: f.elements.len(),
-                corrections: f.corrections,
-            })
-            .collect();
+        made_by = MuscleMade::of(&g);
         calibration = Some(g.calibration());
         (g.muscles, "generated from the blend shapes".to_string())
     } else {
         let welded_mesh = TriMesh::new(
-            welded_loaded.iter().map(|&i| face.positions[i]).collect(),
+            welded
+                .loaded_of
+                .iter()
+                .map(|&i| face.positions[i])
+                .collect(),
             Vec::new(),
         );
         (
@@ -526,6 +547,7 @@ mod tests {
             &model.lattice,
             &interior,
             &targets,
+            &ShapeSamples::vertices(&model.lattice),
             regulariser,
             None,
         )

@@ -103,7 +103,7 @@ pub fn refine_skin(
         )),
         None => None,
     };
-    let points = refine::embed_refined(input.lattice, &input.welded.mesh, &refined)?;
+    let points = refine::embed_refined(input.lattice, &input.welded.mesh, &refined.subdivision)?;
     let mut rows: Vec<Vec<(usize, f64)>> = vec![Vec::new(); points.len()];
     for (v, n, w) in refine::embedding_triplets(input.lattice, &points) {
         rows[v].push((n, w));

@@ -576,9 +576,10 @@ mod tests {
     /// muscles that leave the skin's pull on it (`none`), whose actuations only balance the
     /// flesh and tracking. Held at each shape (`shapes`), one coupling pass per frame swings
     /// about the answer (the skin pre-tensioned, seen through its rest tangent); three
-    /// relaxed passes settle it in the first frame, two in the second. Held at the state
-    /// reached (`reached`, the default), one pass makes the shape as closely (measured 4.0e-5
-    /// against 3.6e-5 m of 6.0e-4 m), the same in every frame.
+    /// relaxed passes settle it within 3 % of the motion in the first frame, two in the
+    /// second. Held at the state reached (`reached`, the default), one pass makes the shape
+    /// more closely (measured 1.6e-5 against 2.3e-5 m of 6.0e-4 m; the lattice fit held on
+    /// the subdivided surface), the same in every frame.
     #[test]
     fn muscles_that_hold_the_skin_make_the_shape_against_it() {
         let (without, motion) = held_lift("none", 3);
@@ -589,17 +590,10 @@ mod tests {
         assert!(without[7] > 0.2 * motion, "the skin resists");
         assert!(with[7] < 0.3 * without[7], "{} vs {}", with[7], without[7]);
         // Settled from the first frame on.
-        assert!(
-            with.iter().all(|m| (m - with[7]).abs() < 0.25 * with[7]),
-            "{with:?}"
-        );
+        let settled = |m: &f64| (m - with[7]).abs() < 0.03 * motion;
+        assert!(with.iter().all(settled), "{with:?}");
         // Two passes (the default with the skin at the shapes) settle from the second frame on.
-        assert!(
-            two[1..]
-                .iter()
-                .all(|m| (m - with[7]).abs() < 0.25 * with[7]),
-            "{two:?}"
-        );
+        assert!(two[1..].iter().all(settled) && !settled(&two[0]), "{two:?}");
         // One pass swings between frames by more than the settled miss.
         assert!((swinging[6] - swinging[7]).abs() > with[7], "{swinging:?}");
         // Held where it is, in one pass, from the first frame on.
