@@ -554,7 +554,6 @@ fn face_rig_gets_sensible_muscles_without_a_file() {
     zero.positions.iter_mut().for_each(|d| *d = V3::zeros());
     targets.push(zero);
     targets.push(targets[5].clone());
-    let samples = ShapeSamples::subdivided(&lat, &rig.mesh, SAMPLE_LEVELS).unwrap();
     let shapes = BlendShapes {
         targets: &targets,
         samples: &samples,

@@ -43,6 +43,15 @@ fn subdivided_samples_lie_on_the_subdivided_surface() {
         worst < 1e-9 * lattice.cell_size,
         "embedded {worst:.2e} m off"
     );
+    // Samples of another face's vertices are refused, naming what is wrong.
+    let interior = Interior::new(&lattice, &Material::default()).unwrap();
+    let mut foreign = ShapeSamples::vertices(&lattice);
+    foreign.of[0] = vec![(nv, 1.0)];
+    let beta = GenerateSettings::default().regulariser;
+    let e = fit_node_displacements(&lattice, &interior, &rig.targets, &foreign, beta, None)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("samples are not of this face"), "{e}");
     // A displacement is carried by the same rows.
     let delta: Vec<V3> = rig
         .mesh

@@ -145,6 +145,11 @@ pub fn fit_node_displacements(
             t.positions.len()
         )));
     }
+    if samples.of.iter().flatten().any(|&(v, _)| v >= nv) {
+        return Err(MuscleError::Input(format!(
+            "the shapes' samples are not of this face's {nv} vertices"
+        )));
+    }
     let mut free = vec![usize::MAX; nn];
     let mut nfree = 0;
     for (n, &p) in lattice.pinned.iter().enumerate() {
