@@ -8,7 +8,6 @@ use crate::fem::Interior;
 use crate::io::mesh::MeshInstance;
 use crate::io::model::MorphTarget;
 use crate::lattice::Lattice;
-use crate::mesh::TriMesh;
 use crate::muscle::generate::BlendShapes;
 use crate::muscle::jaw::{Hinge, JawBone};
 use crate::muscle::samples::{ShapeSamples, SAMPLE_LEVELS};
@@ -199,12 +198,7 @@ pub fn build_muscles(
         let targets = welded_targets(face, &welded.loaded_of);
         let samples = ShapeSamples::subdivided(lattice, &welded.mesh, SAMPLE_LEVELS)
             .with_context(|| format!("{path}: the muscles' shape samples"))?;
-        let rest: Vec<_> = welded
-            .loaded_of
-            .iter()
-            .map(|&i| face.positions[i])
-            .collect();
-        let jaw = JawBone::find(lattice, &rest, &targets);
+        let jaw = JawBone::find(lattice, &welded.mesh.positions, &targets);
         let interior = Interior::new(lattice, &material)?;
         let way = match scene.muscles.skin_at_shapes.as_deref() {
             Some("solved") => SkinWay::Solved,
@@ -235,16 +229,8 @@ pub fn build_muscles(
         calibration = Some(g.calibration());
         (g.muscles, "generated from the blend shapes".to_string())
     } else {
-        let welded_mesh = TriMesh::new(
-            welded
-                .loaded_of
-                .iter()
-                .map(|&i| face.positions[i])
-                .collect(),
-            Vec::new(),
-        );
         (
-            crate::muscle::rigfile::load(Path::new(source), lattice, &welded_mesh)?,
+            crate::muscle::rigfile::load(Path::new(source), lattice, &welded.mesh)?,
             format!("from {source}"),
         )
     };
