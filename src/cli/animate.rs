@@ -47,6 +47,11 @@ pub struct AnimateArgs {
     /// The face mesh by name or index (default: the mesh with the most morph targets).
     #[arg(long)]
     pub mesh: Option<String>,
+    /// The face mesh's skin primitives, by index or material name, comma-separated (`0,1`
+    /// or `M_Face,M_BackHead`; over the scene's `[rig] skin_primitives`); the others ride
+    /// along unchanged. Default: decided from the materials and the geometry.
+    #[arg(long, value_parser = crate::io::parts::parse_picks)]
+    pub skin_primitives: Option<Vec<crate::io::parts::PrimitivePick>>,
     /// Metres per unit of the rig file, or `auto` (default; over the scene's `[rig] scale`):
     /// a face larger or smaller than a human face by a power of ten is simulated at human
     /// size and written back in the file's units.
@@ -75,8 +80,12 @@ fn preflight(paths: &[&Path], force: bool) -> anyhow::Result<()> {
 }
 
 /// The settings that decide a run's result, hashed to tie chunks to one run.
-fn settings_hash(scene: &Scene, fps: f64, mesh: &Option<String>, scale: f64) -> String {
-    let v = serde_json::json!({ "scene": scene, "fps": fps, "mesh": mesh, "scale": scale });
+fn settings_hash(scene: &Scene, fps: f64, a: &AnimateArgs, scale: f64) -> String {
+    let mesh = &a.mesh;
+    let mut v = serde_json::json!({ "scene": scene, "fps": fps, "mesh": mesh, "scale": scale });
+    if let Some(skin) = &a.skin_primitives {
+        v["skin_primitives"] = serde_json::json!(skin);
+    }
     chunk::fnv64(v.to_string().as_bytes())
 }
 
@@ -121,9 +130,16 @@ pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
         &LoadOptions {
             mesh: a.mesh.clone(),
             animation: None,
+            skin_primitives: a
+                .skin_primitives
+                .clone()
+                .or_else(|| scene.rig.skin_primitives.clone()),
         },
     )?;
     out.note(&rig.face_reason);
+    if rig.parts.parts.len() > 1 {
+        out.note(rig.parts.summary());
+    }
     out.note(crate::io::units::apply(&mut rig, a.scale, scene.rig.scale));
     let count = crate::pipeline::plan::clip_weights(&rig, a.fps).0.len();
     let frames = frame_range(a, count)?;
@@ -231,7 +247,7 @@ fn write_chunk_file(
 ) -> anyhow::Result<()> {
     let header = ChunkHeader {
         rig_hash: chunk::fnv64(bytes),
-        settings_hash: settings_hash(scene, a.fps, &a.mesh, rig.scale.metres_per_unit),
+        settings_hash: settings_hash(scene, a.fps, a, rig.scale.metres_per_unit),
         fps: a.fps,
         range,
         clip_frames: count,
@@ -353,6 +369,7 @@ pub fn batch(a: BatchArgs, out: &Output) -> anyhow::Result<()> {
             report: Some(report.clone()),
             preview: None,
             mesh: None,
+            skin_primitives: None,
             scale: a.scale,
             // An output without its report is an unfinished earlier attempt: redo it.
             force: true,
@@ -403,6 +420,9 @@ pub struct MergeArgs {
     /// The face mesh, as given to `animate --mesh`.
     #[arg(long)]
     pub mesh: Option<String>,
+    /// The face's skin primitives, as given to `animate --skin-primitives`.
+    #[arg(long, value_parser = crate::io::parts::parse_picks)]
+    pub skin_primitives: Option<Vec<crate::io::parts::PrimitivePick>>,
     /// Replace an existing output.
     #[arg(long)]
     pub force: bool,
@@ -446,6 +466,7 @@ pub fn merge(a: MergeArgs, out: &Output) -> anyhow::Result<()> {
         &LoadOptions {
             mesh: a.mesh.clone(),
             animation: None,
+            skin_primitives: a.skin_primitives.clone(),
         },
     )?;
     // The frames are in the metres they were simulated in: write them back in file units.

@@ -95,6 +95,7 @@ pub fn run_demo(a: DemoArgs, out: &Output) -> anyhow::Result<crate::pipeline::re
         report: Some(a.out.join("report.json")),
         preview: Some(a.out.join("preview")),
         mesh: None,
+        skin_primitives: None,
         scale: a.scale,
         // The demo's folder is its own: an earlier demo's files are replaced (and said so).
         force: true,

@@ -199,6 +199,7 @@ fn tradeoff_rig(a: &TradeoffArgs) -> anyhow::Result<(Rig, String)> {
             &LoadOptions {
                 mesh: a.mesh.clone(),
                 animation: None,
+                skin_primitives: None,
             },
         )?,
         None => tradeoff::sheet_rig(&SheetRig::default())?,

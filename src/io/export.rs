@@ -258,14 +258,11 @@ fn carried_attributes(
     let f = rig.face();
     let c = &rig.container;
     let reader = AccessorReader::new(&rig.path, c);
-    let prims: Vec<&Value> = c.json["meshes"][f.mesh]["primitives"]
-        .as_array()
-        .map(|a| {
-            a.iter()
-                .filter(|p| (4..=6).contains(&p["mode"].as_u64().unwrap_or(4)))
-                .collect()
-        })
-        .unwrap_or_default();
+    let prims: Vec<&Value> = f
+        .primitives
+        .iter()
+        .map(|s| &c.json["meshes"][f.mesh]["primitives"][s.json])
+        .collect();
     let skinned = matches!(f.to_world, VertexTransform::PerVertex(_));
     // Attributes present in any primitive are carried (zeros where a primitive lacks one),
     // because the kept material may sample any texture coordinate set.
@@ -339,7 +336,7 @@ pub(crate) fn carried(name: &str, skinned: bool) -> bool {
         || (skinned && (name.starts_with("JOINTS_") || name.starts_with("WEIGHTS_")))
 }
 
-/// Attribute `name` of the face's triangle primitives `prims`, concatenated in the loaded
+/// Attribute `name` of the face's skin primitives `prims` (its spans' JSON), concatenated in the loaded
 /// face's vertex order (zeros for a primitive without it), and its component count.
 fn gather(
     rig: &Rig,
@@ -356,7 +353,7 @@ fn gather(
     }
     let mut all = Vec::new();
     for (pi, p) in prims.iter().enumerate() {
-        let count = f.primitive_ranges.get(pi).map_or(0, |r| r.1);
+        let count = f.primitives.get(pi).map_or(0, |s| s.count);
         match p["attributes"][name].as_u64() {
             Some(a) => {
                 let d = reader.read(a as usize)?;

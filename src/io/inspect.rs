@@ -84,7 +84,7 @@ pub fn summarize(path: &Path) -> GltfResult<Summary> {
                 node: m.node,
                 mesh: m.mesh,
                 name: m.name.clone(),
-                primitives: m.primitive_ranges.len(),
+                primitives: m.primitives.len(),
                 vertices: m.positions.len(),
                 triangles: m.triangles.len(),
                 targets: m.targets.iter().map(|t| t.name.clone()).collect(),

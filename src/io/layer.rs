@@ -96,7 +96,7 @@ pub struct Written {
     /// For each vertex of the written face (primitives in order, vertices concatenated), its
     /// refined vertex.
     pub refined_of_vertex: Vec<usize>,
-    /// What the user should know (primitives dropped, weights resampled).
+    /// What the user should know (primitives riding along, weights resampled).
     pub notes: Vec<String>,
 }
 
@@ -196,13 +196,26 @@ pub fn layer_glb(
     for p in &split.primitives {
         prims.push(write_primitive(&mut cd, rig, (&split, p), &base, &locals)?);
     }
+    let k = layer.wrinkles.len();
+    for &j in &split.unrefined {
+        prims.push(riding_primitive(&mut cd, &mesh_json["primitives"][j], k));
+    }
+    // The mesh's own order: refined skin and riding primitives as the artist laid them out.
+    let order: Vec<usize> = split
+        .primitives
+        .iter()
+        .map(|p| p.json)
+        .chain(split.unrefined.iter().copied())
+        .collect();
+    let mut by_json: Vec<(usize, Value)> = order.into_iter().zip(prims).collect();
+    by_json.sort_by_key(|(j, _)| *j);
+    let prims: Vec<Value> = by_json.into_iter().map(|(_, p)| p).collect();
     let names: Vec<&str> = layer
         .shapes
         .iter()
         .chain(&layer.wrinkles)
         .map(|t| t.name.as_str())
         .collect();
-    let k = layer.wrinkles.len();
     let mut mesh = mesh_json.clone();
     mesh["primitives"] = json!(prims);
     let mut weights: Vec<f64> = mesh_json["weights"]
@@ -233,9 +246,23 @@ pub fn layer_glb(
         keys
     });
     let mut notes: Vec<String> = split
-        .dropped
+        .unrefined
         .iter()
-        .map(|p| format!("primitive {p} of the face is not written (not triangles, or no triangle left after welding)"))
+        .map(|&j| {
+            let why = rig
+                .parts
+                .parts
+                .iter()
+                .find(|p| p.primitive == j)
+                .map_or("no skin triangle left after welding", |p| {
+                    if p.skin {
+                        "no skin triangle left after welding"
+                    } else {
+                        p.reason.describe()
+                    }
+                });
+            format!("primitive {j} of the face rides along unchanged ({why})")
+        })
         .collect();
     if k > 0 {
         notes.extend(face_weights::install(&mut cd, rig, keys.as_ref(), k)?);
@@ -408,6 +435,27 @@ fn write_primitive(
     Ok(prim)
 }
 
+/// A primitive of the face that is not refined skin, as the artist wrote it (its attributes,
+/// indices, material and morph targets unchanged), with `wrinkles` zero targets after the
+/// rig's own (glTF gives every primitive of a mesh the same number of targets): each an
+/// accessor of zeros with no buffer view.
+fn riding_primitive(cd: &mut CompactDocument, json: &Value, wrinkles: usize) -> Value {
+    let mut prim = json.clone();
+    if wrinkles == 0 {
+        return prim;
+    }
+    let count = json["attributes"]["POSITION"]
+        .as_u64()
+        .and_then(|a| cd.doc.json["accessors"][a as usize]["count"].as_u64())
+        .unwrap_or(0);
+    let zeros = cd.push_accessor(json!({ "componentType": 5126, "count": count,
+        "type": "VEC3", "min": [0.0, 0.0, 0.0], "max": [0.0, 0.0, 0.0] }));
+    let mut targets = prim["targets"].as_array().cloned().unwrap_or_default();
+    targets.extend((0..wrinkles).map(|_| json!({ "POSITION": zeros })));
+    prim["targets"] = json!(targets);
+    prim
+}
+
 /// Primitive `p`'s own texture coordinates, colours and (skinned) influences at its export
 /// vertices (`origin`, in the loaded face's numbering).
 fn carried_attributes(
@@ -419,10 +467,11 @@ fn carried_attributes(
     let face = rig.face();
     let skinned = matches!(face.to_world, VertexTransform::PerVertex(_));
     let pj = &rig.container.json["meshes"][face.mesh]["primitives"][p.json];
-    let range = split::triangle_primitives(&rig.container.json["meshes"][face.mesh])
+    let range = face
+        .primitives
         .iter()
-        .position(|&j| j == p.json)
-        .map(|r| face.primitive_ranges[r])
+        .find(|s| s.json == p.json)
+        .map(|s| (s.first, s.count))
         .context("primitive not loaded")?;
     let shifted: Vec<VertexOrigin> = origin
         .iter()

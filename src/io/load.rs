@@ -6,6 +6,7 @@ use super::animation::{self, AnimationInfo, WeightTrack};
 use super::container::{self, Container};
 use super::error::{GltfError, GltfResult};
 use super::mesh::{self, MeshInstance};
+use super::parts::{self, FaceParts, PrimitivePick};
 use super::scene;
 use nalgebra::Vector3;
 use std::path::{Path, PathBuf};
@@ -17,6 +18,9 @@ pub struct LoadOptions {
     pub mesh: Option<String>,
     /// Animation by name or index; default: the first that animates the face's weights.
     pub animation: Option<String>,
+    /// The face mesh's skin primitives by index or material name; default: decided from
+    /// the materials and the geometry ([`super::parts`]).
+    pub skin_primitives: Option<Vec<PrimitivePick>>,
 }
 
 /// A loaded rig: every mesh instance and the chosen face with its weight animation.
@@ -27,8 +31,13 @@ pub struct Rig {
     pub container: Container,
     /// Every node that instances a mesh, in world space.
     pub instances: Vec<MeshInstance>,
-    /// Index into `instances` of the face.
+    /// Index into `instances` of the face mesh (all its primitives).
     pub face: usize,
+    /// The face's skin: the face mesh restricted to its skin primitives (what is welded,
+    /// refined and simulated; [`Rig::face`]).
+    pub skin: MeshInstance,
+    /// Which primitives of the face mesh are skin and which ride along, and why.
+    pub parts: FaceParts,
     /// Why that mesh was taken (said to the user).
     pub face_reason: String,
     /// Every animation in the file.
@@ -47,8 +56,14 @@ pub struct Rig {
 }
 
 impl Rig {
-    /// The face mesh instance.
+    /// The face's skin: the face mesh instance restricted to its skin primitives (the
+    /// primitives that ride along are left out; [`Rig::parts`] says which).
     pub fn face(&self) -> &MeshInstance {
+        &self.skin
+    }
+
+    /// The face mesh instance with every primitive, skin and riding along.
+    pub fn face_mesh(&self) -> &MeshInstance {
         &self.instances[self.face]
     }
 
@@ -259,11 +274,22 @@ fn load_container(path: &Path, c: Container, opts: &LoadOptions) -> GltfResult<R
     };
     let extensions_used = c.root.extensions_used.clone();
     drop(reader);
+    let whole = &instances[face];
+    let parts = parts::classify(
+        whole,
+        &c.json["meshes"][whole.mesh],
+        &c.json["materials"],
+        opts.skin_primitives.as_deref(),
+    )
+    .map_err(|e| GltfError::new(path, e))?;
+    let skin = whole.restricted(&parts.skin_spans(whole)).0;
     Ok(Rig {
         path: path.to_path_buf(),
         container: c,
         instances,
         face,
+        skin,
+        parts,
         face_reason,
         animations,
         animation,

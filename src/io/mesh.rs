@@ -26,6 +26,24 @@ impl VertexTransform {
     }
 }
 
+/// Where one triangle primitive of a mesh lies in its instance's merged vertex arrays.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PrimitiveSpan {
+    /// The primitive's index in the mesh's JSON `primitives`.
+    pub json: usize,
+    /// Its first vertex in the merged arrays.
+    pub first: usize,
+    /// Its vertex count.
+    pub count: usize,
+}
+
+impl PrimitiveSpan {
+    /// The merged vertex indices of the primitive.
+    pub fn vertices(&self) -> std::ops::Range<usize> {
+        self.first..self.first + self.count
+    }
+}
+
 /// One mesh as placed by one node, all primitives merged (vertices concatenated, not welded).
 #[derive(Debug, Clone)]
 pub struct MeshInstance {
@@ -47,10 +65,84 @@ pub struct MeshInstance {
     pub default_weights: Vec<f64>,
     /// Local-to-world transform of each vertex (for writing results back in local space).
     pub to_world: VertexTransform,
-    /// First vertex of each primitive in the merged arrays, and its vertex count.
-    pub primitive_ranges: Vec<(usize, usize)>,
+    /// The merged triangle primitives, in the mesh's order: each one's JSON index, first
+    /// vertex and vertex count in the merged arrays.
+    pub primitives: Vec<PrimitiveSpan>,
     /// Primitives skipped because they are not triangles (mode 0–3).
     pub skipped_primitives: usize,
+}
+
+impl MeshInstance {
+    /// The instance restricted to the primitives whose span `keep` marks (one flag per
+    /// [`PrimitiveSpan`], in order): their vertices renumbered in order, their triangles,
+    /// their morph deltas and transforms. Also returns, for each kept vertex, its index in
+    /// `self`.
+    pub fn restricted(&self, keep: &[bool]) -> (MeshInstance, Vec<usize>) {
+        let mut whole_of = Vec::new();
+        let mut spans = Vec::new();
+        let mut new_of = vec![usize::MAX; self.positions.len()];
+        for (span, _) in self.primitives.iter().zip(keep).filter(|(_, &k)| k) {
+            spans.push(PrimitiveSpan {
+                json: span.json,
+                first: whole_of.len(),
+                count: span.count,
+            });
+            for v in span.vertices() {
+                new_of[v] = whole_of.len();
+                whole_of.push(v);
+            }
+        }
+        let pick = |v: &[Vector3<f64>]| whole_of.iter().map(|&i| v[i]).collect::<Vec<_>>();
+        let triangles = self
+            .triangles
+            .iter()
+            .map(|t| t.map(|v| new_of[v]))
+            .filter(|t| t.iter().all(|&v| v != usize::MAX))
+            .collect();
+        let targets = self
+            .targets
+            .iter()
+            .map(|t| MorphTarget {
+                name: t.name.clone(),
+                positions: pick(&t.positions),
+                normals: t.normals.as_deref().map(pick),
+            })
+            .collect();
+        let to_world = match &self.to_world {
+            VertexTransform::Node(m) => VertexTransform::Node(*m),
+            VertexTransform::PerVertex(ms) => {
+                VertexTransform::PerVertex(whole_of.iter().map(|&i| ms[i]).collect())
+            }
+        };
+        let restricted = MeshInstance {
+            node: self.node,
+            mesh: self.mesh,
+            name: self.name.clone(),
+            positions: pick(&self.positions),
+            normals: self.normals.as_deref().map(pick),
+            triangles,
+            targets,
+            default_weights: self.default_weights.clone(),
+            to_world,
+            primitives: spans,
+            skipped_primitives: self.skipped_primitives,
+        };
+        (restricted, whole_of)
+    }
+
+    /// Scale the instance by `f` (metres per file unit): every position and morph delta, and
+    /// the local-to-world transforms with them.
+    pub fn scale(&mut self, f: f64) {
+        let s = Matrix4::new_scaling(f);
+        self.positions.iter_mut().for_each(|p| *p *= f);
+        for t in &mut self.targets {
+            t.positions.iter_mut().for_each(|d| *d *= f);
+        }
+        match &mut self.to_world {
+            VertexTransform::Node(w) => *w = s * *w,
+            VertexTransform::PerVertex(ws) => ws.iter_mut().for_each(|w| *w = s * *w),
+        }
+    }
 }
 
 fn check_finite(path: &Path, what: &str, v: &[f64]) -> GltfResult<()> {
@@ -228,7 +320,7 @@ pub fn extract(
         targets: merged.targets,
         default_weights,
         to_world,
-        primitive_ranges: merged.ranges,
+        primitives: merged.spans,
         skipped_primitives: merged.skipped,
     })
 }
@@ -426,8 +518,8 @@ struct Merged {
     targets: Vec<MorphTarget>,
     /// Per-vertex local-to-world matrices (filled for skinned meshes only).
     per_vertex: Vec<Matrix4<f64>>,
-    /// First vertex and vertex count of each merged primitive.
-    ranges: Vec<(usize, usize)>,
+    /// Where each merged primitive lies.
+    spans: Vec<PrimitiveSpan>,
     /// Primitives skipped because they are not triangles.
     skipped: usize,
 }
@@ -448,7 +540,7 @@ impl Merged {
                 })
                 .collect(),
             per_vertex: Vec::new(),
-            ranges: Vec::new(),
+            spans: Vec::new(),
             skipped: 0,
         }
     }
@@ -499,7 +591,11 @@ impl Merged {
         if src.skin.is_some() {
             self.per_vertex.extend(xf);
         }
-        self.ranges.push((base, count));
+        self.spans.push(PrimitiveSpan {
+            json: pi,
+            first: base,
+            count,
+        });
         Ok(())
     }
 }
@@ -517,8 +613,8 @@ pub struct VertexAttribute {
     pub float: bool,
 }
 
-/// Read attribute `name` (e.g. `TEXCOORD_0` or a custom `_THICKNESS`) of every triangle
-/// primitive of `instance` from the file it was extracted from. Fails, naming the file, the
+/// Read attribute `name` (e.g. `TEXCOORD_0` or a custom `_THICKNESS`) of every primitive
+/// of `instance` (its [`PrimitiveSpan`]s) from the file it was extracted from. Fails, naming the file, the
 /// mesh and the primitive, when a primitive lacks it or has a different count or type.
 pub fn read_attribute(
     path: &Path,
@@ -529,20 +625,14 @@ pub fn read_attribute(
 ) -> GltfResult<VertexAttribute> {
     let mesh = instance.mesh;
     let what = format!("mesh {mesh} ('{}')", instance.name);
-    let prims = json["meshes"][mesh]["primitives"]
-        .as_array()
-        .map(|a| a.as_slice())
-        .unwrap_or(&[]);
     let mut out = VertexAttribute {
         components: 0,
         data: Vec::new(),
         float: true,
     };
-    for (pi, p) in prims.iter().enumerate() {
-        let mode = p["mode"].as_u64().unwrap_or(4);
-        if !(4..=6).contains(&mode) {
-            continue;
-        }
+    for span in &instance.primitives {
+        let pi = span.json;
+        let p = &json["meshes"][mesh]["primitives"][pi];
         let a = usize_of(&p["attributes"][name]).ok_or_else(|| {
             GltfError::new(
                 path,
@@ -550,9 +640,7 @@ pub fn read_attribute(
             )
         })?;
         let d = reader.read(a)?;
-        let count = usize_of(&p["attributes"]["POSITION"])
-            .and_then(|pa| usize_of(&json["accessors"][pa]["count"]))
-            .unwrap_or(d.count);
+        let count = span.count;
         if d.count != count {
             return Err(GltfError::new(
                 path,

@@ -114,22 +114,10 @@ pub struct SplitFace {
     pub origin: Vec<VertexOrigin>,
     /// The primitives, in the face mesh's order.
     pub primitives: Vec<SplitPrimitive>,
-    /// JSON indices of the face's primitives that are not written: not triangles, or with
-    /// no triangle left after welding.
-    pub dropped: Vec<usize>,
-}
-
-/// JSON indices of the triangle primitives of a mesh (mode 4, 5 or 6), in order: the loader's
-/// `primitive_ranges` follow them one to one.
-pub fn triangle_primitives(mesh_json: &serde_json::Value) -> Vec<usize> {
-    mesh_json["primitives"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .enumerate()
-        .filter(|(_, p)| (4..=6).contains(&p["mode"].as_u64().unwrap_or(4)))
-        .map(|(i, _)| i)
-        .collect()
+    /// JSON indices of the face mesh's primitives that are not refined skin: those that ride
+    /// along (not skin, or not triangles) and skin ones with no triangle left after welding.
+    /// They are written unchanged.
+    pub unrefined: Vec<usize>,
 }
 
 /// The loaded vertices a corner lies on (barycentric coordinate above [`ON_EDGE`]), sorted,
@@ -159,8 +147,8 @@ fn corner_origin(loaded: [usize; 3], bary: &[f64; 3]) -> VertexOrigin {
     }
 }
 
-/// Split the refined face of `map` for export: primitive by primitive (in the mesh's
-/// order, `mesh_json` the face mesh's JSON), one vertex per refined vertex and the loaded
+/// Split the refined face of `map` for export: primitive by primitive (the face's spans, in
+/// the mesh's order; `mesh_json` the face mesh's JSON), one vertex per refined vertex and the loaded
 /// vertices it lies on.
 pub fn split_face(
     face: &MeshInstance,
@@ -168,20 +156,12 @@ pub fn split_face(
     map: &FaceMap,
 ) -> anyhow::Result<SplitFace> {
     map.check(face)?;
-    let json_of_range = triangle_primitives(mesh_json);
-    if json_of_range.len() != face.primitive_ranges.len() {
-        bail!(
-            "the face has {} triangle primitives in its file but {} were loaded",
-            json_of_range.len(),
-            face.primitive_ranges.len()
-        );
-    }
     let range_of = |v: usize| {
-        face.primitive_ranges
-            .partition_point(|&(first, _)| first <= v)
+        face.primitives
+            .partition_point(|s| s.first <= v)
             .saturating_sub(1)
     };
-    let mut by_range: Vec<Vec<usize>> = vec![Vec::new(); face.primitive_ranges.len()];
+    let mut by_range: Vec<Vec<usize>> = vec![Vec::new(); face.primitives.len()];
     for (t, c) in map.corners.iter().enumerate() {
         by_range[range_of(face.triangles[c.triangle][0])].push(t);
     }
@@ -189,11 +169,10 @@ pub fn split_face(
         refined: Vec::new(),
         origin: Vec::new(),
         primitives: Vec::new(),
-        dropped: Vec::new(),
+        unrefined: Vec::new(),
     };
     for (r, tris) in by_range.iter().enumerate() {
         if tris.is_empty() {
-            out.dropped.push(json_of_range[r]);
             continue;
         }
         let first = out.refined.len();
@@ -214,23 +193,23 @@ pub fn split_face(
             triangles.push(tri);
         }
         out.primitives.push(SplitPrimitive {
-            json: json_of_range[r],
+            json: face.primitives[r].json,
             first,
             count: out.refined.len() - first,
             triangles,
         });
     }
-    let all: Vec<usize> = (0..mesh_json["primitives"].as_array().map_or(0, |a| a.len())).collect();
-    out.dropped
-        .extend(all.into_iter().filter(|p| !json_of_range.contains(p)));
-    out.dropped.sort_unstable();
+    let count = mesh_json["primitives"].as_array().map_or(0, |a| a.len());
+    out.unrefined = (0..count)
+        .filter(|j| !out.primitives.iter().any(|p| p.json == *j))
+        .collect();
     Ok(out)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::io::mesh::VertexTransform;
+    use crate::io::mesh::{PrimitiveSpan, VertexTransform};
     use nalgebra::{Matrix4, Vector3};
 
     /// Two loaded triangles sharing an edge, in two primitives with the edge's vertices
@@ -254,7 +233,18 @@ mod tests {
             targets: vec![],
             default_weights: vec![],
             to_world: VertexTransform::Node(Matrix4::identity()),
-            primitive_ranges: vec![(0, 3), (3, 3)],
+            primitives: vec![
+                PrimitiveSpan {
+                    json: 0,
+                    first: 0,
+                    count: 3,
+                },
+                PrimitiveSpan {
+                    json: 2,
+                    first: 3,
+                    count: 3,
+                },
+            ],
             skipped_primitives: 0,
         }
     }
@@ -302,7 +292,7 @@ mod tests {
         assert_eq!(s.primitives.len(), 2);
         assert_eq!(s.primitives[0].json, 0);
         assert_eq!(s.primitives[1].json, 2);
-        assert_eq!(s.dropped, vec![1]);
+        assert_eq!(s.unrefined, vec![1]);
         // Primitive 0: refined 0 1 2 4 5 6; primitive 1: refined 1 3 2 4 7 8 (own copies of
         // the seam vertices 1, 2 and 4).
         assert_eq!(s.primitives[0].count, 6);

@@ -5,8 +5,8 @@
 //! is simulated at human size, and the output is written back in the file's own units.
 
 use super::load::Rig;
-use super::mesh::{MeshInstance, VertexTransform};
-use nalgebra::{Matrix4, Vector3};
+use super::mesh::MeshInstance;
+use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 /// Height range of a human face (m), over what its blend shapes move: brow to chin is about
@@ -203,17 +203,8 @@ impl Rig {
     pub fn rescale(&mut self, scale: RigScale) {
         let f = scale.metres_per_unit;
         if f != 1.0 {
-            let s = Matrix4::new_scaling(f);
-            for m in &mut self.instances {
-                m.positions.iter_mut().for_each(|p| *p *= f);
-                for t in &mut m.targets {
-                    t.positions.iter_mut().for_each(|d| *d *= f);
-                }
-                match &mut m.to_world {
-                    VertexTransform::Node(w) => *w = s * *w,
-                    VertexTransform::PerVertex(ws) => ws.iter_mut().for_each(|w| *w = s * *w),
-                }
-            }
+            self.instances.iter_mut().for_each(|m| m.scale(f));
+            self.skin.scale(f);
         }
         self.scale = scale;
     }

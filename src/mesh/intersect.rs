@@ -35,72 +35,125 @@ pub fn first_self_intersection_beyond(
     x: &[f64],
     reference: Option<&[f64]>,
 ) -> Option<(usize, usize)> {
-    let p = |v: usize| V3::new(x[3 * v], x[3 * v + 1], x[3 * v + 2]);
-    let crosses_in_reference = |ts: [usize; 3], tt: [usize; 3]| {
-        reference.is_some_and(|r| {
-            let p = |v: usize| V3::new(r[3 * v], r[3 * v + 1], r[3 * v + 2]);
-            pierces(ts.map(p), tt.map(p)) || pierces(tt.map(p), ts.map(p))
-        })
+    let scan = CellScan::new(mesh, x)?;
+    scan.starts.par_windows(2).find_map_first(|w| {
+        scan.crossing_in(&scan.entries[w[0]..w[1]], reference)
+            .into_iter()
+            .next()
+    })
+}
+
+/// Every pair of triangles of `mesh` (topology) at positions `x` (flat, m) that pass through
+/// each other, leaving out pairs that also do at the `reference` positions when given; each
+/// pair once, smaller triangle first, sorted.
+pub fn self_intersections_beyond(
+    mesh: &TriMesh,
+    x: &[f64],
+    reference: Option<&[f64]>,
+) -> Vec<(usize, usize)> {
+    let Some(scan) = CellScan::new(mesh, x) else {
+        return Vec::new();
     };
-    let tris = &mesh.triangles;
-    if tris.is_empty() {
-        return None;
-    }
-    let edge_sum: f64 = tris
-        .iter()
-        .map(|t| (p(t[1]) - p(t[0])).norm() + (p(t[2]) - p(t[1])).norm())
-        .sum();
-    let cell = (0.5 * edge_sum / tris.len() as f64).max(1e-12);
-    let boxes: Vec<(V3, V3)> = tris
-        .par_iter()
-        .map(|tri| {
-            let pts = tri.map(p);
-            (
-                pts[0].inf(&pts[1]).inf(&pts[2]),
-                pts[0].sup(&pts[1]).sup(&pts[2]),
-            )
-        })
+    let mut pairs: Vec<(usize, usize)> = scan
+        .starts
+        .par_windows(2)
+        .flat_map_iter(|w| scan.crossing_in(&scan.entries[w[0]..w[1]], reference))
         .collect();
-    // (cell key, triangle) for every cell a triangle's box overlaps, sorted by key: each run
-    // of one key is a cell's list (hash collisions only add candidate pairs).
-    let mut entries: Vec<(u64, u32)> = boxes
-        .par_iter()
-        .enumerate()
-        .flat_map_iter(|(t, &(lo, hi))| {
-            let a = (lo / cell).map(|c| c.floor() as i64);
-            let b = (hi / cell).map(|c| c.floor() as i64);
-            (a.x..=b.x).flat_map(move |i| {
-                (a.y..=b.y).flat_map(move |j| (a.z..=b.z).map(move |k| (key(i, j, k), t as u32)))
+    pairs.par_sort_unstable();
+    pairs.dedup();
+    pairs
+}
+
+/// Triangles binned by their bounding boxes on a uniform grid: the candidate pairs of a
+/// self-intersection test.
+struct CellScan<'a> {
+    tris: &'a [[usize; 3]],
+    x: &'a [f64],
+    boxes: Vec<(V3, V3)>,
+    /// (cell key, triangle), sorted by key: each run of one key is a cell's list (hash
+    /// collisions only add candidate pairs).
+    entries: Vec<(u64, u32)>,
+    /// Where each run of `entries` starts, and its end.
+    starts: Vec<usize>,
+}
+
+impl<'a> CellScan<'a> {
+    /// The grid of `mesh`'s triangles at `x` (cell half the mean edge); `None` without
+    /// triangles.
+    fn new(mesh: &'a TriMesh, x: &'a [f64]) -> Option<Self> {
+        let tris = &mesh.triangles;
+        if tris.is_empty() {
+            return None;
+        }
+        let p = |v: usize| V3::new(x[3 * v], x[3 * v + 1], x[3 * v + 2]);
+        let edge_sum: f64 = tris
+            .iter()
+            .map(|t| (p(t[1]) - p(t[0])).norm() + (p(t[2]) - p(t[1])).norm())
+            .sum();
+        let cell = (0.5 * edge_sum / tris.len() as f64).max(1e-12);
+        let boxes: Vec<(V3, V3)> = tris
+            .par_iter()
+            .map(|tri| {
+                let pts = tri.map(p);
+                (
+                    pts[0].inf(&pts[1]).inf(&pts[2]),
+                    pts[0].sup(&pts[1]).sup(&pts[2]),
+                )
             })
+            .collect();
+        let mut entries: Vec<(u64, u32)> = boxes
+            .par_iter()
+            .enumerate()
+            .flat_map_iter(|(t, &(lo, hi))| {
+                let a = (lo / cell).map(|c| c.floor() as i64);
+                let b = (hi / cell).map(|c| c.floor() as i64);
+                (a.x..=b.x).flat_map(move |i| {
+                    (a.y..=b.y)
+                        .flat_map(move |j| (a.z..=b.z).map(move |k| (key(i, j, k), t as u32)))
+                })
+            })
+            .collect();
+        entries.par_sort_unstable();
+        let mut starts: Vec<usize> = (0..entries.len())
+            .filter(|&n| n == 0 || entries[n].0 != entries[n - 1].0)
+            .collect();
+        starts.push(entries.len());
+        Some(Self {
+            tris,
+            x,
+            boxes,
+            entries,
+            starts,
         })
-        .collect();
-    entries.par_sort_unstable();
-    let mut starts: Vec<usize> = (0..entries.len())
-        .filter(|&n| n == 0 || entries[n].0 != entries[n - 1].0)
-        .collect();
-    starts.push(entries.len());
-    starts.par_windows(2).find_map_first(|w| {
-        let run = &entries[w[0]..w[1]];
+    }
+
+    /// The crossing pairs among one cell's triangles `run` (in the cell's order), leaving out
+    /// those that also cross at `reference`.
+    fn crossing_in(&self, run: &[(u64, u32)], reference: Option<&[f64]>) -> Vec<(usize, usize)> {
+        let at = |x: &[f64], v: usize| V3::new(x[3 * v], x[3 * v + 1], x[3 * v + 2]);
+        let cross = |x: &[f64], ts: [usize; 3], tt: [usize; 3]| {
+            let (a, b) = (ts.map(|v| at(x, v)), tt.map(|v| at(x, v)));
+            pierces(a, b) || pierces(b, a)
+        };
+        let mut found = Vec::new();
         for (n, &(_, s)) in run.iter().enumerate() {
             for &(_, t) in &run[n + 1..] {
                 let (s, t) = (s as usize, t as usize);
-                let ((a0, a1), (b0, b1)) = (boxes[s], boxes[t]);
+                let ((a0, a1), (b0, b1)) = (self.boxes[s], self.boxes[t]);
                 if (0..3).any(|c| a1[c] < b0[c] || b1[c] < a0[c]) {
                     continue;
                 }
-                let (ts, tt) = (tris[s], tris[t]);
+                let (ts, tt) = (self.tris[s], self.tris[t]);
                 if ts.iter().any(|v| tt.contains(v)) {
                     continue;
                 }
-                if (pierces(ts.map(p), tt.map(p)) || pierces(tt.map(p), ts.map(p)))
-                    && !crosses_in_reference(ts, tt)
-                {
-                    return Some((s.min(t), s.max(t)));
+                if cross(self.x, ts, tt) && !reference.is_some_and(|r| cross(r, ts, tt)) {
+                    found.push((s.min(t), s.max(t)));
                 }
             }
         }
-        None
-    })
+        found
+    }
 }
 
 /// A hash of grid cell (i, j, k).

@@ -22,6 +22,7 @@ use super::step::compose::carry;
 use crate::io::face_weights::WrinkleKeys;
 use crate::io::layer::{Layer, LayerTarget};
 use crate::io::load::{load_bytes, LoadOptions, Rig};
+use crate::io::parts::PrimitivePick;
 use crate::io::split::FaceMap;
 use crate::math::modes::{self, FieldFit, ModeBound};
 use crate::mesh::TriMesh;
@@ -536,9 +537,12 @@ pub fn check_file(
     written: &crate::io::layer::Written,
     frames: &[Vec<Vector3<f64>>],
 ) -> anyhow::Result<()> {
+    // The written face's skin is the rig's: the same primitives, refined.
+    let skin = rig.parts.parts.iter().filter(|p| p.skin);
     let face_mesh = LoadOptions {
         mesh: Some(written.mesh.to_string()),
         animation: None,
+        skin_primitives: Some(skin.map(|p| PrimitivePick::Index(p.primitive)).collect()),
     };
     let back = load_bytes(&rig.path, &written.bytes, &face_mesh)
         .context("furrow cannot read back the file it wrote")?;

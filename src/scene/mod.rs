@@ -51,6 +51,13 @@ pub struct RigSection {
     /// A scene whose materials are for another scale (a robot) sets `scale = 1`. Boxes and
     /// regions of the scene are in simulated metres (after this scale).
     pub scale: Option<crate::io::units::ScaleSetting>,
+    /// The face mesh's skin primitives, by index in the mesh or material name (e.g.
+    /// `[0, "M_BackHead"]`); the others ride along unchanged. Default: decided from the
+    /// materials (alpha-blended and alpha-masked cards ride along) and the geometry (the
+    /// largest surface the shapes move is skin; closed or small surfaces apart from it ride
+    /// along).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub skin_primitives: Option<Vec<crate::io::parts::PrimitivePick>>,
 }
 
 /// `[skin]`: the thin shell's material, thickness and resolution.

@@ -13,6 +13,7 @@ pub mod cell;
 pub mod interior;
 pub mod lattice;
 pub mod muscles;
+pub mod outside;
 pub mod refine;
 pub mod select;
 pub mod skin;
@@ -121,11 +122,12 @@ pub fn set_up(
     progress("setup", 0, 4);
     let (welded, record) = weld::weld_face(face, &path)?;
     log.stages.push(record);
-    select::check_folds(rig, plan, &welded, &path)?;
+    let (outside, record) = outside::find(rig, plan, &welded);
+    log.stages.push(record);
     let (lattice, record) = lattice::lattice_for_run(face, &welded, &scene.interior, plan, &path)?;
     log.stages.push(record);
     progress("setup", 1, 4);
-    let (selection, record) = select::select_skin(rig, scene, plan, &welded);
+    let (selection, record) = select::select_skin(rig, scene, plan, &welded, &outside);
     log.stages.push(record);
     let region = simulated_region(selection.as_ref(), skin::within_mask(&welded.mesh, scene));
     let input = refine::RefineInput {

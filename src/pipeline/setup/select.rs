@@ -10,6 +10,7 @@
 //! the constraints do not depend on the selection. `skin.simulate = "all"` turns it off. The measure uses every frame whatever `--frames` says, so chunks, `merge`
 //! and reruns share one topology.
 
+use super::outside::OutOfModel;
 use super::weld::Welded;
 use crate::io::load::Rig;
 use crate::mesh::grid::PointGrid;
@@ -19,8 +20,6 @@ use crate::pipeline::record::StagePlan;
 use crate::pipeline::step::blend::weld_positions;
 use crate::scene::{Materials, Scene};
 use nalgebra::{Matrix2, Vector3};
-use rayon::prelude::*;
-use std::collections::HashMap;
 use std::time::Instant;
 
 /// Onset strain ε_c of wrinkling for a skin on an interior (dimensionless): the compressive
@@ -63,20 +62,29 @@ pub fn smaller_stretch(rest: [Vector3<f64>; 3], now: [Vector3<f64>; 3]) -> f64 {
 }
 
 /// Largest compression 1 − s_min of each triangle of `rest` over `poses` (positions of the
-/// same vertices, m); 0 where no pose compresses it.
+/// same vertices, m), leaving out in each pose the triangles `outside` it (per pose, per
+/// triangle; `None`: none); 0 where no pose compresses it. Also, per pose, its own largest
+/// compression.
 pub fn largest_compression<P: AsRef<[Vector3<f64>]>>(
     rest: &TriMesh,
-    poses: impl IntoIterator<Item = P>,
-) -> Vec<f64> {
+    poses: impl IntoIterator<Item = (P, Option<Vec<bool>>)>,
+) -> (Vec<f64>, Vec<f64>) {
     let mut worst = vec![0.0f64; rest.triangles.len()];
-    for pose in poses {
+    let mut per_pose = Vec::new();
+    for (pose, outside) in poses {
         let pose = pose.as_ref();
+        let mut most = 0.0f64;
         for (t, tri) in rest.triangles.iter().enumerate() {
+            if outside.as_ref().is_some_and(|o| o[t]) {
+                continue;
+            }
             let s = smaller_stretch(tri.map(|v| rest.positions[v]), tri.map(|v| pose[v]));
             worst[t] = worst[t].max(1.0 - s);
+            most = most.max(1.0 - s);
         }
+        per_pose.push(most);
     }
-    worst
+    (worst, per_pose)
 }
 
 /// The triangles of `mesh` with a vertex within `margin` (m) of a vertex of a `seed` triangle
@@ -115,17 +123,21 @@ pub struct Selection {
     pub threshold: f64,
     /// Fraction of the skin's rest area simulated (0–1).
     pub area_fraction: f64,
+    /// Per pose: whether it compresses some triangle in the model beyond the threshold (a
+    /// still rig's shape that does not needs no solve).
+    pub pose_compresses: Vec<bool>,
 }
 
-/// Select the triangles of `rest` compressed beyond `threshold` in some pose, grown by
-/// `margin` (m).
+/// Select the triangles of `rest` compressed beyond `threshold` in some pose (leaving out
+/// each pose's triangles outside the model, as [`largest_compression`]), grown by `margin`
+/// (m).
 pub fn select_compressed<P: AsRef<[Vector3<f64>]>>(
     rest: &TriMesh,
-    poses: impl IntoIterator<Item = P>,
+    poses: impl IntoIterator<Item = (P, Option<Vec<bool>>)>,
     threshold: f64,
     margin: f64,
 ) -> Selection {
-    let compression = largest_compression(rest, poses);
+    let (compression, per_pose) = largest_compression(rest, poses);
     let seed: Vec<bool> = compression.iter().map(|&c| c > threshold).collect();
     let simulated = grow(rest, &seed, margin);
     let area = |t: usize| rest.triangle_area(t);
@@ -139,124 +151,21 @@ pub fn select_compressed<P: AsRef<[Vector3<f64>]>>(
         compression,
         threshold,
         area_fraction: if total > 0.0 { kept / total } else { 0.0 },
+        pose_compresses: per_pose.iter().map(|&c| c > threshold).collect(),
     }
-}
-
-/// Dihedral turn (rad) across a skin edge beyond which the blend shapes are taken to fold
-/// the skin over itself: the two triangles' normals, which agree at rest, point more than
-/// 150° apart. The skin has no contact, so such targets are outside the model.
-pub const FOLD_ANGLE: f64 = 150.0 * std::f64::consts::PI / 180.0;
-
-/// The first edge of `rest` that `pose` folds over (see [`FOLD_ANGLE`]): the two triangles
-/// and the angle (rad) between their normals, or `None`.
-pub fn first_fold(rest: &TriMesh, pose: &[Vector3<f64>]) -> Option<(usize, usize, f64)> {
-    fold_in(rest, &judged_edges(rest), pose)
-}
-
-/// The pairs of triangles (in edge order) sharing an edge whose normals agree at rest: the
-/// edges a fold is judged on (a crease at rest, or a non-manifold pair, is not judged).
-fn judged_edges(rest: &TriMesh) -> Vec<(usize, usize)> {
-    let normals: Vec<Option<Vector3<f64>>> = (0..rest.triangles.len())
-        .map(|t| triangle_normal(rest, &rest.positions, t))
-        .collect();
-    let mut by_edge: HashMap<(usize, usize), usize> = HashMap::new();
-    let mut pairs = Vec::new();
-    for (t, tri) in rest.triangles.iter().enumerate() {
-        for k in 0..3 {
-            let (a, b) = (tri[k], tri[(k + 1) % 3]);
-            let Some(u) = by_edge.insert((a.min(b), a.max(b)), t) else {
-                continue;
-            };
-            if let (Some(n0), Some(n1)) = (normals[u], normals[t]) {
-                if n0.dot(&n1) > 0.0 {
-                    pairs.push((u, t));
-                }
-            }
-        }
-    }
-    pairs
-}
-
-/// Unit normal of triangle `t` of `mesh` at positions `p`, `None` when degenerate.
-fn triangle_normal(mesh: &TriMesh, p: &[Vector3<f64>], t: usize) -> Option<Vector3<f64>> {
-    let [a, b, c] = mesh.triangles[t].map(|v| p[v]);
-    (b - a).cross(&(c - a)).try_normalize(1e-300)
-}
-
-/// The first of the judged triangle pairs `edges` that `pose` folds over (see
-/// [`first_fold`]).
-fn fold_in(
-    rest: &TriMesh,
-    edges: &[(usize, usize)],
-    pose: &[Vector3<f64>],
-) -> Option<(usize, usize, f64)> {
-    let cos_fold = FOLD_ANGLE.cos();
-    edges.iter().find_map(|&(u, t)| {
-        let (p0, p1) = (
-            triangle_normal(rest, pose, u)?,
-            triangle_normal(rest, pose, t)?,
-        );
-        let c = p0.dot(&p1);
-        (c < cos_fold).then(|| (u, t, c.clamp(-1.0, 1.0).acos()))
-    })
-}
-
-/// Refuse blend shapes that fold the welded skin over itself in some pose of the clip (or,
-/// for a still rig, some shape at weight 1): the error names the first such frame or shape,
-/// the two triangles, the angle and the limit. Poses are judged in parallel.
-pub fn check_folds(rig: &Rig, plan: &Plan, welded: &Welded, path: &str) -> anyhow::Result<()> {
-    let (weights, what) = pose_weights(plan);
-    let count = welded.mesh.positions.len();
-    let edges = judged_edges(&welded.mesh);
-    let fold = weights.par_iter().enumerate().find_map_first(|(k, w)| {
-        let pose = weld_positions(&rig.blend(w), &welded.of_loaded, count);
-        fold_in(&welded.mesh, &edges, &pose).map(|f| (k, f))
-    });
-    if let Some((k, (a, b, angle))) = fold {
-        let which = match what {
-            PoseKind::Frames => format!("frame {k}"),
-            PoseKind::Shapes => {
-                format!("shape {k} (\"{}\") at weight 1", rig.face().targets[k].name)
-            }
-        };
-        anyhow::bail!(
-            "{path}: the blend shapes fold the skin over itself: in {which}, skin triangles {a} and {b}, which share an edge, turn {:.0}° apart (limit {:.0}°). furrow's skin has no contact, so such targets are outside its model; check the shape weights (values far beyond 1) or the shape itself",
-            angle.to_degrees(),
-            FOLD_ANGLE.to_degrees()
-        );
-    }
-    Ok(())
-}
-
-/// What the poses of [`pose_weights`] are.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum PoseKind {
-    /// Every frame of the clip.
-    Frames,
-    /// Each shape alone at weight 1 (a still rig).
-    Shapes,
-}
-
-/// The weights of the poses the skin is judged on: every frame at the run's fps, or for a
-/// still rig each shape at weight 1.
-fn pose_weights(plan: &Plan) -> (Vec<Vec<f64>>, PoseKind) {
-    let kind = if plan.animated {
-        PoseKind::Frames
-    } else {
-        PoseKind::Shapes
-    };
-    (plan.weights.clone(), kind)
 }
 
 /// The `select` stage: with `skin.simulate = "compressed"` (the default), the welded triangles
 /// some pose of the rig compresses past the threshold, grown by one λ (of the thickest skin);
 /// `None` with `"all"`. The poses are every frame of the clip at the run's fps (whatever
-/// frames are written), or for a still rig each shape at weight 1.
+/// frames are written), or for a still rig each shape at weight 1; in each, the skin
+/// `outside` the model is left out.
 pub fn select_skin(
     rig: &Rig,
     scene: &Scene,
     plan: &Plan,
     welded: &Welded,
+    outside: &OutOfModel,
 ) -> (Option<Selection>, StagePlan) {
     if scene.skin.simulate.as_deref() == Some("all") {
         let why = "skin.simulate = all: the whole skin is simulated";
@@ -265,11 +174,17 @@ pub fn select_skin(
     let t = Instant::now();
     let onset = onset_strain(&plan.materials);
     let threshold = scene.skin.compression_threshold.unwrap_or(0.5 * onset);
-    let (weights, _) = pose_weights(plan);
+    let weights = &plan.weights;
     let count = welded.mesh.positions.len();
-    let poses = weights
-        .iter()
-        .map(|w| weld_positions(&rig.blend(w), &welded.of_loaded, count));
+    let triangles = welded.mesh.triangles.len();
+    let poses = weights.iter().enumerate().map(|(k, w)| {
+        let region = outside.region(k).map(|r| {
+            let mut on = vec![false; triangles];
+            r.triangles.iter().for_each(|&t| on[t] = true);
+            on
+        });
+        (weld_positions(&rig.blend(w), &welded.of_loaded, count), region)
+    });
     let margin = plan.skin.lambda_max;
     let s = select_compressed(&welded.mesh, poses, threshold, margin);
     let why = format!(
@@ -315,29 +230,6 @@ mod tests {
     }
 
     #[test]
-    fn a_fold_is_found_and_a_bend_is_not() {
-        let rest = bump_sheet(9);
-        // Bending the sheet up by 90° along x = 0 is no fold.
-        let bend = |p: &Vector3<f64>| {
-            if p.x < 0.0 {
-                *p
-            } else {
-                Vector3::new(0.0, p.y, p.z + p.x)
-            }
-        };
-        let bent: Vec<Vector3<f64>> = rest.positions.iter().map(bend).collect();
-        assert!(first_fold(&rest, &bent).is_none());
-        // Mirroring the left half onto the right (x ↦ −x for x < 0) folds it over.
-        let folded: Vec<Vector3<f64>> = rest
-            .positions
-            .iter()
-            .map(|p| Vector3::new(p.x.abs(), p.y, p.z))
-            .collect();
-        let (a, b, angle) = first_fold(&rest, &folded).expect("a fold");
-        assert!(angle > FOLD_ANGLE && a != b, "{angle}");
-    }
-
-    #[test]
     fn onset_strain_matches_the_bilayer_formula() {
         let mut m = crate::scene::Scene::default().materials().unwrap();
         m.skin.young = 1e6;
@@ -357,7 +249,7 @@ mod tests {
             .iter()
             .map(|p| Vector3::new(if p.x < 0.0 { 0.95 * p.x } else { 1.05 * p.x }, p.y, p.z))
             .collect();
-        let s = select_compressed(&rest, [pose], 0.01, 0.004);
+        let s = select_compressed(&rest, [(pose, None)], 0.01, 0.004);
         for (t, tri) in rest.triangles.iter().enumerate() {
             let cx = tri.iter().map(|&v| rest.positions[v].x).sum::<f64>() / 3.0;
             if cx < 0.0 {
