@@ -55,6 +55,9 @@ pub struct AnimateArgs {
     /// Replace existing output files.
     #[arg(long)]
     pub force: bool,
+    /// Whether the rig's buffer and image files may lie outside its folder.
+    #[command(flatten)]
+    pub paths: super::RigPathsArgs,
     /// With --frames, do not write the chunk file (`furrow merge` needs it).
     #[arg(long)]
     pub no_chunk: bool,
@@ -121,6 +124,7 @@ pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
         &LoadOptions {
             mesh: a.mesh.clone(),
             animation: None,
+            allow_outside_paths: a.paths.allow_outside_paths,
         },
     )?;
     out.note(&rig.face_reason);
@@ -309,6 +313,9 @@ pub struct BatchArgs {
     /// Redo inputs whose outputs are finished.
     #[arg(long)]
     pub force: bool,
+    /// Whether the rig's buffer and image files may lie outside its folder.
+    #[command(flatten)]
+    pub paths: super::RigPathsArgs,
     /// The outputs' form and storage.
     #[command(flatten)]
     pub export: ExportArgs,
@@ -356,6 +363,7 @@ pub fn batch(a: BatchArgs, out: &Output) -> anyhow::Result<()> {
             scale: a.scale,
             // An output without its report is an unfinished earlier attempt: redo it.
             force: true,
+            paths: a.paths,
             no_chunk: false,
             clamp_frames: false,
         };
@@ -406,6 +414,9 @@ pub struct MergeArgs {
     /// Replace an existing output.
     #[arg(long)]
     pub force: bool,
+    /// Whether the rig's buffer and image files may lie outside its folder.
+    #[command(flatten)]
+    pub paths: super::RigPathsArgs,
     /// The output's form and storage (the layer's basis is built over the joined frames).
     #[command(flatten)]
     pub export: ExportArgs,
@@ -446,6 +457,7 @@ pub fn merge(a: MergeArgs, out: &Output) -> anyhow::Result<()> {
         &LoadOptions {
             mesh: a.mesh.clone(),
             animation: None,
+            allow_outside_paths: a.paths.allow_outside_paths,
         },
     )?;
     // The frames are in the metres they were simulated in: write them back in file units.

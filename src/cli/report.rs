@@ -53,6 +53,9 @@ pub struct TradeoffArgs {
     /// Leave out the slab sweep.
     #[arg(long)]
     pub no_slab: bool,
+    /// Whether the rig's buffer and image files may lie outside its folder.
+    #[command(flatten)]
+    pub paths: super::RigPathsArgs,
     /// Replace existing outputs.
     #[arg(long)]
     pub force: bool,
@@ -199,6 +202,7 @@ fn tradeoff_rig(a: &TradeoffArgs) -> anyhow::Result<(Rig, String)> {
             &LoadOptions {
                 mesh: a.mesh.clone(),
                 animation: None,
+                allow_outside_paths: a.paths.allow_outside_paths,
             },
         )?,
         None => tradeoff::sheet_rig(&SheetRig::default())?,

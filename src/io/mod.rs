@@ -20,6 +20,7 @@ pub mod motion;
 pub mod scene;
 pub mod split;
 pub mod units;
+pub mod uri;
 
 pub use error::{GltfError, GltfResult};
 pub use load::{load, LoadOptions, Rig};

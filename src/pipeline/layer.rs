@@ -538,7 +538,7 @@ pub fn check_file(
 ) -> anyhow::Result<()> {
     let face_mesh = LoadOptions {
         mesh: Some(written.mesh.to_string()),
-        animation: None,
+        ..Default::default()
     };
     let back = load_bytes(&rig.path, &written.bytes, &face_mesh)
         .context("furrow cannot read back the file it wrote")?;
