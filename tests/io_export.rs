@@ -77,6 +77,7 @@ fn export_round_trips_and_validates(shared: Vec<std::path::PathBuf>) {
             &LoadOptions {
                 mesh: Some(face.name.clone() + " (furrow)"),
                 animation: (frames.len() > 1).then(|| "furrow_wrinkles".into()),
+                ..Default::default()
             },
         )
         .unwrap();

@@ -90,6 +90,7 @@ fn shared_files_have_their_documented_contents() {
         &LoadOptions {
             mesh: Some("Head_3".into()),
             animation: Some("Yes".into()),
+            ..Default::default()
         },
     )
     .unwrap();
@@ -100,6 +101,7 @@ fn shared_files_have_their_documented_contents() {
         &LoadOptions {
             mesh: Some("Nose".into()),
             animation: None,
+            ..Default::default()
         },
     )
     .err()

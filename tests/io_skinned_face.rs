@@ -72,6 +72,7 @@ fn skinned_face_round_trips_in_world_space() {
         &LoadOptions {
             mesh: None,
             animation: Some("furrow_wrinkles".into()),
+            ..Default::default()
         },
     )
     .unwrap();

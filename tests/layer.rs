@@ -198,6 +198,7 @@ fn load_sequence(path: &Path) -> Rig {
     let opts = LoadOptions {
         mesh: Some("face (furrow)".into()),
         animation: Some("furrow_wrinkles".into()),
+        ..Default::default()
     };
     load_bytes(path, &std::fs::read(path).unwrap(), &opts).unwrap()
 }

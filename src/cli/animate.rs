@@ -60,6 +60,9 @@ pub struct AnimateArgs {
     /// Replace existing output files.
     #[arg(long)]
     pub force: bool,
+    /// Whether the rig's buffer and image files may lie outside its folder.
+    #[command(flatten)]
+    pub paths: super::RigPathsArgs,
     /// With --frames, do not write the chunk file (`furrow merge` needs it).
     #[arg(long)]
     pub no_chunk: bool,
@@ -134,6 +137,7 @@ pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
                 .skin_primitives
                 .clone()
                 .or_else(|| scene.rig.skin_primitives.clone()),
+            allow_outside_paths: a.paths.allow_outside_paths,
         },
     )?;
     out.note(&rig.face_reason);
@@ -325,6 +329,9 @@ pub struct BatchArgs {
     /// Redo inputs whose outputs are finished.
     #[arg(long)]
     pub force: bool,
+    /// Whether the rig's buffer and image files may lie outside its folder.
+    #[command(flatten)]
+    pub paths: super::RigPathsArgs,
     /// The outputs' form and storage.
     #[command(flatten)]
     pub export: ExportArgs,
@@ -373,6 +380,7 @@ pub fn batch(a: BatchArgs, out: &Output) -> anyhow::Result<()> {
             scale: a.scale,
             // An output without its report is an unfinished earlier attempt: redo it.
             force: true,
+            paths: a.paths,
             no_chunk: false,
             clamp_frames: false,
         };
@@ -426,6 +434,9 @@ pub struct MergeArgs {
     /// Replace an existing output.
     #[arg(long)]
     pub force: bool,
+    /// Whether the rig's buffer and image files may lie outside its folder.
+    #[command(flatten)]
+    pub paths: super::RigPathsArgs,
     /// The output's form and storage (the layer's basis is built over the joined frames).
     #[command(flatten)]
     pub export: ExportArgs,
@@ -467,6 +478,7 @@ pub fn merge(a: MergeArgs, out: &Output) -> anyhow::Result<()> {
             mesh: a.mesh.clone(),
             animation: None,
             skin_primitives: a.skin_primitives.clone(),
+            allow_outside_paths: a.paths.allow_outside_paths,
         },
     )?;
     // The frames are in the metres they were simulated in: write them back in file units.

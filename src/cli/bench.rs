@@ -206,6 +206,9 @@ pub struct RigFrames {
     /// Scene file (TOML) both runs start from; default: the defaults.
     #[arg(long)]
     scene: Option<std::path::PathBuf>,
+    /// Whether the rig's buffer and image files may lie outside its folder.
+    #[command(flatten)]
+    paths: super::RigPathsArgs,
 }
 
 /// The rig of `on` (units decided as `animate` does) and the run options for its frames.
@@ -217,9 +220,14 @@ fn bench_rig(
         frames,
         fps,
         scene,
+        paths,
     } = on;
     let fps = *fps;
-    let mut loaded = crate::io::load::load(rig, &Default::default())?;
+    let load = crate::io::LoadOptions {
+        allow_outside_paths: paths.allow_outside_paths,
+        ..Default::default()
+    };
+    let mut loaded = crate::io::load::load(rig, &load)?;
     crate::io::units::apply(&mut loaded, None, None);
     let count = crate::pipeline::plan::clip_weights(&loaded, fps).0.len();
     let opts = crate::pipeline::RunOptions {

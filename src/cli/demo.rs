@@ -23,6 +23,9 @@ pub struct DemoArgs {
     /// Also write one glTF per frame into OUT/frames.
     #[arg(long)]
     pub frames_dir: bool,
+    /// Whether the rig's buffer and image files may lie outside its folder.
+    #[command(flatten)]
+    pub paths: super::RigPathsArgs,
     /// Metres per unit of the rig file, or `auto` (default; see `animate --scale`).
     #[arg(long, value_parser = crate::io::units::scale_arg)]
     pub scale: Option<crate::io::units::ScaleSetting>,
@@ -40,6 +43,7 @@ impl DemoArgs {
             frames: DEMO_FRAMES.into(),
             rig: None,
             frames_dir: false,
+            paths: Default::default(),
             scale: None,
             export: Default::default(),
         }
@@ -99,6 +103,7 @@ pub fn run_demo(a: DemoArgs, out: &Output) -> anyhow::Result<crate::pipeline::re
         scale: a.scale,
         // The demo's folder is its own: an earlier demo's files are replaced (and said so).
         force: true,
+        paths: a.paths,
         no_chunk: true,
         clamp_frames: true,
     };

@@ -27,6 +27,9 @@ pub struct FitArgs {
     /// Replace the output if it exists.
     #[arg(long)]
     pub force: bool,
+    /// Whether the rig's buffer and image files may lie outside its folder.
+    #[command(flatten)]
+    pub paths: super::RigPathsArgs,
     /// Muscle rig file (TOML); without it, one muscle per blend shape is generated (in place
     /// of the scene's `muscles.source`).
     #[arg(long)]
@@ -96,7 +99,11 @@ pub fn run(a: FitArgs, out: &Output) -> anyhow::Result<()> {
     atomic::check_free(&outputs, Overwrite::from_force(a.force))?;
     let t0 = Instant::now();
     let scene = fit_scene(&a)?;
-    let mut rig = fio::load(&a.rig, &LoadOptions::default())?;
+    let load = LoadOptions {
+        allow_outside_paths: a.paths.allow_outside_paths,
+        ..Default::default()
+    };
+    let mut rig = fio::load(&a.rig, &load)?;
     out.note(&rig.face_reason);
     out.note(crate::io::units::apply(&mut rig, a.scale, scene.rig.scale));
     // A bad range is refused before the set-up's seconds.

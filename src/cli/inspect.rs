@@ -8,11 +8,14 @@ use std::path::PathBuf;
 pub struct InspectArgs {
     /// The glTF file (.glb or .gltf).
     pub file: PathBuf,
+    /// Whether the rig's buffer and image files may lie outside its folder.
+    #[command(flatten)]
+    pub paths: super::RigPathsArgs,
 }
 
 /// Print the summary of one file.
 pub fn run(a: InspectArgs, out: &Output) -> anyhow::Result<()> {
-    let s = crate::io::inspect::summarize(&a.file)?;
+    let s = crate::io::inspect::summarize_with(&a.file, a.paths.read())?;
     out.json_result(&serde_json::to_value(&s)?);
     out.say(s.to_string().trim_end());
     Ok(())

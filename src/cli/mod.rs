@@ -104,6 +104,25 @@ pub enum Command {
     Report(report::ReportCommand),
 }
 
+/// The flag of every subcommand that loads a rig: whether its buffer and image files may lie
+/// outside its folder.
+#[derive(Debug, Clone, Copy, Default, clap::Args)]
+pub struct RigPathsArgs {
+    /// Read buffer and image files outside the rig's folder (absolute paths, `..`, symlinks
+    /// out); refused by default.
+    #[arg(long)]
+    pub allow_outside_paths: bool,
+}
+
+impl RigPathsArgs {
+    /// How the rig file is read.
+    pub fn read(&self) -> crate::io::container::ReadOptions {
+        crate::io::container::ReadOptions {
+            allow_outside_paths: self.allow_outside_paths,
+        }
+    }
+}
+
 /// A failure whose details were already printed (in JSON mode, as the command's own result
 /// document); `main` prints only the one-line message to stderr.
 #[derive(Debug, thiserror::Error)]

@@ -53,6 +53,9 @@ pub struct TradeoffArgs {
     /// Leave out the slab sweep.
     #[arg(long)]
     pub no_slab: bool,
+    /// Whether the rig's buffer and image files may lie outside its folder.
+    #[command(flatten)]
+    pub paths: super::RigPathsArgs,
     /// Replace existing outputs.
     #[arg(long)]
     pub force: bool,
@@ -200,6 +203,7 @@ fn tradeoff_rig(a: &TradeoffArgs) -> anyhow::Result<(Rig, String)> {
                 mesh: a.mesh.clone(),
                 animation: None,
                 skin_primitives: None,
+                allow_outside_paths: a.paths.allow_outside_paths,
             },
         )?,
         None => tradeoff::sheet_rig(&SheetRig::default())?,

@@ -2,6 +2,7 @@
 //! embedded `data:` buffers), parsed into the JSON document and the resolved buffer bytes.
 
 use super::error::{GltfError, GltfResult};
+use super::uri::{self, Refusal, Resolved};
 use base64::Engine;
 use std::path::Path;
 
@@ -14,8 +15,31 @@ pub struct Container {
     pub root: gltf_json::Root,
     /// Bytes of each buffer; a meshopt fallback buffer with no data is empty.
     pub buffers: Vec<Vec<u8>>,
+    /// Where each image's bytes are (index = image index).
+    pub images: Vec<ImageSource>,
     /// True when the file was binary (`.glb`).
     pub binary: bool,
+}
+
+/// How a file is read.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ReadOptions {
+    /// Read buffer and image files outside the rig's folder (absolute paths, `..`, symlinks
+    /// out); refused by default.
+    pub allow_outside_paths: bool,
+}
+
+/// Where the bytes of one of the file's images are, as judged when the file was read.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ImageSource {
+    /// In the file itself: a buffer view or a `data:` URI.
+    Embedded,
+    /// In an external file, judged against the rig's folder (unless outside paths are
+    /// allowed); the export reads it from there.
+    File(Resolved),
+    /// In an external file furrow cannot read (remote, or not found when the rig was read);
+    /// the export refuses it with this message.
+    Unreadable(String),
 }
 
 /// Extensions furrow reads; a file requiring any other is refused.
@@ -33,21 +57,24 @@ pub const SUPPORTED_REQUIRED: &[&str] = &[
 const JSON_OBJECT_START: u8 = b'{';
 
 /// Read and parse the file at `path`.
-pub fn read(path: &Path) -> GltfResult<Container> {
+pub fn read(path: &Path, opts: ReadOptions) -> GltfResult<Container> {
     let bytes = std::fs::read(path)
         .map_err(|e| GltfError::new(path, format!("cannot read the file: {e}")))?;
-    parse(path, &bytes)
+    parse(path, &bytes, opts)
 }
 
-/// Parse glTF bytes that came from `path` (the path names errors and anchors relative URIs).
-pub fn parse(path: &Path, bytes: &[u8]) -> GltfResult<Container> {
+/// Parse glTF bytes that came from `path` (the path names errors and anchors relative URIs;
+/// buffer and image URIs must stay in its folder unless `opts` allows outside paths).
+pub fn parse(path: &Path, bytes: &[u8], opts: ReadOptions) -> GltfResult<Container> {
     let (json_bytes, bin) = split_chunks(path, bytes)?;
     let (json, root) = parse_document(path, json_bytes)?;
-    let buffers = resolve_buffers(path, &json, &root, bin)?;
+    let buffers = resolve_buffers(path, &json, &root, bin, opts)?;
+    let images = resolve_images(path, &json, opts)?;
     Ok(Container {
         json,
         root,
         buffers,
+        images,
         binary: bin.is_some() || bytes.starts_with(b"glTF"),
     })
 }
@@ -146,11 +173,14 @@ fn is_meshopt_fallback(json: &serde_json::Value, index: usize) -> bool {
         .unwrap_or(false)
 }
 
+/// The bytes of every buffer: the GLB binary chunk, a `data:` URI or a file in the rig's
+/// folder (see [`uri::resolve`]).
 fn resolve_buffers(
     path: &Path,
     json: &serde_json::Value,
     root: &gltf_json::Root,
     bin: Option<&[u8]>,
+    opts: ReadOptions,
 ) -> GltfResult<Vec<Vec<u8>>> {
     let err = |m: String| GltfError::new(path, m);
     let mut out = Vec::with_capacity(root.buffers.len());
@@ -181,15 +211,13 @@ fn resolve_buffers(
                     .map_err(|e| err(format!("buffer {i}: bad base64 in data URI: {e}")))?
             }
             Some(uri) => {
-                let decoded = percent_decode(uri);
-                if decoded.contains("://") {
-                    return Err(err(format!("buffer {i}: remote URI {uri:?} is not supported; download it next to the file")));
-                }
-                let p = path.parent().unwrap_or(Path::new(".")).join(&decoded);
-                std::fs::read(&p).map_err(|e| {
+                let what = format!("buffer {i}");
+                let file = uri::resolve(path, uri, opts.allow_outside_paths)
+                    .map_err(|r| err(refusal_message(&what, uri, r)))?;
+                std::fs::read(&file.path).map_err(|e| {
                     err(format!(
-                        "buffer {i}: cannot read external buffer {}: {e}",
-                        p.display()
+                        "{what}: cannot read external file {}: {e}",
+                        file.path.display()
                     ))
                 })?
             }
@@ -205,23 +233,62 @@ fn resolve_buffers(
     Ok(out)
 }
 
-/// Decode `%XX` escapes in a relative URI.
-fn percent_decode(s: &str) -> String {
-    let b = s.as_bytes();
-    let mut out = Vec::with_capacity(b.len());
-    let mut i = 0;
-    while i < b.len() {
-        if b[i] == b'%' && i + 2 < b.len() {
-            if let Ok(v) = u8::from_str_radix(&s[i + 1..i + 3], 16) {
-                out.push(v);
-                i += 3;
-                continue;
-            }
-        }
-        out.push(b[i]);
-        i += 1;
+/// Where each image's bytes are. An image whose file lies outside the rig's folder is refused
+/// (unless `opts` allows it); one that is remote or missing is refused by the export, which
+/// reads it, not here (`inspect` and `fit` never read images).
+fn resolve_images(
+    path: &Path,
+    json: &serde_json::Value,
+    opts: ReadOptions,
+) -> GltfResult<Vec<ImageSource>> {
+    let Some(images) = json["images"].as_array() else {
+        return Ok(Vec::new());
+    };
+    let mut out = Vec::with_capacity(images.len());
+    for (i, im) in images.iter().enumerate() {
+        let source = match im["uri"].as_str() {
+            None => ImageSource::Embedded,
+            Some(u) if u.starts_with("data:") => ImageSource::Embedded,
+            Some(u) => match uri::resolve(path, u, opts.allow_outside_paths) {
+                Ok(file) => ImageSource::File(file),
+                Err(r @ Refusal::Outside { .. }) => {
+                    return Err(GltfError::new(
+                        path,
+                        refusal_message(&format!("image {i}"), u, r),
+                    ))
+                }
+                Err(r) => ImageSource::Unreadable(refusal_message(&format!("image {i}"), u, r)),
+            },
+        };
+        out.push(source);
     }
-    String::from_utf8_lossy(&out).into_owned()
+    Ok(out)
+}
+
+/// The message for a URI `uri` of `what` (`buffer 0`, `image 2`) that gives no file.
+fn refusal_message(what: &str, uri: &str, r: Refusal) -> String {
+    let decoded = uri::percent_decode(uri);
+    let shown = if decoded == uri {
+        format!("'{uri}'")
+    } else {
+        format!("'{uri}' (decoded '{decoded}')")
+    };
+    match r {
+        Refusal::Remote => format!(
+            "{what}'s uri {shown} is remote, which is not supported; download it next to the file"
+        ),
+        Refusal::Outside { folder, why } => format!(
+            "{what}'s uri {shown} lies outside the rig's folder {}: {why}; pass \
+             --allow-outside-paths to read it",
+            folder.display()
+        ),
+        Refusal::Unresolved { path, error } => {
+            format!(
+                "{what}: cannot read external file {}: {error}",
+                path.display()
+            )
+        }
+    }
 }
 
 #[cfg(test)]
@@ -235,22 +302,15 @@ mod tests {
         b.extend(2u32.to_le_bytes());
         b.extend(5u32.to_le_bytes());
         b.extend([0u8; 40]);
-        let e = parse(Path::new("x.glb"), &b)
+        let e = parse(Path::new("x.glb"), &b, ReadOptions::default())
             .err()
             .expect("refused")
             .to_string();
         assert!(e.contains("x.glb") && e.contains("length of 5"), "{e}");
-        let e = parse(Path::new("y.glb"), b"glTF\x02\0")
+        let e = parse(Path::new("y.glb"), b"glTF\x02\0", ReadOptions::default())
             .err()
             .expect("refused")
             .to_string();
         assert!(e.contains("cut short"), "{e}");
-    }
-
-    #[test]
-    fn percent_decoding() {
-        assert_eq!(percent_decode("a%20b.bin"), "a b.bin");
-        assert_eq!(percent_decode("plain.bin"), "plain.bin");
-        assert_eq!(percent_decode("bad%2"), "bad%2");
     }
 }

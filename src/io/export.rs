@@ -10,6 +10,7 @@
 use super::accessor::AccessorReader;
 use super::atomic::{self, Overwrite};
 use super::carry;
+use super::container::ImageSource;
 use super::glb_write::{generator, Document, ARRAY_BUFFER};
 use super::load::Rig;
 use super::mesh::VertexTransform;
@@ -136,30 +137,7 @@ pub(crate) fn base_document(rig: &Rig) -> anyhow::Result<Document> {
                 mime,
             )
         } else {
-            let p = rig.path.parent().unwrap_or(Path::new(".")).join(&uri);
-            let b = std::fs::read(&p).with_context(|| {
-                format!(
-                    "{}: image {i} ({}) cannot be read",
-                    rig.path.display(),
-                    p.display()
-                )
-            })?;
-            let mime = match p
-                .extension()
-                .and_then(|e| e.to_str())
-                .map(|e| e.to_ascii_lowercase())
-                .as_deref()
-            {
-                Some("png") => "image/png",
-                Some("jpg") | Some("jpeg") => "image/jpeg",
-                Some("webp") => "image/webp",
-                Some("ktx2") => "image/ktx2",
-                _ => bail!(
-                    "{}: image {i} ({uri}) has an unknown type",
-                    rig.path.display()
-                ),
-            };
-            (b, mime.to_string())
+            image_file(rig, i, &uri)?
         };
         let v = doc.push_view(bytes, None);
         let im = doc.json["images"][i].as_object_mut().expect("image object");
@@ -168,6 +146,44 @@ pub(crate) fn base_document(rig: &Rig) -> anyhow::Result<Document> {
         im.insert("mimeType".into(), json!(mime));
     }
     Ok(doc)
+}
+
+/// The bytes and MIME type of image `i` of `rig`, whose URI `uri` names a file: read from
+/// where it was judged when the rig was loaded (inside the rig's folder unless outside paths
+/// were allowed), typed by the extension the URI names.
+fn image_file(rig: &Rig, i: usize, uri: &str) -> anyhow::Result<(Vec<u8>, String)> {
+    let file = match rig.container.images.get(i) {
+        Some(ImageSource::File(f)) => f,
+        Some(ImageSource::Unreadable(why)) => bail!("{}: {why}", rig.path.display()),
+        Some(ImageSource::Embedded) | None => bail!(
+            "{}: image {i} ({uri}) was not resolved when the rig was read",
+            rig.path.display()
+        ),
+    };
+    let b = std::fs::read(&file.path).with_context(|| {
+        format!(
+            "{}: image {i} ({}) cannot be read",
+            rig.path.display(),
+            file.path.display()
+        )
+    })?;
+    let mime = match file
+        .named
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(|e| e.to_ascii_lowercase())
+        .as_deref()
+    {
+        Some("png") => "image/png",
+        Some("jpg") | Some("jpeg") => "image/jpeg",
+        Some("webp") => "image/webp",
+        Some("ktx2") => "image/ktx2",
+        _ => bail!(
+            "{}: image {i} ({uri}) has an unknown type",
+            rig.path.display()
+        ),
+    };
+    Ok((b, mime.to_string()))
 }
 
 /// Local-to-world affine map of an exported vertex (blended for skinned faces).

@@ -3,9 +3,9 @@
 
 use super::accessor::AccessorReader;
 use super::animation::{weight_track, AnimationInfo};
-use super::container::Container;
+use super::container::{Container, ReadOptions};
 use super::error::GltfResult;
-use super::load::load_instances;
+use super::load::load_instances_with;
 use super::mesh::MeshInstance;
 use super::mesh::VertexTransform;
 use serde::Serialize;
@@ -63,11 +63,16 @@ pub struct Summary {
     pub animations: Vec<AnimationInfo>,
 }
 
-/// Read `path` and summarise it. A weight animation that `animate` would refuse (outputs
-/// that do not match keys × targets, key times that do not increase, non-finite weights) is
-/// refused here too, with the same message.
+/// Read `path` and summarise it, with the default [`ReadOptions`] (see [`summarize_with`]).
 pub fn summarize(path: &Path) -> GltfResult<Summary> {
-    let (c, inst, animations) = load_instances(path)?;
+    summarize_with(path, ReadOptions::default())
+}
+
+/// Read `path` with `opts` and summarise it. A weight animation that `animate` would refuse
+/// (outputs that do not match keys × targets, key times that do not increase, non-finite
+/// weights) is refused here too, with the same message.
+pub fn summarize_with(path: &Path, opts: ReadOptions) -> GltfResult<Summary> {
+    let (c, inst, animations) = load_instances_with(path, opts)?;
     check_weight_tracks(path, &c, &inst, &animations)?;
     let meshes = inst
         .iter()

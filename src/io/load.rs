@@ -3,7 +3,7 @@
 
 use super::accessor::{usize_of, AccessorReader};
 use super::animation::{self, AnimationInfo, WeightTrack};
-use super::container::{self, Container};
+use super::container::{self, Container, ReadOptions};
 use super::error::{GltfError, GltfResult};
 use super::mesh::{self, MeshInstance};
 use super::parts::{self, FaceParts, PrimitivePick};
@@ -21,6 +21,18 @@ pub struct LoadOptions {
     /// The face mesh's skin primitives by index or material name; default: decided from
     /// the materials and the geometry ([`super::parts`]).
     pub skin_primitives: Option<Vec<PrimitivePick>>,
+    /// Read buffer and image files outside the rig's folder (absolute paths, `..`, symlinks
+    /// out); refused by default.
+    pub allow_outside_paths: bool,
+}
+
+impl LoadOptions {
+    /// How the file itself is read.
+    pub fn read(&self) -> ReadOptions {
+        ReadOptions {
+            allow_outside_paths: self.allow_outside_paths,
+        }
+    }
 }
 
 /// A loaded rig: every mesh instance and the chosen face with its weight animation.
@@ -97,11 +109,20 @@ impl Rig {
     }
 }
 
-/// Load every mesh instance of the file at `path` without choosing a face (for `inspect`).
+/// Load every mesh instance of the file at `path` without choosing a face (for `inspect`),
+/// with the default [`ReadOptions`].
 pub fn load_instances(
     path: &Path,
 ) -> GltfResult<(Container, Vec<MeshInstance>, Vec<AnimationInfo>)> {
-    let c = container::read(path)?;
+    load_instances_with(path, ReadOptions::default())
+}
+
+/// Load every mesh instance of the file at `path`, read with `opts`, without choosing a face.
+pub fn load_instances_with(
+    path: &Path,
+    opts: ReadOptions,
+) -> GltfResult<(Container, Vec<MeshInstance>, Vec<AnimationInfo>)> {
+    let c = container::read(path, opts)?;
     let (inst, anims) = instances_of(path, &c)?;
     Ok((c, inst, anims))
 }
@@ -181,13 +202,13 @@ fn pick_face(
 
 /// Load the rig at `path` and choose its face and animation.
 pub fn load(path: &Path, opts: &LoadOptions) -> GltfResult<Rig> {
-    let c = container::read(path)?;
+    let c = container::read(path, opts.read())?;
     load_container(path, c, opts)
 }
 
 /// Load a rig from bytes that came from `path` (which names errors and anchors relative URIs).
 pub fn load_bytes(path: &Path, bytes: &[u8], opts: &LoadOptions) -> GltfResult<Rig> {
-    let c = container::parse(path, bytes)?;
+    let c = container::parse(path, bytes, opts.read())?;
     load_container(path, c, opts)
 }
 

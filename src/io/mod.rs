@@ -21,6 +21,7 @@ pub mod parts;
 pub mod scene;
 pub mod split;
 pub mod units;
+pub mod uri;
 
 pub use error::{GltfError, GltfResult};
 pub use load::{load, LoadOptions, Rig};

@@ -541,8 +541,8 @@ pub fn check_file(
     let skin = rig.parts.parts.iter().filter(|p| p.skin);
     let face_mesh = LoadOptions {
         mesh: Some(written.mesh.to_string()),
-        animation: None,
         skin_primitives: Some(skin.map(|p| PrimitivePick::Index(p.primitive)).collect()),
+        ..Default::default()
     };
     let back = load_bytes(&rig.path, &written.bytes, &face_mesh)
         .context("furrow cannot read back the file it wrote")?;
