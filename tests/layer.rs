@@ -348,8 +348,8 @@ fn check_rig_kept(rig: &Rig, out: &RunOutput, back: &Rig, w: &Written) {
     // its chart (the left half's u in [0, ½], the right's in [1½, 2]).
     let uv = back.face_attribute("TEXCOORD_0").unwrap();
     let mut seam = [0, 0];
-    for (r, &(first, count)) in face.primitive_ranges.iter().enumerate() {
-        for i in first..first + count {
+    for (r, span) in face.primitives.iter().enumerate() {
+        for i in span.vertices() {
             let p = face.positions[i];
             let (u, v) = (uv.data[2 * i], uv.data[2 * i + 1]);
             assert!(

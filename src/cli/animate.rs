@@ -160,6 +160,9 @@ pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
         }
     })?;
     pb.finish_and_clear();
+    if let Some(o) = &run.report.out_of_model {
+        o.summary().iter().for_each(|l| out.note(l));
+    }
     for w in &run.report.warnings {
         out.note(format!("warning: {w}"));
     }

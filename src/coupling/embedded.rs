@@ -341,6 +341,17 @@ impl EmbeddedShell {
         Ok(())
     }
 
+    /// Put the skin back at its rest shape and its solver back to a new one's history (the
+    /// sparsity analysis is kept): the next solve is the first from rest.
+    pub fn reset_to_rest(&mut self) {
+        for (x, p) in self.x.chunks_exact_mut(3).zip(&self.shell.rest.positions) {
+            x.copy_from_slice(&[p.x, p.y, p.z]);
+        }
+        self.solver.forget_solves();
+        self.last_flat = false;
+        self.last_bq.clear();
+    }
+
     /// Pin skin vertices: they then follow the embedded surface B q exactly (all three
     /// coordinates), e.g. where the skin is glued to bone.
     pub fn set_pinned(&mut self, vertices: &[usize]) -> anyhow::Result<()> {

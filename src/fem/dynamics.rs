@@ -734,6 +734,16 @@ pub struct BackwardEuler {
 }
 
 impl BackwardEuler {
+    /// Put the interior back at rest at positions `q0` (flat, m), with zero velocity at time
+    /// zero and no warm start or factor from earlier steps.
+    pub fn reset_to_rest(&mut self, q0: &[f64]) {
+        self.q.copy_from_slice(q0);
+        self.v.iter_mut().for_each(|v| *v = 0.0);
+        self.time = 0.0;
+        self.last_direction = None;
+        self.factor_coefs = None;
+    }
+
     /// A stepper starting at rest at positions `q0` (flat, m) with `pinned` nodes.
     pub fn new(
         interior: Interior,

@@ -483,3 +483,162 @@ impl DisjointSets {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::mesh::{PrimitiveSpan, VertexTransform};
+    use crate::io::model::MorphTarget;
+    use crate::mesh::TriMesh;
+    use nalgebra::Matrix4;
+    use serde_json::json;
+
+    /// A face mesh of `parts` (mesh, whether its shape moves it) as one instance, one
+    /// primitive each, with one morph target.
+    fn face_of(parts: &[(TriMesh, bool)]) -> MeshInstance {
+        let (mut positions, mut triangles, mut spans, mut lift) = (vec![], vec![], vec![], vec![]);
+        for (j, (m, moved)) in parts.iter().enumerate() {
+            let first = positions.len();
+            spans.push(PrimitiveSpan {
+                json: j,
+                first,
+                count: m.positions.len(),
+            });
+            positions.extend(&m.positions);
+            triangles.extend(m.triangles.iter().map(|t| t.map(|v| v + first)));
+            let d = if *moved { 0.01 } else { 0.0 };
+            lift.extend(m.positions.iter().map(|_| Vector3::new(0.0, 0.0, d)));
+        }
+        MeshInstance {
+            node: 0,
+            mesh: 0,
+            name: "face".into(),
+            positions,
+            normals: None,
+            triangles,
+            targets: vec![MorphTarget {
+                name: "lift".into(),
+                positions: lift,
+                normals: None,
+            }],
+            default_weights: vec![0.0],
+            to_world: VertexTransform::Node(Matrix4::identity()),
+            primitives: spans,
+            skipped_primitives: 0,
+        }
+    }
+
+    /// An n × n vertex grid `size` wide (m) in the z = 0 plane, its corner at `at`.
+    fn sheet(n: usize, size: f64, at: Vector3<f64>) -> TriMesh {
+        let h = size / (n - 1) as f64;
+        let p = (0..n * n)
+            .map(|i| at + Vector3::new((i % n) as f64 * h, (i / n) as f64 * h, 0.0))
+            .collect();
+        let mut t = Vec::new();
+        for j in 0..n - 1 {
+            for i in 0..n - 1 {
+                let a = j * n + i;
+                t.push([a, a + 1, a + n + 1]);
+                t.push([a, a + n + 1, a + n]);
+            }
+        }
+        TriMesh::new(p, t)
+    }
+
+    fn cube(a: f64, at: Vector3<f64>) -> TriMesh {
+        let mut m = crate::mesh::cube_mesh(a, 2);
+        m.positions.iter_mut().for_each(|p| *p += at);
+        m
+    }
+
+    /// Skin (a sheet the shape moves) split in two primitives along a seam, an eyeball (a
+    /// closed cube apart), teeth (a small open sheet apart) and a lash card (alpha-blended).
+    fn avatar_face() -> (MeshInstance, serde_json::Value, serde_json::Value) {
+        let left = sheet(9, 0.2, Vector3::zeros());
+        let right = sheet(9, 0.2, Vector3::new(0.2, 0.0, 0.0));
+        let parts = [
+            (left, true),
+            (right, true),
+            (cube(0.02, Vector3::new(0.0, 0.0, -0.05)), true),
+            (sheet(3, 0.03, Vector3::new(0.0, -0.05, -0.05)), true),
+            (sheet(3, 0.03, Vector3::new(0.0, 0.05, 0.02)), true),
+        ];
+        let mesh = json!({ "primitives": [
+            { "material": 0 }, { "material": 0 }, { "material": 1 }, { "material": 2 },
+            { "material": 3 }, { "material": 3, "mode": 1 } ] });
+        let materials = json!([
+            { "name": "skin" }, { "name": "eye" }, { "name": "teeth" },
+            { "name": "lashes", "alphaMode": "BLEND" } ]);
+        (face_of(&parts), mesh, materials)
+    }
+
+    #[test]
+    fn skin_eyes_teeth_and_cards_are_told_apart() {
+        let (face, mesh, materials) = avatar_face();
+        let parts = classify(&face, &mesh, &materials, None).unwrap();
+        let reasons: Vec<PartReason> = parts.parts.iter().map(|p| p.reason).collect();
+        assert_eq!(
+            reasons,
+            vec![
+                PartReason::LargestMoved,
+                PartReason::LargestMoved,
+                PartReason::ClosedApart,
+                PartReason::OpenApart,
+                PartReason::AlphaBlend,
+                PartReason::NotTriangles,
+            ]
+        );
+        assert_eq!(parts.skin_spans(&face), vec![true, true, false, false, false]);
+        assert_eq!(parts.riding().count(), 4);
+        let said = parts.summary();
+        assert!(said.contains("1 (skin)") && said.contains("4 (lashes)"), "{said}");
+    }
+
+    #[test]
+    fn a_large_open_surface_the_shapes_move_is_skin_too() {
+        let parts = [
+            (sheet(9, 0.2, Vector3::zeros()), true),
+            (sheet(9, 0.15, Vector3::new(1.0, 0.0, 0.0)), true),
+            (sheet(9, 0.15, Vector3::new(2.0, 0.0, 0.0)), false),
+        ];
+        let face = face_of(&parts);
+        let mesh = json!({ "primitives": [{}, {}, {}] });
+        let p = classify(&face, &mesh, &json!([]), None).unwrap();
+        let reasons: Vec<PartReason> = p.parts.iter().map(|p| p.reason).collect();
+        assert_eq!(
+            reasons,
+            vec![
+                PartReason::LargestMoved,
+                PartReason::LargeOpen,
+                PartReason::OpenApart
+            ]
+        );
+    }
+
+    #[test]
+    fn a_list_picks_the_skin_by_index_or_material_and_names_what_it_lacks() {
+        let (face, mesh, materials) = avatar_face();
+        let picks = parse_picks("0, teeth").unwrap();
+        assert_eq!(
+            picks,
+            vec![
+                PrimitivePick::Index(0),
+                PrimitivePick::Material("teeth".into())
+            ]
+        );
+        let p = classify(&face, &mesh, &materials, Some(&picks)).unwrap_or_else(|e| panic!("{e}"));
+        let skin: Vec<usize> = p
+            .parts
+            .iter()
+            .filter(|p| p.skin)
+            .map(|p| p.primitive)
+            .collect();
+        assert_eq!(skin, vec![0, 3]);
+        assert_eq!(p.parts[1].reason, PartReason::NotChosen);
+        let e = classify(&face, &mesh, &materials, Some(&parse_picks("7").unwrap())).unwrap_err();
+        assert!(e.contains("primitive 7") && e.contains("3 (teeth)"), "{e}");
+        let e = classify(&face, &mesh, &materials, Some(&parse_picks("5").unwrap())).unwrap_err();
+        assert!(e.contains("no primitive of the face"), "{e}");
+        assert!(parse_picks(" , ").is_err());
+    }
+}

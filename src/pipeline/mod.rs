@@ -89,20 +89,6 @@ pub struct RunOutput {
 /// Progress callback: (stage, done, total).
 pub type Progress<'a> = &'a dyn Fn(&str, usize, usize);
 
-/// A still rig's state for its next shape, solved alone from rest: set up afresh, keeping
-/// `old`'s muscles (reset to rest) rather than making them again.
-fn fresh_state(rig: &Rig, scene: &Scene, plan: &Plan, old: State) -> anyhow::Result<State> {
-    let muscles = old.muscles.map(|mut m| {
-        m.reset();
-        m
-    });
-    let mut plan = plan.clone();
-    plan.driver = plan::Driver::Tracking;
-    let mut state = setup::set_up(rig, scene, &mut plan, &mut Log::default(), &|_, _, _| {})?.1;
-    state.muscles = muscles;
-    Ok(state)
-}
-
 /// Run the pipeline on a loaded rig: plan, set up, step every frame, report.
 pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<RunOutput> {
     let wall = Instant::now();
@@ -121,15 +107,26 @@ pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<R
     let mut totals = Totals::default();
     let end = plan.range.end;
     // A clip's history leads to its first written frame; a still rig's shapes are each
-    // solved alone, from rest (a fresh state per shape).
+    // solved alone, from rest (the state put back at rest for each), and only those that
+    // compress some skin.
     let first = if plan.animated { 0 } else { plan.range.start };
+    let mut at_rest = true;
     for k in first..end {
         progress("frames", k, end);
-        if !plan.animated && k > first {
-            state = fresh_state(rig, scene, &plan, state)?;
+        let w = &plan.weights[k];
+        if !plan.animated && !model.pose_maps.solves(k) {
+            let why = (plan.fps, record::NotSimulated::CompressesNothing);
+            let (record, composed) = step::unsimulated_frame(rig, w, k, &model, why)?;
+            per_frame.push(record);
+            out.wrinkled.push(composed.wrinkled);
+            out.smooth.push(composed.target);
+            continue;
+        }
+        if !plan.animated && !at_rest {
+            state.reset_to_rest(&model);
             scratch = Scratch::new(model.lattice.node_count());
         }
-        let w = &plan.weights[k];
+        at_rest = false;
         let (record, composed) =
             step::step_frame(rig, w, k, &model, &mut state, &mut scratch, options)?;
         totals.add(&record);
@@ -343,6 +340,8 @@ fn finish_report(
             .and_then(|m| m.jaw.clone())
             .or_else(|| jaw_hinge(face)),
         export: None,
+        face_parts: (rig.parts.parts.len() > 1).then(|| rig.parts.clone()),
+        out_of_model: (!model.outside.regions.is_empty()).then(|| model.outside.clone()),
     }
 }
 

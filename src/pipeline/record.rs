@@ -74,6 +74,10 @@ pub struct StageRecord {
     /// Skin: where the wall time went (ms), when the stage solved anything.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub time: Option<SolveTime>,
+    /// Skin: vertices pinned to the interior in this frame because the solved skin passed
+    /// through itself there (that skin is outside the model and follows the blend shape).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub crossing_pins: usize,
 }
 
 impl StageRecord {
@@ -87,6 +91,7 @@ impl StageRecord {
         self.factorizations += later.factorizations;
         self.patch_factorizations += later.patch_factorizations;
         self.linear_solves += later.linear_solves;
+        self.crossing_pins += later.crossing_pins;
         self.time = match (self.time, later.time) {
             (Some(mut a), Some(b)) => {
                 a.add(&b);
@@ -161,6 +166,18 @@ pub struct FrameRecord {
     /// measured on the interior), when muscles turn a jaw bone.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub jaw_deg: Option<f64>,
+    /// Why the frame was not simulated, when it was not (its surface is the blend shape).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub not_simulated: Option<NotSimulated>,
+}
+
+/// Why a frame (a still rig's shape) was not simulated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NotSimulated {
+    /// The shape compresses no skin in the model past the wrinkling threshold: it cannot
+    /// wrinkle, and gets no corrective.
+    CompressesNothing,
 }
 
 /// What a muscle-driven frame's fit status says when tracking drove the frame instead.
@@ -271,6 +288,14 @@ pub struct RunReport {
     /// (filled by the export; absent for the frame-sequence form).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub export: Option<super::layer::LayerReport>,
+    /// The face mesh's primitives: which are skin and which ride along unchanged, and why
+    /// (absent for a face of one primitive).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub face_parts: Option<crate::io::parts::FaceParts>,
+    /// The poses that leave the skin's model (folds, crossings, collapsed triangles): per
+    /// pose, the area that followed the blend shape and why (absent when none does).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub out_of_model: Option<super::setup::outside::OutOfModel>,
 }
 
 impl RunReport {

@@ -145,6 +145,10 @@ pub fn scatter_element_hessians(
     for colour in &colouring.colours {
         colour.par_iter().with_min_len(64).for_each(|&e| {
             let e = e as usize;
+            // An element whose dofs are all pinned adds nothing: its block is not computed.
+            if slot[e * per..(e + 1) * per].iter().all(|&s| s == NO_SLOT) {
+                return;
+            }
             let mut h = [0.0; 144];
             block(e, &mut h[..len]);
             if project {

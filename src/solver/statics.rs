@@ -588,6 +588,23 @@ impl StaticSolver {
         self.fresh_next = true;
     }
 
+    /// Forget every solve so far, keeping only what is independent of them (the sparsity
+    /// layout, its symbolic analysis and patches): the next solve starts as a new solver's
+    /// first would (γ from its first Hessian, no multipliers, no lagged factor, no predictor).
+    pub fn forget_solves(&mut self) {
+        self.gamma = None;
+        self.multipliers.clear();
+        self.last_shift = 0.0;
+        self.last_x.clear();
+        self.last_gradient = None;
+        self.last_pinned.clear();
+        self.lag_layout = None;
+        self.seen_indefinite = false;
+        self.expect_indefinite = false;
+        self.fresh_next = false;
+        self.lag_last_iterations = 0;
+    }
+
     /// Number of symbolic analyses done so far (1 while the problem's structure is fixed).
     pub fn symbolic_analyses(&self) -> usize {
         self.kkt.symbolic_count

@@ -68,6 +68,10 @@ pub struct Model {
     pub skin_stiffness: skin::Stiffness,
     /// The head's motion the interior feels as inertial forces, when the rig's face node moves.
     pub head_motion: Option<crate::pipeline::plan::HeadMotion>,
+    /// Where each pose leaves the skin's model (that skin follows the blend shape there).
+    pub outside: outside::OutOfModel,
+    /// How a pose's region reaches the simulated skin's pins.
+    pub pose_maps: outside::PoseMaps,
 }
 
 impl Model {
@@ -94,6 +98,23 @@ pub struct State {
     /// The welded target of the last frame stepped (m): sub-steps of the next frame move
     /// the target from it to that frame's, so a shorter step is also a smaller load step.
     pub last_target: Option<Vec<nalgebra::Vector3<f64>>>,
+}
+
+impl State {
+    /// Put the state back at rest for `model` (a still rig's next shape is solved alone from
+    /// rest): the interior at its rest positions, the skin at its rest shape with a fresh
+    /// solver history, the muscles at rest, no last target. What only speeds up solves (the
+    /// sparsity patterns and their analyses) is kept.
+    pub fn reset_to_rest(&mut self, model: &Model) {
+        self.interior.reset_to_rest(&model.lattice.rest_flat());
+        if let Some(skin) = self.skin.as_mut() {
+            skin.reset_to_rest();
+        }
+        if let Some(m) = self.muscles.as_mut() {
+            m.reset();
+        }
+        self.last_target = None;
+    }
 }
 
 /// The run's log: each stage's record in the order they were planned, and the warnings.
@@ -149,7 +170,9 @@ pub fn set_up(
         lambda: plan.skin.lambda,
         path: &path,
     };
-    let compressed = selection.is_none_or(|sel| sel.simulated.contains(&true));
+    let compressed = selection
+        .as_ref()
+        .is_none_or(|sel| sel.simulated.contains(&true));
     let (mut simulated, left_out) = simulated_skin(&input, region.as_deref(), compressed, log)?;
     progress("setup", 3, 4);
     let stepper = interior::stepper(&lattice, scene, plan)?;
@@ -204,6 +227,14 @@ pub fn set_up(
     };
     log.stages.push(interior::record(plan, &stepper));
     log.stages.extend(records);
+    let pose_maps = outside::PoseMaps {
+        static_pins: simulated
+            .as_ref()
+            .map_or_else(Vec::new, |s| s.shell.pinned().to_vec()),
+        shell_of_refined: shell_of_refined(simulated.as_ref(), refined.mesh.positions.len()),
+        welded_of_refined: refined.ancestor.iter().map(|a| a.triangle as u32).collect(),
+        active: selection.map_or_else(Vec::new, |s| s.per_pose),
+    };
     let (skin, sim_vertices, sigma) = match simulated {
         Some(s) => (Some(s.shell), s.vertices, s.sigma),
         None => (None, Vec::new(), f64::NAN),
@@ -232,6 +263,8 @@ pub fn set_up(
         left_out,
         skin_stiffness,
         head_motion: plan.head_motion.clone(),
+        outside,
+        pose_maps,
     };
     let state = State {
         interior: stepper,
@@ -240,6 +273,17 @@ pub fn set_up(
         last_target: None,
     };
     Ok((model, state))
+}
+
+/// The shell vertex of each of `count` refined vertices (`u32::MAX` where not simulated).
+fn shell_of_refined(simulated: Option<&skin::SimulatedSkin>, count: usize) -> Vec<u32> {
+    let mut of = vec![u32::MAX; count];
+    if let Some(s) = simulated {
+        for (i, &v) in s.vertices.iter().enumerate() {
+            of[v] = i as u32;
+        }
+    }
+    of
 }
 
 /// What the interior carries besides its elasticity, as the muscles' fit sees it: the
@@ -353,7 +397,11 @@ pub(crate) mod test_support {
             }],
             default_weights: vec![0.0],
             to_world: VertexTransform::Node(Matrix4::identity()),
-            primitive_ranges: vec![(0, mesh.positions.len())],
+            primitives: vec![crate::io::mesh::PrimitiveSpan {
+                json: 0,
+                first: 0,
+                count: mesh.positions.len(),
+            }],
             skipped_primitives: 0,
             positions: mesh.positions,
             triangles: mesh.triangles,

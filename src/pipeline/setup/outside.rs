@@ -183,12 +183,94 @@ impl OutOfModel {
     }
 }
 
+/// How a pose's region reaches the simulated skin and the export: the shell's own pins
+/// (slits, degenerate corners, the selection's border), and for each refined triangle its
+/// welded ancestor and each refined vertex its shell vertex.
+#[derive(Debug, Clone, Default)]
+pub struct PoseMaps {
+    /// Shell vertices pinned in every pose (sorted).
+    pub static_pins: Vec<usize>,
+    /// Shell vertex of each refined vertex (`u32::MAX` where not simulated).
+    pub shell_of_refined: Vec<u32>,
+    /// Welded triangle of each refined triangle.
+    pub welded_of_refined: Vec<u32>,
+    /// Per pose of a still rig, the welded triangles it alone can wrinkle (compressed
+    /// beyond the threshold, grown by the margin): the skin elsewhere is pinned in that
+    /// pose. Empty for a clip, whose frames share their history.
+    pub active: Vec<Vec<bool>>,
+}
+
+impl PoseMaps {
+    /// The shell vertices pinned in `pose`: the static pins and those on refined triangles
+    /// of the pose's region or, for a still rig, outside what the pose can wrinkle (sorted,
+    /// each once).
+    pub fn pins(&self, outside: &OutOfModel, refined: &TriMesh, pose: usize) -> Vec<usize> {
+        let region = outside.region(pose);
+        let active = self.active.get(pose);
+        if region.is_none() && active.is_none() {
+            return self.static_pins.clone();
+        }
+        let welded = self.welded_of_refined.iter().max().map_or(0, |&t| t as usize + 1);
+        let mut held = vec![false; welded];
+        if let Some(a) = active {
+            held.iter_mut().zip(a).for_each(|(h, &a)| *h = !a);
+        }
+        for &t in region.map_or(&[][..], |r| &r.triangles) {
+            held[t] = true;
+        }
+        let mut pins = self.static_pins.clone();
+        for (t, tri) in refined.triangles.iter().enumerate() {
+            if held[self.welded_of_refined[t] as usize] {
+                let shell = tri.iter().map(|&v| self.shell_of_refined[v]);
+                pins.extend(shell.filter(|&s| s != u32::MAX).map(|s| s as usize));
+            }
+        }
+        pins.sort_unstable();
+        pins.dedup();
+        pins
+    }
+}
+
+impl PoseMaps {
+    /// Whether `pose` needs a skin solve: a still rig's shape that compresses no skin in the
+    /// model does not.
+    pub fn solves(&self, pose: usize) -> bool {
+        self.active.get(pose).is_none_or(|a| a.contains(&true))
+    }
+}
+
+/// The wrinkles' weight (0–1) at each refined vertex in `pose`, carried from the welded
+/// vertices' by the subdivision `target_of`; `None` where it is one everywhere.
+pub fn refined_fade(
+    outside: &OutOfModel,
+    target_of: &[Vec<(usize, f64)>],
+    pose: usize,
+) -> Option<Vec<f64>> {
+    let below = outside.fade(pose);
+    if below.is_empty() {
+        return None;
+    }
+    let mut missing = std::collections::HashMap::with_capacity(below.len());
+    for &(v, w) in below {
+        missing.insert(v, 1.0 - w);
+    }
+    Some(
+        target_of
+            .iter()
+            .map(|o| {
+                let gone: f64 = o.iter().map(|(v, a)| a * missing.get(v).unwrap_or(&0.0)).sum();
+                (1.0 - gone).clamp(0.0, 1.0)
+            })
+            .collect(),
+    )
+}
+
 /// The `outside` stage: every pose of `plan` judged on the `welded` skin, with a margin of
-/// the thickest skin's wavelength; its record.
+/// the thinnest skin's wavelength; its record.
 pub fn find(rig: &Rig, plan: &Plan, welded: &Welded) -> (OutOfModel, StagePlan) {
     let t = Instant::now();
     let mesh = &welded.mesh;
-    let margin = plan.skin.lambda_max;
+    let margin = plan.skin.lambda;
     let judge = Judge::new(mesh);
     let count = mesh.positions.len();
     let found: Vec<(PoseRegion, Vec<bool>)> = plan
@@ -465,8 +547,8 @@ mod tests {
         let rest = bump_sheet(5);
         let judge = Judge::new(&rest);
         let mut pose = rest.positions.clone();
-        // Move vertex 6 onto vertex 0's line to 12: the triangles at it collapse.
-        let [a, b] = [rest.positions[0], rest.positions[12]];
+        // Move vertex 6 onto the edge from vertex 0 to 1: triangle (0, 1, 6) collapses.
+        let [a, b] = [rest.positions[0], rest.positions[1]];
         pose[6] = 0.5 * (a + b);
         let (r, _) = judge.region(0, &pose, 0.001).expect("collapsed");
         assert!(r.degenerate_triangles > 0, "{r:?}");

@@ -63,26 +63,29 @@ pub fn smaller_stretch(rest: [Vector3<f64>; 3], now: [Vector3<f64>; 3]) -> f64 {
 
 /// Largest compression 1 − s_min of each triangle of `rest` over `poses` (positions of the
 /// same vertices, m), leaving out in each pose the triangles `outside` it (per pose, per
-/// triangle; `None`: none); 0 where no pose compresses it. Also, per pose, its own largest
-/// compression.
+/// triangle; `None`: none); 0 where no pose compresses it. Also, per pose, the triangles it
+/// compresses beyond `threshold`.
 pub fn largest_compression<P: AsRef<[Vector3<f64>]>>(
     rest: &TriMesh,
     poses: impl IntoIterator<Item = (P, Option<Vec<bool>>)>,
-) -> (Vec<f64>, Vec<f64>) {
+    threshold: f64,
+) -> (Vec<f64>, Vec<Vec<usize>>) {
     let mut worst = vec![0.0f64; rest.triangles.len()];
     let mut per_pose = Vec::new();
     for (pose, outside) in poses {
         let pose = pose.as_ref();
-        let mut most = 0.0f64;
+        let mut beyond = Vec::new();
         for (t, tri) in rest.triangles.iter().enumerate() {
             if outside.as_ref().is_some_and(|o| o[t]) {
                 continue;
             }
             let s = smaller_stretch(tri.map(|v| rest.positions[v]), tri.map(|v| pose[v]));
             worst[t] = worst[t].max(1.0 - s);
-            most = most.max(1.0 - s);
+            if 1.0 - s > threshold {
+                beyond.push(t);
+            }
         }
-        per_pose.push(most);
+        per_pose.push(beyond);
     }
     (worst, per_pose)
 }
@@ -123,21 +126,22 @@ pub struct Selection {
     pub threshold: f64,
     /// Fraction of the skin's rest area simulated (0–1).
     pub area_fraction: f64,
-    /// Per pose: whether it compresses some triangle in the model beyond the threshold (a
-    /// still rig's shape that does not needs no solve).
-    pub pose_compresses: Vec<bool>,
+    /// Per pose: the triangles it compresses beyond the threshold (in the model), grown by
+    /// the margin: where that pose alone can wrinkle (a still rig's shape is solved there
+    /// only, and not at all when it is empty).
+    pub per_pose: Vec<Vec<bool>>,
 }
 
 /// Select the triangles of `rest` compressed beyond `threshold` in some pose (leaving out
 /// each pose's triangles outside the model, as [`largest_compression`]), grown by `margin`
-/// (m).
+/// (m); with `each_pose`, also each pose's own ([`Selection::per_pose`], else empty).
 pub fn select_compressed<P: AsRef<[Vector3<f64>]>>(
     rest: &TriMesh,
     poses: impl IntoIterator<Item = (P, Option<Vec<bool>>)>,
-    threshold: f64,
-    margin: f64,
+    (threshold, margin): (f64, f64),
+    each_pose: bool,
 ) -> Selection {
-    let (compression, per_pose) = largest_compression(rest, poses);
+    let (compression, beyond) = largest_compression(rest, poses, threshold);
     let seed: Vec<bool> = compression.iter().map(|&c| c > threshold).collect();
     let simulated = grow(rest, &seed, margin);
     let area = |t: usize| rest.triangle_area(t);
@@ -151,7 +155,19 @@ pub fn select_compressed<P: AsRef<[Vector3<f64>]>>(
         compression,
         threshold,
         area_fraction: if total > 0.0 { kept / total } else { 0.0 },
-        pose_compresses: per_pose.iter().map(|&c| c > threshold).collect(),
+        per_pose: beyond
+            .iter()
+            .filter(|_| each_pose)
+            .map(|b| {
+                let mut seed = vec![false; rest.triangles.len()];
+                b.iter().for_each(|&t| seed[t] = true);
+                if b.is_empty() {
+                    seed
+                } else {
+                    grow(rest, &seed, margin)
+                }
+            })
+            .collect(),
     }
 }
 
@@ -186,7 +202,7 @@ pub fn select_skin(
         (weld_positions(&rig.blend(w), &welded.of_loaded, count), region)
     });
     let margin = plan.skin.lambda_max;
-    let s = select_compressed(&welded.mesh, poses, threshold, margin);
+    let s = select_compressed(&welded.mesh, poses, (threshold, margin), !plan.animated);
     let why = format!(
         "{:.1} % of the skin's area simulated: compressed beyond {:.2} % (ε_c = {:.2} %) in some of {} {}, plus a margin of λ = {:.1} mm; the rest follows the blend shapes",
         // max: an empty selection's fraction can be −0.0 in round-off.
@@ -249,7 +265,7 @@ mod tests {
             .iter()
             .map(|p| Vector3::new(if p.x < 0.0 { 0.95 * p.x } else { 1.05 * p.x }, p.y, p.z))
             .collect();
-        let s = select_compressed(&rest, [(pose, None)], 0.01, 0.004);
+        let s = select_compressed(&rest, [(pose, None)], (0.01, 0.004), false);
         for (t, tri) in rest.triangles.iter().enumerate() {
             let cx = tri.iter().map(|&v| rest.positions[v].x).sum::<f64>() / 3.0;
             if cx < 0.0 {

@@ -30,13 +30,18 @@ pub struct SurfaceMaps<'a> {
     pub sim_vertices: &'a [usize],
 }
 
-/// The frame's surfaces from the welded target (m), node positions `q` (flat, m) and the
-/// skin's positions `x` (flat per shell vertex, m; `None` without a simulated skin).
+/// The state a frame's surfaces are composed from: node positions `q` (flat, m), the skin's
+/// positions `x` (flat per shell vertex, m; `None` without a simulated skin) and the
+/// wrinkles' weight per export vertex (0–1; `None`: one everywhere), below one about skin
+/// outside the model ([`crate::pipeline::setup::outside`]).
+pub type ComposeState<'a> = (&'a [f64], Option<&'a [f64]>, Option<&'a [f64]>);
+
+/// The frame's surfaces from the welded target (m) and the state `(q, x, fade)`: the target
+/// plus the wrinkles x − B q weighted by the fade.
 pub fn compose(
     maps: SurfaceMaps,
     welded_target: &[Vector3<f64>],
-    q: &[f64],
-    x: Option<&[f64]>,
+    (q, x, fade): ComposeState,
     simulated_surface: bool,
     k: usize,
 ) -> anyhow::Result<Composed> {
@@ -53,11 +58,15 @@ pub fn compose(
         for (i, &v) in maps.sim_vertices.iter().enumerate() {
             let xv = Vector3::new(x[3 * i], x[3 * i + 1], x[3 * i + 2]);
             let detail = xv - embedded[v];
-            depth_max = depth_max.max(detail.norm());
+            let (shown, kept) = match fade {
+                None => (xv, detail),
+                Some(f) => (embedded[v] + detail * f[v], detail * f[v]),
+            };
+            depth_max = depth_max.max(kept.norm());
             out[v] = if simulated_surface {
-                xv
+                shown
             } else {
-                target[v] + detail
+                target[v] + kept
             };
         }
     }
@@ -116,18 +125,18 @@ mod tests {
         let welded = [Vector3::new(0.0, 0.0, 0.0), Vector3::new(2.0, 0.0, 0.0)];
         let q = [0.5, 0.0, 0.0];
         let x = [0.5, 0.0, 0.003];
-        let c = compose(maps, &welded, &q, Some(&x), false, 0).unwrap();
+        let c = compose(maps, &welded, (&q, Some(&x), None), false, 0).unwrap();
         assert_eq!(c.target, vec![welded[0], Vector3::new(1.0, 0.0, 0.0)]);
         assert_eq!(c.wrinkled, vec![welded[0], Vector3::new(1.0, 0.0, 0.003)]);
         assert!((c.depth_max - 0.003).abs() < 1e-15);
         // B q stands at x = 0.5 for both: 0.5 m from the first target, 0.5 m from the second.
         assert!((c.shape_miss - 0.5).abs() < 1e-15, "{}", c.shape_miss);
-        let s = compose(maps, &welded, &q, Some(&x), true, 0).unwrap();
+        let s = compose(maps, &welded, (&q, Some(&x), None), true, 0).unwrap();
         assert_eq!(
             s.wrinkled,
             vec![Vector3::new(0.5, 0.0, 0.0), Vector3::new(0.5, 0.0, 0.003)]
         );
-        let bad = compose(maps, &welded, &[f64::NAN, 0.0, 0.0], None, true, 7);
+        let bad = compose(maps, &welded, (&[f64::NAN, 0.0, 0.0], None, None), true, 7);
         assert!(bad
             .unwrap_err()
             .to_string()

@@ -11,8 +11,8 @@ pub mod interior;
 pub mod skin;
 
 use super::plan::SkinHold;
-use super::record::{FrameRecord, StageRecord};
-use super::setup::{Model, State};
+use super::record::{FrameRecord, NotSimulated, StageRecord};
+use super::setup::{outside, Model, State};
 use crate::io::load::Rig;
 use crate::math::vector::{dot, norm};
 use compose::{Composed, SurfaceMaps};
@@ -132,6 +132,14 @@ pub fn step_to_target(
     scratch: &mut Scratch,
     options: StepOptions,
 ) -> anyhow::Result<(FrameRecord, Composed)> {
+    if let Some(skin) = state.skin.as_mut() {
+        let pins = model
+            .pose_maps
+            .pins(&model.outside, &model.skin_mesh, k);
+        if pins != skin.pinned() {
+            skin.set_pinned(&pins)?;
+        }
+    }
     let mut fit = match state.muscles.as_mut() {
         Some(m) => Some(drive::fit_activations(m, target)?),
         None => None,
@@ -139,11 +147,11 @@ pub fn step_to_target(
     let (interior, shell) = advance_driven(model, state, scratch, options, target, k, &mut fit)?;
     let q = &state.interior.q;
     let x = state.skin.as_ref().map(|s| s.x());
+    let fade = outside::refined_fade(&model.outside, &model.target_of, k);
     let composed = compose::compose(
         model.surface_maps(),
         target,
-        q,
-        x,
+        (q, x, fade.as_deref()),
         options.simulated_surface,
         k,
     )?;
@@ -161,6 +169,39 @@ pub fn step_to_target(
             .as_ref()
             .and_then(|m| m.fitter.forward.bone.as_ref())
             .map(|(_, bone)| bone.angle_of(q).to_degrees()),
+        not_simulated: None,
+    };
+    Ok((record, composed))
+}
+
+/// Frame `k` with morph `weights` not simulated (`why`): its surface is the blend shape on
+/// the refined skin, without wrinkles.
+pub fn unsimulated_frame(
+    rig: &Rig,
+    weights: &[f64],
+    k: usize,
+    model: &Model,
+    (fps, why): (f64, NotSimulated),
+) -> anyhow::Result<(FrameRecord, Composed)> {
+    let welded = blend::blend_frame(rig, weights, &model.welded_of_loaded, model.welded_count, k)?;
+    let target = compose::carry(&model.target_of, &welded);
+    let record = FrameRecord {
+        frame: k,
+        time_s: k as f64 / fps,
+        fit: None,
+        interior: None,
+        shell: None,
+        wrinkle_depth_max_m: 0.0,
+        shape_miss_m: 0.0,
+        shape_motion_m: compose::rms_distance(&target, &model.skin_mesh.positions),
+        jaw_deg: None,
+        not_simulated: Some(why),
+    };
+    let composed = Composed {
+        wrinkled: target.clone(),
+        target,
+        depth_max: 0.0,
+        shape_miss: 0.0,
     };
     Ok((record, composed))
 }
@@ -325,7 +366,7 @@ fn advance_coupled(
     let start = start.filter(|_| passes > 1);
     let mut interior = interior::advance(model, state, scratch, schedule, target, k, None)?;
     let first_loosening = if start.is_some() { PASS_LOOSENING } else { 1.0 };
-    let mut shell = solve_skin_on_interior(state, first_loosening, false)?;
+    let mut shell = solve_skin_on_interior(model, state, first_loosening, false)?;
     let Some(start) = start else {
         return Ok((interior, shell));
     };
@@ -359,7 +400,7 @@ fn advance_coupled(
         let moved = shell.as_ref().is_some_and(|s| s.iterations > 0);
         if let (Some(s), Some(p)) = (
             shell.as_mut(),
-            solve_skin_on_interior(state, loosening, moved)?,
+            solve_skin_on_interior(model, state, loosening, moved)?,
         ) {
             s.then(p);
         }
@@ -391,6 +432,7 @@ fn aitken(omega: f64, last: &[f64], now: &[f64]) -> f64 {
 /// The skin's statics on the interior's current positions, when a skin is simulated, at
 /// `loosening` times its tolerance ([`skin::solve_skin`]).
 fn solve_skin_on_interior(
+    model: &Model,
     state: &mut State,
     loosening: f64,
     moved_unchecked: bool,
@@ -399,8 +441,8 @@ fn solve_skin_on_interior(
         Some(skin) => Ok(Some(skin::solve_skin(
             skin,
             &state.interior.q,
-            loosening,
-            moved_unchecked,
+            (loosening, moved_unchecked),
+            model.outside.margin_m,
         )?)),
         None => Ok(None),
     }
@@ -671,7 +713,7 @@ mod tests {
                         .unwrap();
                 };
                 pass(&mut state, &mut scratch, None);
-                solve_skin_on_interior(&mut state, PASS_LOOSENING, false).unwrap();
+                solve_skin_on_interior(&model, &mut state, PASS_LOOSENING, false).unwrap();
                 let x = state.interior.q.clone();
                 if linear {
                     assert!(interior::linear_pass(
@@ -688,7 +730,7 @@ mod tests {
                     pass(&mut state, &mut scratch, Some(&x));
                 }
                 out.push((x, state.interior.q.clone()));
-                solve_skin_on_interior(&mut state, 1.0, true).unwrap();
+                solve_skin_on_interior(&model, &mut state, 1.0, true).unwrap();
             }
             out
         };

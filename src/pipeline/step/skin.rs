@@ -14,19 +14,80 @@
 //! crossings left out (103.9 s).
 
 use crate::coupling::embedded::EmbeddedShell;
-use crate::mesh::intersect::first_self_intersection_beyond;
+use crate::mesh::intersect::{first_self_intersection_beyond, self_intersections_beyond};
 use crate::pipeline::record::{SolveTime, StageRecord};
 use std::time::Instant;
 
 /// Solve the skin for node positions `q` (flat, m) at `loosening` times its statics'
 /// tolerance (1 for a frame's result) and record the statics' outcome; `moved_unchecked`:
 /// a loosened solve of the frame moved the skin since its last self-intersection check.
+/// A result that still passes the skin through itself has the crossing triangles and the
+/// skin within `margin` (m) of them pinned to the interior for this frame, and is solved
+/// again from where it started (up to [`CROSSING_RETRIES`] times): that skin is outside the
+/// model, which has no contact, and follows the blend shape.
 pub fn solve_skin(
+    skin: &mut EmbeddedShell,
+    q: &[f64],
+    (loosening, moved_unchecked): (f64, bool),
+    margin: f64,
+) -> anyhow::Result<StageRecord> {
+    let t = Instant::now();
+    let start = skin.x().to_vec();
+    let (mut record, mut crossing) = solve_once(skin, q, loosening, moved_unchecked)?;
+    let mut retries = 0;
+    while !crossing.is_empty() && retries < CROSSING_RETRIES {
+        retries += 1;
+        let before = skin.pinned().len();
+        let pins = pins_about(&skin.shell.rest, skin.pinned(), &crossing, margin);
+        record.crossing_pins += pins.len() - before;
+        skin.set_pinned(&pins)?;
+        skin.set_x(&start)?;
+        let (again, still) = solve_once(skin, q, loosening, true)?;
+        let pinned = record.crossing_pins;
+        record.then(again);
+        record.crossing_pins = pinned;
+        crossing = still;
+    }
+    record.ms = t.elapsed().as_secs_f64() * 1e3;
+    Ok(record)
+}
+
+/// Attempts at a frame's skin that pin more of it where it passes through itself.
+pub const CROSSING_RETRIES: usize = 3;
+
+/// `pinned` (sorted shell vertices) and every vertex of `rest` within `margin` (m) of a
+/// vertex of the `crossing` triangle pairs, sorted.
+fn pins_about(
+    rest: &crate::mesh::TriMesh,
+    pinned: &[usize],
+    crossing: &[(usize, usize)],
+    margin: f64,
+) -> Vec<usize> {
+    let mut seed = vec![false; rest.triangles.len()];
+    for &(a, b) in crossing {
+        seed[a] = true;
+        seed[b] = true;
+    }
+    let grown = crate::pipeline::setup::select::grow(rest, &seed, margin);
+    let mut pins = pinned.to_vec();
+    for (t, tri) in rest.triangles.iter().enumerate() {
+        if grown[t] {
+            pins.extend_from_slice(tri);
+        }
+    }
+    pins.sort_unstable();
+    pins.dedup();
+    pins
+}
+
+/// One solve of the skin ([`solve_skin`] without the retries): its record and, for a
+/// result, the pairs of shell triangles that pass through each other where B q does not.
+fn solve_once(
     skin: &mut EmbeddedShell,
     q: &[f64],
     loosening: f64,
     moved_unchecked: bool,
-) -> anyhow::Result<StageRecord> {
+) -> anyhow::Result<(StageRecord, Vec<(usize, usize)>)> {
     let t = Instant::now();
     // A loosened solve is not a result (its force only feeds the frame's next coupling
     // pass, whose exact solve checks where the skin ends).
@@ -55,10 +116,12 @@ pub fn solve_skin(
                 && first_self_intersection_beyond(&rest, skin.x(), Some(&bq)).is_some()
         }
     };
+    let mut crossing = Vec::new();
     if result && crossed {
         status = "self_intersecting".into();
+        crossing = self_intersections_beyond(&rest, skin.x(), Some(&bq));
     }
-    Ok(StageRecord {
+    let record = StageRecord {
         status,
         iterations: rep.iterations,
         residual: rep.residual,
@@ -79,5 +142,7 @@ pub fn solve_skin(
             solve_ms: rep.solve_s * 1e3,
             line_search_ms: rep.line_search_s * 1e3,
         }),
-    })
+        crossing_pins: 0,
+    };
+    Ok((record, crossing))
 }
