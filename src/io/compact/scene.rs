@@ -528,3 +528,110 @@ fn push_clip(cd: &mut CompactDocument, clip: &WeightClip, storage: Storage) {
     cd.doc.json["animations"] =
         json!([{ "name": clip.name, "samplers": samplers, "channels": channels }]);
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::load::{load_bytes, LoadOptions};
+    use std::path::Path;
+
+    /// A scene of one joint and a skinned two-triangle mesh with one target, and an unskinned
+    /// one-primitive mesh carrying the same target, driven together by a two-key clip.
+    fn square_scene() -> Scene {
+        let p = |x: f64, y: f64| Vector3::new(x, y, 0.0);
+        let mesh = TriMesh::new(
+            vec![p(0.0, 0.0), p(0.1, 0.0), p(0.1, 0.1), p(0.0, 0.1)],
+            vec![[0, 1, 2], [0, 2, 3]],
+        );
+        let target = MorphTarget {
+            name: "lift".into(),
+            positions: vec![
+                Vector3::zeros(),
+                Vector3::zeros(),
+                Vector3::z() * 0.01,
+                Vector3::zeros(),
+            ],
+            normals: None,
+        };
+        let prim = |skinned: bool| Primitive {
+            mesh: mesh.clone(),
+            normals: vec![Vector3::z(); 4],
+            uvs: vec![[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]],
+            targets: vec![target.clone()],
+            material: 0,
+            influences: skinned.then(|| vec![Influences::rigid(0); 4]),
+        };
+        let node = |name: &str, mesh: Option<usize>, skin: Option<usize>| Node {
+            name: name.into(),
+            mesh,
+            skin,
+            translation: if mesh.is_none() {
+                Vector3::y()
+            } else {
+                Vector3::zeros()
+            },
+            ..Node::default()
+        };
+        Scene {
+            nodes: vec![
+                node("joint", None, None),
+                node("a", Some(0), Some(0)),
+                node("b", Some(1), None),
+            ],
+            roots: vec![0, 1, 2],
+            meshes: vec![
+                Mesh {
+                    name: "a".into(),
+                    primitives: vec![prim(true)],
+                },
+                Mesh {
+                    name: "b".into(),
+                    primitives: vec![prim(false)],
+                },
+            ],
+            materials: vec![Material::opaque("m", [1.0; 4], 0.5)],
+            skins: vec![Skin {
+                name: "s".into(),
+                joints: vec![0],
+            }],
+            clip: Some(WeightClip {
+                name: "c".into(),
+                keys: WeightKeys {
+                    times: vec![0.0, 1.0],
+                    weights: vec![vec![0.0], vec![1.0]],
+                },
+                nodes: vec![1, 2],
+            }),
+        }
+    }
+
+    /// The float scene loads back: the skinned mesh where its positions say (its joint's
+    /// placement undone by the inverse bind matrix), its target, texture coordinates, and a
+    /// weights channel for each animated node; a compact scene refuses the skinned node.
+    #[test]
+    fn a_float_scene_loads_back_and_a_compact_one_refuses_a_skin() {
+        let scene = square_scene();
+        let bytes = scene_glb(&scene, Storage::Float).unwrap();
+        let opts = LoadOptions {
+            mesh: Some("a".into()),
+            ..Default::default()
+        };
+        let rig = load_bytes(Path::new("square.glb"), &bytes, &opts).unwrap();
+        let f = rig.face();
+        assert!((f.positions[2] - Vector3::new(0.1, 0.1, 0.0)).norm() < 1e-7);
+        assert!((f.targets[0].positions[2] - Vector3::z() * 0.01).norm() < 1e-7);
+        let uv = rig.face_attribute("TEXCOORD_0").unwrap();
+        assert_eq!(uv.components, 2);
+        let channels = &rig.container.json["animations"][0]["channels"];
+        assert_eq!(channels.as_array().unwrap().len(), 2);
+        assert!(rig.track.is_some());
+        let err = scene_glb(&scene, Storage::Compact).unwrap_err().to_string();
+        assert!(err.contains("neither skinned nor translated"), "{err}");
+        let mut plain = scene;
+        plain.nodes[1].skin = None;
+        plain.skins.clear();
+        let compact = scene_glb(&plain, Storage::Compact).unwrap();
+        let rig = load_bytes(Path::new("square.glb"), &compact, &opts).unwrap();
+        assert!((rig.face().positions[2] - Vector3::new(0.1, 0.1, 0.0)).norm() < 1e-5);
+    }
+}
