@@ -8,17 +8,24 @@ use std::path::PathBuf;
 #[derive(Debug, clap::Subcommand)]
 pub enum RigCommand {
     /// Generate a procedural rig as a GLB: the face (metres, ~10k vertices, nine named blend
-    /// shapes, a weights animation; the default) or the capture-shaped head (a whole head of
+    /// shapes, a weights animation; the default); the capture-shaped head (a whole head of
     /// ~2.6k vertices, the 52 ARKit shapes, an 11 s performance, written compact: quantized,
-    /// sparse targets, meshopt-compressed).
+    /// sparse targets, meshopt-compressed); or a stand-in for a downloaded avatar, whose lip
+    /// press, lip roll, blink and viseme_PP fold the skin as real rigs do: `avatar` (a Ready
+    /// Player Me–style skinned body, head of ~2k vertices with the 52 ARKit shapes and 15
+    /// visemes, eyes and teeth carrying the same targets; float glTF), `avatar-parts` (a
+    /// VRoid-style face: one mesh of skin, eyeballs, lash cards and mouth interior primitives;
+    /// compact glTF) or `avatar-clip` (the avatar with a 2.5 s clip through the folding shapes).
     #[command(
-        after_help = "Example:\n  furrow rig generate -o rigs/face.glb --force\n  furrow rig generate --kind head -o rigs/head.glb --force"
+        after_help = "Example:\n  furrow rig generate -o rigs/face.glb --force\n  furrow rig generate --kind head -o rigs/head.glb --force\n  furrow rig generate --kind avatar -o rigs/avatar.glb --force\n  furrow rig generate --kind avatar-parts -o rigs/avatar_parts.glb --force\n  furrow rig generate --kind avatar-clip -o rigs/avatar_clip.glb --force"
     )]
     Generate {
-        /// Which rig: `face` (rigs/face.glb) or `head` (rigs/head.glb).
+        /// Which rig: `face` (rigs/face.glb), `head` (rigs/head.glb), `avatar`
+        /// (rigs/avatar.glb), `avatar-parts` (rigs/avatar_parts.glb) or `avatar-clip`
+        /// (rigs/avatar_clip.glb).
         #[arg(long, value_enum, default_value_t = RigKind::Face)]
         kind: RigKind,
-        /// Output path (default rigs/face.glb or rigs/head.glb, by kind).
+        /// Output path (default rigs/<kind>.glb, with `_` for `-`).
         #[arg(short, long)]
         output: Option<PathBuf>,
         /// Replace the output if it exists.
@@ -34,6 +41,25 @@ pub enum RigKind {
     Face,
     /// The capture-shaped whole head of `rigs/head.glb` (compact glTF).
     Head,
+    /// The Ready Player Me–style avatar of `rigs/avatar.glb` (float glTF).
+    Avatar,
+    /// The VRoid-style face of several primitives of `rigs/avatar_parts.glb` (compact glTF).
+    AvatarParts,
+    /// The avatar with a clip through its folding shapes, `rigs/avatar_clip.glb` (float glTF).
+    AvatarClip,
+}
+
+impl RigKind {
+    /// The default output path of the kind.
+    pub fn default_output(self) -> PathBuf {
+        PathBuf::from(match self {
+            RigKind::Face => "rigs/face.glb",
+            RigKind::Head => "rigs/head.glb",
+            RigKind::Avatar => "rigs/avatar.glb",
+            RigKind::AvatarParts => "rigs/avatar_parts.glb",
+            RigKind::AvatarClip => "rigs/avatar_clip.glb",
+        })
+    }
 }
 
 /// A generated rig's parts and bytes, ready to write and describe.
@@ -44,7 +70,8 @@ struct Generated {
     bytes: Vec<u8>,
 }
 
-/// Generate the rig of `kind` and encode it (the face as float glTF, the head compact).
+/// Generate the rig of `kind` and encode it (the face and the avatars with a body as float
+/// glTF, the head and the parts face compact).
 fn generate(kind: RigKind) -> anyhow::Result<Generated> {
     Ok(match kind {
         RigKind::Face => {
@@ -67,6 +94,20 @@ fn generate(kind: RigKind) -> anyhow::Result<Generated> {
                 bytes,
             }
         }
+        RigKind::Avatar | RigKind::AvatarParts | RigKind::AvatarClip => {
+            let rig = match kind {
+                RigKind::Avatar => crate::rig::avatar::avatar(),
+                RigKind::AvatarParts => crate::rig::avatar::avatar_parts(),
+                _ => crate::rig::avatar::avatar_clip(),
+            };
+            let bytes = rig.glb()?;
+            Generated {
+                mesh: rig.skin,
+                targets: rig.targets,
+                keys: rig.keys,
+                bytes,
+            }
+        }
     })
 }
 
@@ -78,10 +119,7 @@ pub fn run(c: RigCommand, out: &Output) -> anyhow::Result<()> {
             output,
             force,
         } => {
-            let output = output.unwrap_or_else(|| match kind {
-                RigKind::Face => PathBuf::from("rigs/face.glb"),
-                RigKind::Head => PathBuf::from("rigs/head.glb"),
-            });
+            let output = output.unwrap_or_else(|| kind.default_output());
             atomic::check_free(&[&output], Overwrite::from_force(force))?;
             let rig = generate(kind)?;
             let bytes = &rig.bytes;

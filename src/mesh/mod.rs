@@ -3,6 +3,7 @@
 use nalgebra::Vector3;
 
 pub mod butterfly;
+pub mod fold;
 pub mod grid;
 pub mod intersect;
 pub mod quality;

@@ -55,17 +55,21 @@ pub struct HeadRig {
 
 /// One horizontal cross-section: height and its half-width and depths, m.
 #[derive(Debug, Clone, Copy)]
-struct Ring {
-    y: f64,
-    x: f64,
-    zf: f64,
-    zb: f64,
+pub struct Ring {
+    /// Height, m.
+    pub y: f64,
+    /// Half-width, m.
+    pub x: f64,
+    /// Depth in front of the axis, m.
+    pub zf: f64,
+    /// Depth behind the axis, m.
+    pub zb: f64,
 }
 
 /// The cross-section at meridian angle `a` ∈ [0, π] (0: the crown; π/2: the widest ring at
 /// y = 0; π: the bottom of the neck). The cranium is an ellipsoid; below it the face narrows
 /// to the jaw, the chin's underside recedes to the neck, the occiput curves in to the nape.
-fn ring_at(a: f64) -> Ring {
+pub fn ring_at(a: f64) -> Ring {
     use std::f64::consts::FRAC_PI_2;
     if a <= FRAC_PI_2 {
         let (s, c) = a.sin_cos();
@@ -86,7 +90,7 @@ fn ring_at(a: f64) -> Ring {
 }
 
 /// The point of ring `r` at azimuth `phi` (0 at the front, +X at π/2), m.
-fn ring_point(r: &Ring, phi: f64) -> Vector3<f64> {
+pub fn ring_point(r: &Ring, phi: f64) -> Vector3<f64> {
     let (s, c) = phi.sin_cos();
     let z = if c >= 0.0 { r.zf } else { r.zb };
     Vector3::new(r.x * s, r.y, z * c)
@@ -94,8 +98,14 @@ fn ring_point(r: &Ring, phi: f64) -> Vector3<f64> {
 
 /// Azimuth of column fraction `u` ∈ [0, 1): denser at the front (u = 0).
 fn azimuth(u: f64) -> f64 {
+    warped_azimuth(u, FRONT_WARP)
+}
+
+/// Azimuth (rad) of column fraction `u` ∈ [0, 1) with front warp `warp`: the spacing at the
+/// front is (1 − `warp`) times the mean, at the back (1 + `warp`).
+pub fn warped_azimuth(u: f64, warp: f64) -> f64 {
     let t = std::f64::consts::TAU * u;
-    t - FRONT_WARP * t.sin()
+    t - warp * t.sin()
 }
 
 /// Meridian angles of the [`RINGS`] rings below the pole: even steps of arc length (the
@@ -127,9 +137,14 @@ fn ring_angles() -> Vec<f64> {
 
 /// Even column count of a ring from its perimeter (Ramanujan's ellipse formula), at least 6.
 fn columns(r: &Ring) -> usize {
+    columns_at(r, COLUMN_SPACING)
+}
+
+/// Even column count of ring `r` for a mean column spacing of `spacing` (m), at least 6.
+pub fn columns_at(r: &Ring, spacing: f64) -> usize {
     let (a, b) = (r.x, 0.5 * (r.zf + r.zb));
     let p = std::f64::consts::PI * (3.0 * (a + b) - ((3.0 * a + b) * (a + 3.0 * b)).sqrt());
-    (2 * (p / (2.0 * COLUMN_SPACING)).round() as usize).max(6)
+    (2 * (p / (2.0 * spacing)).round() as usize).max(6)
 }
 
 /// The neutral surface before features: positions, triangles, each vertex's ring (0 is the
@@ -145,7 +160,7 @@ struct Base {
 
 /// Zip ring `a` (above) and ring `b` (below), both starting at the front, into triangles
 /// by azimuth (each ring's indices in column order).
-fn zip(a: &[usize], b: &[usize], out: &mut Vec<[usize; 3]>) {
+pub fn zip(a: &[usize], b: &[usize], out: &mut Vec<[usize; 3]>) {
     let (na, nb) = (a.len(), b.len());
     let (mut i, mut j) = (0, 0);
     while i < na || j < nb {
@@ -240,8 +255,9 @@ fn build_base() -> Base {
     }
 }
 
-/// Outward displacement of the facial features and ears at base point `p`, m.
-fn features(p: &Vector3<f64>, mouth_y: f64) -> f64 {
+/// Outward displacement (m) of the facial features and ears at base point `p` (m), for the
+/// mouth slit at height `mouth_y` (m).
+pub fn features(p: &Vector3<f64>, mouth_y: f64) -> f64 {
     let (x, y, ax) = (p.x, p.y, p.x.abs());
     let front = smoothstep(0.0, 0.04, p.z);
     let eye = ((ax - EYE.0) / 0.022).hypot((y - EYE.1) / 0.016);
@@ -257,8 +273,9 @@ fn features(p: &Vector3<f64>, mouth_y: f64) -> f64 {
     h * front + 0.016 * bump(ear) * smoothstep(0.06, 0.072, ax)
 }
 
-/// Local frame at a vertex of normal `n`: (e_u ≈ +X along the skin, e_v ≈ +Y along the skin).
-fn frame(n: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
+/// Local frame at a vertex of unit normal `n`: (e_u ≈ +X along the skin, e_v ≈ +Y along the
+/// skin), unit vectors.
+pub fn frame(n: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
     let up = Vector3::y() - n * n.y;
     let e_v = if up.norm() > 1e-9 {
         up.normalize()
@@ -320,8 +337,9 @@ pub fn generate() -> HeadRig {
     }
 }
 
-/// Flip every triangle when the surface's normals point inward on average.
-fn orient_outward(mesh: &mut TriMesh) {
+/// Flip every triangle when the surface's normals point inward on average (the surface
+/// around the origin).
+pub fn orient_outward(mesh: &mut TriMesh) {
     let mut s = 0.0;
     for t in &mesh.triangles {
         let [a, b, c] = t.map(|i| mesh.positions[i]);

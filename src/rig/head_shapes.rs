@@ -77,6 +77,10 @@ pub const ARKIT_NAMES: [&str; 52] = [
 pub const JAW_ANGLE: f64 = 14.0 * std::f64::consts::PI / 180.0;
 /// Jaw rotation axis: parallel to X through this point (y, z), m (in front of the ears).
 pub const JAW_PIVOT_YZ: (f64, f64) = (0.0, -0.005);
+/// Forward travel of the jaw at `jawForward` weight 1, m.
+pub const JAW_FORWARD: f64 = 0.006;
+/// Sideways travel of the jaw at `jawLeft` or `jawRight` weight 1, m.
+pub const JAW_SIDE: f64 = 0.007;
 
 /// A vertex of the neutral head as the shapes see it.
 #[derive(Debug, Clone, Copy)]
@@ -335,9 +339,9 @@ fn central(name: &str, s: &Sample, m: &Mouth) -> Vector3<f64> {
     let mouth_shift = || bump((s.pos.x / 0.045).hypot((s.pos.y - m.y) / 0.03));
     match name {
         "jawOpen" => jaw_rotate(s, m, JAW_ANGLE),
-        "jawForward" => Vector3::z() * (0.006 * jaw()),
-        "jawLeft" => Vector3::x() * (0.007 * jaw()),
-        "jawRight" => Vector3::x() * (-0.007 * jaw()),
+        "jawForward" => Vector3::z() * (JAW_FORWARD * jaw()),
+        "jawLeft" => Vector3::x() * (JAW_SIDE * jaw()),
+        "jawRight" => Vector3::x() * (-JAW_SIDE * jaw()),
         "mouthLeft" => Vector3::x() * (0.008 * mouth_shift()),
         "mouthRight" => Vector3::x() * (-0.008 * mouth_shift()),
         "mouthClose" => {

@@ -2,15 +2,18 @@
 //! (`KHR_mesh_quantization`), sparse morph targets, and buffer views compressed with
 //! `EXT_meshopt_compression` (no uncompressed fallback data, so both extensions are required
 //! when used). This is furrow's one writer of such data: the capture-shaped rig
-//! ([`rig::rig_glb`]) and the wrinkle layer export (`io::layer`) both write through it.
+//! ([`rig::rig_glb`]), the multi-mesh avatar scenes ([`scene::scene_glb`], which also writes
+//! them plainly in floats) and the wrinkle layer export (`io::layer`) all write through it.
 //!
 //! [`CompactDocument`] is a [`Document`] whose buffer views each carry a meshopt codec, laid
 //! out into a GLB either plainly (every view in the binary chunk) or compressed (the
 //! compressed bytes in the binary chunk and a data-less fallback buffer for the decoded
 //! views). [`targets`] stores morph targets (float, normalized i16 or i8, dense or sparse);
-//! [`rig`] writes a whole blend-shape rig.
+//! [`rig`] writes a whole blend-shape rig; [`scene`] a scene of several meshes, skins and
+//! materials.
 
 pub mod rig;
+pub mod scene;
 pub mod targets;
 
 pub use rig::{rig_glb, Quantization};
