@@ -60,6 +60,7 @@ fn export_round_trips_and_validates(shared: Vec<std::path::PathBuf>) {
             frames: &frames,
             origin: &origin,
             fps: 10.0,
+            weights: &[],
         };
         let out = outdir.join(format!(
             "{i}_{}",

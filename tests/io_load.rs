@@ -475,6 +475,7 @@ fn skinned_face_loads_in_its_rest_pose_and_exports_valid() {
         frames: &frames,
         origin: &origin,
         fps: 4.0,
+        weights: &[],
     };
     let out = d.path().join("skinned_out.glb");
     furrow::io::export::write_animated(&r, &set, &out, furrow::io::atomic::Overwrite::Refuse)

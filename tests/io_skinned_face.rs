@@ -64,6 +64,7 @@ fn skinned_face_round_trips_in_world_space() {
         frames: &frames,
         origin: &origin,
         fps: 4.0,
+        weights: &[],
     };
     let out = d.path().join("out.glb");
     export::write_animated(&rig, &set, &out, Overwrite::Refuse).unwrap();

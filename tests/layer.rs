@@ -615,6 +615,7 @@ fn the_layer_reproduces_the_sequence_export_on_the_demo_clip() {
         frames: &out.frames,
         origin: &out.origin,
         fps: 30.0,
+        weights: &[],
     };
     furrow::io::export::write_animated(&rig, &set, &seq, furrow::io::atomic::Overwrite::Refuse)
         .unwrap();

@@ -92,6 +92,7 @@ fn the_stretched_half_is_left_out_and_equals_the_blend_shapes_bit_for_bit() {
         frames: &out.frames,
         origin: &out.origin,
         fps: 30.0,
+        weights: &[],
     };
     export::write_animated(&rig, &set, &file, Overwrite::Refuse).unwrap();
     if let Some(v) = common::validate(std::slice::from_ref(&file)) {

@@ -100,6 +100,7 @@ fn check_written_in_file_units(rig: &Rig, out: &RunOutput, factor: f64) {
         frames: &out.frames,
         origin: &out.origin,
         fps: 30.0,
+        weights: &[],
     };
     furrow::io::export::write_animated(rig, &set, &path, furrow::io::atomic::Overwrite::Refuse)
         .unwrap();

@@ -196,6 +196,7 @@ pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
             frames: &run.frames,
             origin: &run.origin,
             fps: a.fps,
+            weights: &run.weights,
         };
         let pb = out.progress(run.frames.len() as u64, "frames");
         files.extend(export::write_frames_dir(

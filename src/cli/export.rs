@@ -87,6 +87,7 @@ pub fn write(
             frames: frames.frames,
             origin: frames.origin,
             fps: frames.fps,
+            weights: frames.weights,
         };
         export::write_animated(rig, &set, output, overwrite)?;
         return Ok(None);

@@ -60,6 +60,9 @@ pub struct FrameSet<'a> {
     pub origin: &'a [VertexOrigin],
     /// Frames per second (frame k is shown at k / fps seconds).
     pub fps: f64,
+    /// The rig's morph weights of each frame: the primitives of the face mesh that ride along
+    /// show their own blend shapes at them (empty: at rest).
+    pub weights: &'a [Vec<f64>],
 }
 
 impl FrameSet<'_> {
@@ -405,6 +408,65 @@ fn flat(v: &[Vector3<f64>]) -> Vec<f64> {
     v.iter().flat_map(|p| [p.x, p.y, p.z]).collect()
 }
 
+/// A primitive of the face mesh that rides along, in the frame-sequence form: its own
+/// attributes and material, its position at each frame's weights (`set.weights`) as one
+/// target per frame when `with_targets`, else its position at the first frame's weights.
+fn riding_frames(
+    rig: &Rig,
+    doc: &mut Document,
+    json: &Value,
+    set: &FrameSet,
+    with_targets: bool,
+) -> anyhow::Result<Value> {
+    let reader = AccessorReader::new(&rig.path, &rig.container);
+    let mut prim = json.clone();
+    let base = match json["attributes"]["POSITION"].as_u64() {
+        Some(a) => reader.read(a as usize)?.data,
+        None => return Ok(prim),
+    };
+    let mut deltas = Vec::new();
+    for t in json["targets"].as_array().into_iter().flatten() {
+        deltas.push(match t["POSITION"].as_u64() {
+            Some(a) => reader.read(a as usize)?.data,
+            None => vec![0.0; base.len()],
+        });
+    }
+    let blend = |w: Option<&Vec<f64>>| -> Vec<f64> {
+        let mut d = vec![0.0; base.len()];
+        for (delta, &wt) in deltas.iter().zip(w.into_iter().flatten()) {
+            if wt != 0.0 {
+                d.iter_mut().zip(delta).for_each(|(a, b)| *a += wt * b);
+            }
+        }
+        d
+    };
+    let object = prim.as_object_mut().expect("primitive object");
+    object.remove("targets");
+    if with_targets {
+        let first = blend(set.weights.first());
+        let frames = set.frames.len();
+        let targets: Vec<Value> = (0..frames)
+            .map(|k| {
+                let d: Vec<f64> = blend(set.weights.get(k))
+                    .iter()
+                    .zip(&first)
+                    .map(|(a, b)| a - b)
+                    .collect();
+                json!({ "POSITION": doc.push_f32(&d, 3, Some(ARRAY_BUFFER)) })
+            })
+            .collect();
+        let at: Vec<f64> = base.iter().zip(&first).map(|(a, b)| a + b).collect();
+        object.insert("attributes".into(), json["attributes"].clone());
+        prim["attributes"]["POSITION"] = json!(doc.push_f32(&at, 3, Some(ARRAY_BUFFER)));
+        prim["targets"] = json!(targets);
+    } else if !deltas.is_empty() {
+        let d = blend(set.weights.first());
+        let at: Vec<f64> = base.iter().zip(&d).map(|(a, b)| a + b).collect();
+        prim["attributes"]["POSITION"] = json!(doc.push_f32(&at, 3, Some(ARRAY_BUFFER)));
+    }
+    Ok(prim)
+}
+
 /// Replace the face by the frames: `animated` true gives morph targets + weights animation,
 /// false gives the single frame `frames[0]` with no animation at all.
 fn replace_face(rig: &Rig, set: &FrameSet, animated: bool) -> anyhow::Result<Document> {
@@ -459,7 +521,12 @@ fn replace_face(rig: &Rig, set: &FrameSet, animated: bool) -> anyhow::Result<Doc
         mesh["weights"] = json!(vec![0.0; frames]);
         mesh["extras"] = json!({ "targetNames": (0..frames).map(|k| format!("frame_{k:05}")).collect::<Vec<_>>() });
     }
-    mesh["primitives"] = json!([prim]);
+    let mut prims = vec![prim];
+    for part in rig.parts.riding() {
+        let json = &rig.container.json["meshes"][f.mesh]["primitives"][part.primitive];
+        prims.push(riding_frames(rig, &mut doc, json, set, with_targets)?);
+    }
+    mesh["primitives"] = json!(prims);
     install_face_mesh(&mut doc.json, rig, mesh)
         .as_object_mut()
         .expect("node object")
@@ -662,6 +729,7 @@ pub fn frame_glb(rig: &Rig, set: &FrameSet, k: usize) -> anyhow::Result<Vec<u8>>
         frames: one,
         origin: set.origin,
         fps: set.fps,
+        weights: set.weights.get(k).map_or(&[], std::slice::from_ref),
     };
     Ok(replace_face(rig, &single, false)?.to_glb())
 }

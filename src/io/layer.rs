@@ -249,18 +249,16 @@ pub fn layer_glb(
         .unrefined
         .iter()
         .map(|&j| {
-            let why = rig
-                .parts
-                .parts
-                .iter()
-                .find(|p| p.primitive == j)
-                .map_or("no skin triangle left after welding", |p| {
+            let why = rig.parts.parts.iter().find(|p| p.primitive == j).map_or(
+                "no skin triangle left after welding",
+                |p| {
                     if p.skin {
                         "no skin triangle left after welding"
                     } else {
                         p.reason.describe()
                     }
-                });
+                },
+            );
             format!("primitive {j} of the face rides along unchanged ({why})")
         })
         .collect();

@@ -96,10 +96,7 @@ pub enum PartReason {
 impl PartReason {
     /// Whether the reason makes the primitive skin.
     pub fn is_skin(self) -> bool {
-        matches!(
-            self,
-            Self::LargestMoved | Self::LargeOpen | Self::Chosen
-        )
+        matches!(self, Self::LargestMoved | Self::LargeOpen | Self::Chosen)
     }
 
     /// The reason in words.
@@ -111,7 +108,9 @@ impl PartReason {
             Self::AlphaBlend => "alpha-blended (a card or shading layer)",
             Self::AlphaMask => "alpha-masked (a lash or brow card)",
             Self::ClosedApart => "a closed surface apart from the skin (an eyeball, teeth)",
-            Self::OpenApart => "a small open surface apart from the skin (teeth, gums, a mouth pocket)",
+            Self::OpenApart => {
+                "a small open surface apart from the skin (teeth, gums, a mouth pocket)"
+            }
             Self::NotChosen => "not named in the skin list",
             Self::NotTriangles => "not triangles",
         }
@@ -350,20 +349,15 @@ impl Surfaces {
             let tri = face.triangles[t];
             let [a, b, c] = tri.map(|v| face.positions[v]);
             area[s] += 0.5 * (b - a).cross(&(c - a)).norm();
-            moved[s] |= tri.iter().any(|&v| {
-                face.targets
-                    .iter()
-                    .any(|m| m.positions[v].norm() > still)
-            });
+            moved[s] |= tri
+                .iter()
+                .any(|&v| face.targets.iter().any(|m| m.positions[v].norm() > still));
             for k in 0..3 {
                 let (u, w) = (point[tri[k]], point[tri[(k + 1) % 3]]);
                 *edges[s].entry((u.min(w), u.max(w))).or_default() += 1;
             }
         }
-        let closed: Vec<bool> = edges
-            .iter()
-            .map(|e| e.values().all(|&c| c == 2))
-            .collect();
+        let closed: Vec<bool> = edges.iter().map(|e| e.values().all(|&c| c == 2)).collect();
         let largest = |pool: &mut dyn Iterator<Item = usize>| {
             pool.max_by(|&a, &b| area[a].total_cmp(&area[b]))
         };
@@ -372,8 +366,7 @@ impl Surfaces {
             .unwrap_or(0);
         let skin = (0..n)
             .map(|s| {
-                s == main
-                    || (moved[s] && !closed[s] && area[s] >= JOINED_SKIN_AREA * area[main])
+                s == main || (moved[s] && !closed[s] && area[s] >= JOINED_SKIN_AREA * area[main])
             })
             .collect();
         Self {
@@ -400,7 +393,9 @@ impl Surfaces {
                 on_skin += area;
             }
         }
-        let Some((&s, _)) = share.iter().max_by(|a, b| a.1.total_cmp(b.1).then(b.0.cmp(a.0)))
+        let Some((&s, _)) = share
+            .iter()
+            .max_by(|a, b| a.1.total_cmp(b.1).then(b.0.cmp(a.0)))
         else {
             return PartReason::OpenApart;
         };
@@ -421,7 +416,10 @@ impl Surfaces {
 /// The face's bounding-box diagonal (world units).
 fn diagonal(face: &MeshInstance) -> f64 {
     let (lo, hi) = face.positions.iter().fold(
-        (Vector3::repeat(f64::INFINITY), Vector3::repeat(f64::NEG_INFINITY)),
+        (
+            Vector3::repeat(f64::INFINITY),
+            Vector3::repeat(f64::NEG_INFINITY),
+        ),
         |(lo, hi), p| (lo.inf(p), hi.sup(p)),
     );
     let d = (hi - lo).norm();
@@ -588,10 +586,16 @@ mod tests {
                 PartReason::NotTriangles,
             ]
         );
-        assert_eq!(parts.skin_spans(&face), vec![true, true, false, false, false]);
+        assert_eq!(
+            parts.skin_spans(&face),
+            vec![true, true, false, false, false]
+        );
         assert_eq!(parts.riding().count(), 4);
         let said = parts.summary();
-        assert!(said.contains("1 (skin)") && said.contains("4 (lashes)"), "{said}");
+        assert!(
+            said.contains("1 (skin)") && said.contains("4 (lashes)"),
+            "{said}"
+        );
     }
 
     #[test]

@@ -169,6 +169,10 @@ pub struct FrameRecord {
     /// Why the frame was not simulated, when it was not (its surface is the blend shape).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub not_simulated: Option<NotSimulated>,
+    /// Exported vertices whose wrinkles were taken out (in part) because the exported
+    /// surface passed through itself there and the blend shape does not.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub crossing_cleared: usize,
 }
 
 /// Why a frame (a still rig's shape) was not simulated.

@@ -210,7 +210,11 @@ impl PoseMaps {
         if region.is_none() && active.is_none() {
             return self.static_pins.clone();
         }
-        let welded = self.welded_of_refined.iter().max().map_or(0, |&t| t as usize + 1);
+        let welded = self
+            .welded_of_refined
+            .iter()
+            .max()
+            .map_or(0, |&t| t as usize + 1);
         let mut held = vec![false; welded];
         if let Some(a) = active {
             held.iter_mut().zip(a).for_each(|(h, &a)| *h = !a);
@@ -258,11 +262,57 @@ pub fn refined_fade(
         target_of
             .iter()
             .map(|o| {
-                let gone: f64 = o.iter().map(|(v, a)| a * missing.get(v).unwrap_or(&0.0)).sum();
+                let gone: f64 = o
+                    .iter()
+                    .map(|(v, a)| a * missing.get(v).unwrap_or(&0.0))
+                    .sum();
                 (1.0 - gone).clamp(0.0, 1.0)
             })
             .collect(),
     )
+}
+
+/// Attempts at clearing the exported surface of crossings its target lacks.
+const EXPORT_CLEARING: usize = 3;
+
+/// Take the wrinkles out of the exported surface `wrinkled` (per refined vertex of `mesh`, m)
+/// where it passes through itself and its `target` (the blend shape) does not: on the
+/// crossing triangles the surface is the target, and the wrinkles come back linearly over
+/// `margin` (m) about them (rest distance). Repeated while crossings remain, up to
+/// [`EXPORT_CLEARING`] times. Returns how many refined vertices lost some of their wrinkles
+/// (0 when the surface adds no crossing, and then it is unchanged).
+pub fn clear_new_crossings(
+    mesh: &TriMesh,
+    target: &[Vector3<f64>],
+    wrinkled: &mut [Vector3<f64>],
+    margin: f64,
+) -> usize {
+    let flat =
+        |p: &[Vector3<f64>]| -> Vec<f64> { p.iter().flat_map(|v| [v.x, v.y, v.z]).collect() };
+    let reference = flat(target);
+    let mut weight = vec![1.0f64; wrinkled.len()];
+    for _ in 0..EXPORT_CLEARING {
+        let pairs = self_intersections_beyond(mesh, &flat(wrinkled), Some(&reference));
+        if pairs.is_empty() {
+            break;
+        }
+        let mut region = vec![false; mesh.triangles.len()];
+        for (a, b) in pairs {
+            region[a] = true;
+            region[b] = true;
+        }
+        let fade = spatial_fade(mesh, &region, margin);
+        for (v, w) in weight.iter_mut().enumerate() {
+            let now = w.min(fade[v]);
+            if now < *w {
+                // Scale what is left of the wrinkle by the new weight over the old.
+                let kept = if *w > 0.0 { now / *w } else { 0.0 };
+                wrinkled[v] = target[v] + (wrinkled[v] - target[v]) * kept;
+                *w = now;
+            }
+        }
+    }
+    weight.iter().filter(|&&w| w < 1.0).count()
 }
 
 /// The `outside` stage: every pose of `plan` judged on the `welded` skin, with a margin of
@@ -378,7 +428,8 @@ impl<'a> Judge<'a> {
         }
         let mut degenerate = 0;
         for (t, tri) in self.mesh.triangles.iter().enumerate() {
-            let collapsed = self.rest_ok[t] && triangle_quality(tri.map(|v| pose[v])).0 < DEGENERATE_QUALITY;
+            let collapsed =
+                self.rest_ok[t] && triangle_quality(tri.map(|v| pose[v])).0 < DEGENERATE_QUALITY;
             degenerate += usize::from(collapsed);
             core[t] |= collapsed || crossing[t];
         }
@@ -530,7 +581,10 @@ mod tests {
             .collect();
         let (r, region) = judge.region(3, &folded, 0.001).expect("a fold");
         assert_eq!(r.pose, 3);
-        assert!(r.folded_edges > 0 && r.worst_fold_deg.unwrap() > 150.0, "{r:?}");
+        assert!(
+            r.folded_edges > 0 && r.worst_fold_deg.unwrap() > 150.0,
+            "{r:?}"
+        );
         assert_eq!(r.causes()[0], OutsideCause::Fold);
         // The fold's triangles lie along x = 0, and the margin keeps the far sides out.
         for (t, tri) in rest.triangles.iter().enumerate() {

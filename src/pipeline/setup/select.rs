@@ -199,7 +199,10 @@ pub fn select_skin(
             r.triangles.iter().for_each(|&t| on[t] = true);
             on
         });
-        (weld_positions(&rig.blend(w), &welded.of_loaded, count), region)
+        (
+            weld_positions(&rig.blend(w), &welded.of_loaded, count),
+            region,
+        )
     });
     let margin = plan.skin.lambda_max;
     let s = select_compressed(&welded.mesh, poses, (threshold, margin), !plan.animated);

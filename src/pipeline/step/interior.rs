@@ -29,6 +29,10 @@ pub struct InteriorSchedule {
     /// ([`crate::pipeline::plan::SkinHold::Reached`]): while they drive, the skin does not
     /// load the interior.
     pub skin_held: bool,
+    /// Each frame's skin starts its solve on the embedded surface B q rather than where the
+    /// last frame left it: a still rig's shapes, each solved alone from rest, where the skin
+    /// at rest is far from the shape but B q is near it.
+    pub skin_from_embedded: bool,
 }
 
 /// Whether the skin's pull on the interior is held by the muscles this frame: under

@@ -81,6 +81,7 @@ impl StepOptions {
                 ),
                 frame_interval: 1.0 / fps,
                 skin_held: plan.driver.skin_hold(scene) == Some(SkinHold::Reached),
+                skin_from_embedded: !plan.animated,
             },
             simulated_surface: scene.export.surface.as_deref() == Some("simulated"),
             fps,
@@ -133,9 +134,7 @@ pub fn step_to_target(
     options: StepOptions,
 ) -> anyhow::Result<(FrameRecord, Composed)> {
     if let Some(skin) = state.skin.as_mut() {
-        let pins = model
-            .pose_maps
-            .pins(&model.outside, &model.skin_mesh, k);
+        let pins = model.pose_maps.pins(&model.outside, &model.skin_mesh, k);
         if pins != skin.pinned() {
             skin.set_pinned(&pins)?;
         }
@@ -148,13 +147,23 @@ pub fn step_to_target(
     let q = &state.interior.q;
     let x = state.skin.as_ref().map(|s| s.x());
     let fade = outside::refined_fade(&model.outside, &model.target_of, k);
-    let composed = compose::compose(
+    let mut composed = compose::compose(
         model.surface_maps(),
         target,
         (q, x, fade.as_deref()),
         options.simulated_surface,
         k,
     )?;
+    let cleared = if options.simulated_surface || x.is_none() {
+        0
+    } else {
+        outside::clear_new_crossings(
+            &model.skin_mesh,
+            &composed.target,
+            &mut composed.wrinkled,
+            model.outside.margin_m,
+        )
+    };
     let record = FrameRecord {
         frame: k,
         time_s: k as f64 / options.fps,
@@ -170,6 +179,7 @@ pub fn step_to_target(
             .and_then(|m| m.fitter.forward.bone.as_ref())
             .map(|(_, bone)| bone.angle_of(q).to_degrees()),
         not_simulated: None,
+        crossing_cleared: cleared,
     };
     Ok((record, composed))
 }
@@ -196,6 +206,7 @@ pub fn unsimulated_frame(
         shape_motion_m: compose::rms_distance(&target, &model.skin_mesh.positions),
         jaw_deg: None,
         not_simulated: Some(why),
+        crossing_cleared: 0,
     };
     let composed = Composed {
         wrinkled: target.clone(),
@@ -365,6 +376,10 @@ fn advance_coupled(
     };
     let start = start.filter(|_| passes > 1);
     let mut interior = interior::advance(model, state, scratch, schedule, target, k, None)?;
+    if let Some(skin) = state.skin.as_mut().filter(|_| schedule.skin_from_embedded) {
+        let bq = skin.embedded_flat(&state.interior.q);
+        skin.set_x(&bq)?;
+    }
     let first_loosening = if start.is_some() { PASS_LOOSENING } else { 1.0 };
     let mut shell = solve_skin_on_interior(model, state, first_loosening, false)?;
     let Some(start) = start else {
@@ -462,6 +477,7 @@ mod tests {
                 frame_interval: 1.0 / 30.0,
                 coupling_iterations: 1,
                 skin_held: false,
+                skin_from_embedded: false,
             },
             simulated_surface: false,
             fps: 30.0,
