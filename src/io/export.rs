@@ -499,7 +499,9 @@ fn replace_face(rig: &Rig, set: &FrameSet, animated: bool) -> anyhow::Result<Doc
     );
     let indices = doc.push_indices(set.triangles);
     let mut prim = json!({ "attributes": attrs, "indices": indices, "mode": 4 });
-    if let Some(m) = rig.container.json["meshes"][f.mesh]["primitives"][0].get("material") {
+    let first_skin = f.primitives.first().map_or(0, |s| s.json);
+    if let Some(m) = rig.container.json["meshes"][f.mesh]["primitives"][first_skin].get("material")
+    {
         prim["material"] = m.clone();
     }
     let frames = set.frames.len();

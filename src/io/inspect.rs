@@ -38,6 +38,10 @@ pub struct MeshSummary {
     pub slivers: usize,
     /// Worst triangle quality (1 equilateral, 0 degenerate).
     pub worst_quality: f64,
+    /// For a mesh of several primitives with morph targets, which primitives would be
+    /// simulated as skin and which ride along, and why.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub parts: Option<super::parts::FaceParts>,
 }
 
 /// Quality 2·r_in/r_circ below which `inspect` counts a triangle as a sliver (a smallest
@@ -99,6 +103,17 @@ pub fn summarize_with(path: &Path, opts: ReadOptions) -> GltfResult<Summary> {
                 size_m: [d.x, d.y, d.z],
                 slivers: q.slivers.len(),
                 worst_quality: q.worst_quality,
+                parts: (m.primitives.len() > 1 && !m.targets.is_empty())
+                    .then(|| {
+                        super::parts::classify(
+                            m,
+                            &c.json["meshes"][m.mesh],
+                            &c.json["materials"],
+                            None,
+                        )
+                        .ok()
+                    })
+                    .flatten(),
             }
         })
         .collect();
@@ -182,6 +197,9 @@ impl std::fmt::Display for Summary {
                     },
                     m.targets.join(", ")
                 )?;
+            }
+            if let Some(p) = &m.parts {
+                writeln!(f, "      {}", p.summary())?;
             }
         }
         writeln!(f, "animations ({}):", self.animations.len())?;

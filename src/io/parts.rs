@@ -297,7 +297,7 @@ fn by_rule(face: &MeshInstance, prims: &[Primitive]) -> Vec<FacePart> {
         .copied()
         .collect();
     let surfaces = Surfaces::of(face, &candidates);
-    prims
+    let mut parts: Vec<FacePart> = prims
         .iter()
         .map(|p| {
             let reason = match (&p.triangles, p.alpha) {
@@ -308,7 +308,24 @@ fn by_rule(face: &MeshInstance, prims: &[Primitive]) -> Vec<FacePart> {
             };
             part(p, reason)
         })
-        .collect()
+        .collect();
+    // A face of many small pieces (a low-poly head, a test mesh) may have no primitive whose
+    // area lies mostly on the main surface: the opaque primitive holding most of it is skin.
+    if !parts.iter().any(|p| p.skin) {
+        let on_main = |p: &Primitive| {
+            p.triangles
+                .as_ref()
+                .filter(|_| opaque(p))
+                .map_or(0.0, |t| surfaces.area_on_main(face, t))
+        };
+        let best = (0..prims.len())
+            .filter(|&j| on_main(&prims[j]) > 0.0)
+            .max_by(|&a, &b| on_main(&prims[a]).total_cmp(&on_main(&prims[b])));
+        if let Some(j) = best {
+            parts[j] = part(&prims[j], PartReason::LargestMoved);
+        }
+    }
+    parts
 }
 
 /// The connected surfaces of a set of triangles, welded by position.
@@ -375,6 +392,17 @@ impl Surfaces {
             skin,
             main,
         }
+    }
+
+    /// The area of triangles `tris` on the main surface (world units²).
+    fn area_on_main(&self, face: &MeshInstance, tris: &[usize]) -> f64 {
+        tris.iter()
+            .filter(|&&t| self.of_triangle[t] == self.main)
+            .map(|&t| {
+                let [a, b, c] = face.triangles[t].map(|v| face.positions[v]);
+                0.5 * (b - a).cross(&(c - a)).norm()
+            })
+            .sum()
     }
 
     /// Why a primitive of `tris` is skin or rides along: by the surface holding most of its
@@ -616,6 +644,32 @@ mod tests {
                 PartReason::LargeOpen,
                 PartReason::OpenApart
             ]
+        );
+    }
+
+    #[test]
+    fn a_face_of_many_small_closed_pieces_keeps_the_piece_holding_the_main_surface() {
+        // A low-poly head: one primitive of three separate closed blocks, a second of one.
+        let mut blocks = cube(0.1, Vector3::zeros());
+        for k in 1..3 {
+            let more = cube(0.1, Vector3::new(0.3 * k as f64, 0.0, 0.0));
+            let first = blocks.positions.len();
+            blocks.positions.extend(&more.positions);
+            blocks
+                .triangles
+                .extend(more.triangles.iter().map(|t| t.map(|v| v + first)));
+        }
+        let parts = [
+            (blocks, true),
+            (cube(0.05, Vector3::new(0.0, 1.0, 0.0)), true),
+        ];
+        let face = face_of(&parts);
+        let mesh = json!({ "primitives": [{}, {}] });
+        let p = classify(&face, &mesh, &json!([]), None).unwrap_or_else(|e| panic!("{e}"));
+        let reasons: Vec<PartReason> = p.parts.iter().map(|p| p.reason).collect();
+        assert_eq!(
+            reasons,
+            vec![PartReason::LargestMoved, PartReason::ClosedApart]
         );
     }
 

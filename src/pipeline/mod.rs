@@ -96,7 +96,7 @@ pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<R
     let mut plan = Plan::new(rig, opts)?;
     let mut log = Log::default();
     log.stages.push(plan.load_stage(rig));
-    let (model, mut state) = setup::set_up(rig, scene, &mut plan, &mut log, progress)?;
+    let (mut model, mut state) = setup::set_up(rig, scene, &mut plan, &mut log, progress)?;
     if state.skin.is_some() {
         log.stages.push(shell_stage(&plan, &model));
     }
@@ -137,6 +137,14 @@ pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<R
         }
     }
     progress("frames", end, end);
+    if plan.animated {
+        model.outside.jolt = setup::outside::jolt(
+            &model.outside,
+            &model.target_of,
+            (&out.wrinkled, &out.smooth),
+            plan.range.start,
+        );
+    }
     totals.frames_written = out.wrinkled.len();
     totals.wall_s = wall.elapsed().as_secs_f64();
     let written = plan.range.start - first;

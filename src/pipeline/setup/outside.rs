@@ -111,6 +111,10 @@ pub struct OutOfModel {
     pub fade_frames: usize,
     /// The poses with a region, in order.
     pub regions: Vec<PoseRegion>,
+    /// How much the exported surface moves between frames about the regions, against
+    /// elsewhere (animated clips; filled after the run).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub jolt: Option<Jolt>,
     /// Per pose, the weight (0–1) of the wrinkles in the export at each welded vertex where
     /// it is below one.
     #[serde(skip)]
@@ -315,6 +319,93 @@ pub fn clear_new_crossings(
     weight.iter().filter(|&&w| w < 1.0).count()
 }
 
+/// How much the wrinkles on the exported surface change per vertex between consecutive
+/// frames (m; the change of the exported surface beyond the blend shape's own): inside the
+/// bands where the wrinkles fade about an out-of-model region, against the clip's 99th
+/// percentile elsewhere. A region switching on or off does not jolt the skin when the first
+/// is at most the second.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Jolt {
+    /// Largest per-vertex change between consecutive frames among vertices whose wrinkles
+    /// fade in either frame (m).
+    pub band_max_m: f64,
+    /// The later frame of that change.
+    pub band_frame: usize,
+    /// The 99th percentile of the per-vertex changes everywhere else (m; the upper edge of a
+    /// logarithmic histogram bin, within 1 %).
+    pub elsewhere_p99_m: f64,
+}
+
+/// Positions of the refined skin vertices at each exported frame (m).
+pub type FramePositions = [Vec<Vector3<f64>>];
+
+/// Bins per decade of the changes' histogram ([`jolt`]).
+const BINS_PER_DECADE: f64 = 230.0;
+
+/// The [`Jolt`] of exported frames `frames` over their blend shapes `smooth` (per refined
+/// vertex, m), the first being pose `first`, with the wrinkle fades of `outside` carried by
+/// `target_of`; `None` with fewer than two frames or no fade among them.
+pub fn jolt(
+    outside: &OutOfModel,
+    target_of: &[Vec<(usize, f64)>],
+    (frames, smooth): (&FramePositions, &FramePositions),
+    first: usize,
+) -> Option<Jolt> {
+    let fade = |j: usize| refined_fade(outside, target_of, first + j);
+    let (mut band_max, mut band_frame, mut any) = (0.0f64, 0, false);
+    let mut bins: BTreeMap<i64, u64> = BTreeMap::new();
+    let mut count = 0u64;
+    let mut before = fade(0);
+    for j in 1..frames.len() {
+        let now = fade(j);
+        let faded = |v: usize| {
+            before.as_ref().is_some_and(|f| f[v] < 1.0) || now.as_ref().is_some_and(|f| f[v] < 1.0)
+        };
+        let (now_x, now_t, was_x, was_t) = (&frames[j], &smooth[j], &frames[j - 1], &smooth[j - 1]);
+        for v in 0..now_x.len() {
+            let c = ((now_x[v] - now_t[v]) - (was_x[v] - was_t[v])).norm();
+            if faded(v) {
+                any = true;
+                if c > band_max {
+                    (band_max, band_frame) = (c, first + j);
+                }
+            } else {
+                let bin = if c > 0.0 {
+                    (c.log10() * BINS_PER_DECADE).ceil() as i64
+                } else {
+                    i64::MIN
+                };
+                *bins.entry(bin).or_default() += 1;
+                count += 1;
+            }
+        }
+        before = now;
+    }
+    if !any || count == 0 {
+        return None;
+    }
+    let rank = (0.99 * count as f64).ceil() as u64;
+    let mut seen = 0;
+    let p99 = bins
+        .iter()
+        .find_map(|(&bin, &n)| {
+            seen += n;
+            (seen >= rank).then_some(bin)
+        })
+        .map_or(0.0, |bin| {
+            if bin == i64::MIN {
+                0.0
+            } else {
+                10f64.powf(bin as f64 / BINS_PER_DECADE)
+            }
+        });
+    Some(Jolt {
+        band_max_m: band_max,
+        band_frame,
+        elsewhere_p99_m: p99,
+    })
+}
+
 /// The `outside` stage: every pose of `plan` judged on the `welded` skin, with a margin of
 /// the thinnest skin's wavelength; its record.
 pub fn find(rig: &Rig, plan: &Plan, welded: &Welded) -> (OutOfModel, StagePlan) {
@@ -347,6 +438,7 @@ pub fn find(rig: &Rig, plan: &Plan, welded: &Welded) -> (OutOfModel, StagePlan) 
         margin_m: margin,
         fade_frames,
         regions: found.into_iter().map(|(r, _)| r).collect(),
+        jolt: None,
         fade,
     };
     let ms = t.elapsed().as_secs_f64() * 1e3;
