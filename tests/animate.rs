@@ -59,6 +59,7 @@ fn sheet_tracked_wrinkles_where_compressed_and_not_where_stretched() {
     .unwrap();
     // Tracking of the blended surface (the muscle-driven default is tested below).
     let opts = RunOptions {
+        preroll: None,
         scene: Scene::parse("[muscles]\nsource = \"none\"\n", "t.toml").unwrap(),
         scene_path: None,
         fps: 30.0,
@@ -265,6 +266,7 @@ fn masked_skin_simulates_only_the_mask_and_the_rest_keeps_the_blend_shapes() {
     )
     .unwrap();
     let opts = RunOptions {
+        preroll: None,
         scene,
         scene_path: None,
         fps: 30.0,
@@ -456,6 +458,7 @@ fn muscles_fitted_per_frame_drive_the_interior_and_the_skin_wrinkles_by_default(
     )
     .unwrap();
     let opts = RunOptions {
+        preroll: None,
         scene: Scene::default(),
         scene_path: None,
         fps: 30.0,

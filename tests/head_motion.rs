@@ -146,6 +146,7 @@ fn options(dt: f64, tracking: f64) -> RunOptions {
          [muscles]\nsource = \"none\"\n[export]\nsurface = \"simulated\"\n"
     );
     RunOptions {
+        preroll: None,
         scene: Scene::parse(&text, "turn.toml").unwrap(),
         scene_path: None,
         fps: 30.0,

@@ -170,6 +170,7 @@ fn seam_rig(animated: bool) -> Vec<u8> {
 fn run(path: &Path) -> (Rig, RunOutput) {
     let rig = load_bytes(path, &std::fs::read(path).unwrap(), &LoadOptions::default()).unwrap();
     let opts = RunOptions {
+        preroll: None,
         scene: Scene::default(),
         scene_path: None,
         fps: 30.0,
@@ -603,6 +604,7 @@ fn the_layer_reproduces_the_sequence_export_on_the_demo_clip() {
     .unwrap();
     let count = pipeline::plan::clip_weights(&rig, 30.0).0.len();
     let opts = RunOptions {
+        preroll: None,
         scene: Scene::default(),
         scene_path: None,
         fps: 30.0,

@@ -946,6 +946,7 @@ fn muscle_driven(
     scene.muscles.skin_hold = skin_hold.map(str::to_string);
     let count = furrow::pipeline::plan::clip_weights(&loaded, 30.0).0.len();
     let opts = RunOptions {
+        preroll: None,
         scene,
         scene_path: None,
         fps: 30.0,
@@ -1043,6 +1044,7 @@ fn head_run(scene: Scene) -> (furrow::io::load::Rig, pipeline::RunOutput) {
     furrow::io::units::apply(&mut loaded, None, None);
     let count = furrow::pipeline::plan::clip_weights(&loaded, 30.0).0.len();
     let opts = RunOptions {
+        preroll: None,
         scene,
         scene_path: None,
         fps: 30.0,

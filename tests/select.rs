@@ -18,6 +18,7 @@ fn compressed() -> Scene {
 
 fn options(scene: Scene) -> RunOptions {
     RunOptions {
+        preroll: None,
         scene,
         scene_path: None,
         fps: 30.0,

@@ -14,6 +14,7 @@ fn options(solver: &str) -> RunOptions {
     let mut scene = Scene::default();
     scene.solver.skin_solver = Some(solver.into());
     RunOptions {
+        preroll: None,
         scene,
         scene_path: None,
         fps: 30.0,

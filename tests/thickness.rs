@@ -314,6 +314,7 @@ fn thicker_region_wrinkles_at_the_longer_wavelength() {
     )
     .unwrap();
     let opts = RunOptions {
+        preroll: None,
         scene,
         scene_path: None,
         fps: 30.0,
@@ -612,6 +613,7 @@ fn pipeline_reports_thickness_and_wavelength_ranges() {
     )
     .unwrap();
     let opts = RunOptions {
+        preroll: None,
         scene,
         scene_path: None,
         fps: 30.0,

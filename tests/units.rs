@@ -32,6 +32,7 @@ fn load_scaled(bytes: &[u8]) -> Rig {
 
 fn run(rig: &Rig) -> RunOutput {
     let opts = RunOptions {
+        preroll: None,
         scene: Scene::default(),
         scene_path: None,
         fps: 30.0,

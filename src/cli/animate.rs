@@ -4,7 +4,6 @@ use super::export::{self as out_file, ExportArgs, Frames};
 use super::Output;
 use crate::io::atomic::{self, Overwrite};
 use crate::io::export;
-use crate::io::units::ScaleSetting;
 use crate::io::{self as fio, LoadOptions};
 use crate::pipeline::chunk::{self, ChunkHeader};
 use crate::pipeline::frames::FrameRange;
@@ -32,6 +31,11 @@ pub struct AnimateArgs {
     /// Frames to write, `A:B` (end exclusive); also writes OUTPUT's chunk file for `merge`.
     #[arg(long)]
     pub frames: Option<String>,
+    /// With --frames A:B, simulate from rest P frames before A (at frame max(0, A − P),
+    /// quasi-static there) instead of the clip's whole history from frame 0: chunks of a clip
+    /// then run in parallel on a farm, and `furrow merge` cross-fades their overlaps.
+    #[arg(long, value_name = "P", requires = "frames")]
+    pub preroll: Option<usize>,
     /// Frames per second at which the clip is sampled.
     #[arg(long, default_value_t = 30.0)]
     pub fps: f64,
@@ -129,6 +133,7 @@ pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
         scene_path: a.scene.as_ref().map(|p| p.display().to_string()),
         fps: a.fps,
         frames,
+        preroll: a.preroll,
     };
     let pb = out.progress(count as u64, "simulating");
     let run = pipeline::run(&rig, &opts, &|stage, done, _total| {
@@ -271,11 +276,21 @@ fn write_chunk_file(
         origin: chunk::origin_to_plain(&run.origin),
         metres_per_unit: rig.scale.metres_per_unit,
         face_map: run.face_map.clone(),
+        preroll: a.preroll,
+        wavelength_m: run.report.wavelength_m,
+        offsets: true,
     };
+    let offsets: Vec<Vec<_>> = run
+        .frames
+        .iter()
+        .zip(&run.smooth)
+        .map(|(f, s)| f.iter().zip(s).map(|(p, q)| p - q).collect())
+        .collect();
     chunk::write(
         chunk_file,
         &header,
         &run.frames,
+        &offsets,
         Overwrite::from_force(a.force),
     )?;
     Ok(())
@@ -382,6 +397,7 @@ pub fn batch(a: BatchArgs, out: &Output) -> anyhow::Result<()> {
             export: a.export.clone(),
             scene: a.scene.clone(),
             frames: a.frames.clone(),
+            preroll: None,
             fps: a.fps,
             frames_dir: None,
             report: Some(report.clone()),
@@ -420,145 +436,6 @@ pub fn batch(a: BatchArgs, out: &Output) -> anyhow::Result<()> {
             a.inputs.len()
         ))
         .into());
-    }
-    Ok(())
-}
-
-/// Arguments of `furrow merge`.
-#[derive(Debug, clap::Args)]
-pub struct MergeArgs {
-    /// Chunk outputs of `furrow animate --frames A:B` (their .glb or .furrow-chunk files).
-    #[arg(required = true)]
-    pub chunks: Vec<PathBuf>,
-    /// The rig the chunks were made from.
-    #[arg(long)]
-    pub rig: PathBuf,
-    /// The merged glTF.
-    #[arg(short, long)]
-    pub output: PathBuf,
-    /// The face mesh, as given to `animate --mesh`.
-    #[arg(long)]
-    pub mesh: Option<String>,
-    /// The face's skin primitives, as given to `animate --skin-primitives`.
-    #[arg(long, value_parser = crate::io::parts::parse_picks)]
-    pub skin_primitives: Option<Vec<crate::io::parts::PrimitivePick>>,
-    /// Replace an existing output.
-    #[arg(long)]
-    pub force: bool,
-    /// Whether the rig's buffer and image files may lie outside its folder.
-    #[command(flatten)]
-    pub paths: super::RigPathsArgs,
-    /// The output's form and storage (the layer's basis is built over the joined frames).
-    #[command(flatten)]
-    pub export: ExportArgs,
-    /// Write the export's report (JSON: wrinkle targets, errors, file size) here.
-    #[arg(long)]
-    pub report: Option<PathBuf>,
-}
-
-/// Run `furrow merge`.
-pub fn merge(a: MergeArgs, out: &Output) -> anyhow::Result<()> {
-    a.export.check()?;
-    let mut outputs: Vec<&Path> = vec![&a.output];
-    if let Some(r) = &a.report {
-        outputs.push(r);
-    }
-    preflight(&outputs, a.force)?;
-    let mut chunks = Vec::new();
-    for p in &a.chunks {
-        let cp = if p.extension().and_then(|e| e.to_str()) == Some("furrow-chunk") {
-            p.clone()
-        } else {
-            chunk_path(p)
-        };
-        chunks.push((cp.display().to_string(), chunk::read(&cp)?));
-    }
-    let joined = chunk::join(chunks)?;
-    let bytes = std::fs::read(&a.rig)
-        .with_context(|| format!("{}: cannot read the rig", a.rig.display()))?;
-    if chunk::fnv64(&bytes) != joined.header.rig_hash {
-        bail!(
-            "{}: the chunks were made from another rig file",
-            a.rig.display()
-        );
-    }
-    let mut rig = fio::load::load_bytes(
-        &a.rig,
-        &bytes,
-        &LoadOptions {
-            mesh: a.mesh.clone(),
-            animation: None,
-            skin_primitives: a.skin_primitives.clone(),
-            allow_outside_paths: a.paths.allow_outside_paths,
-        },
-    )?;
-    // The frames are in the metres they were simulated in: write them back in file units.
-    let m = joined.header.metres_per_unit;
-    crate::io::units::apply(
-        &mut rig,
-        Some(ScaleSetting::metres(m, "the chunks' scale")?),
-        None,
-    );
-    let origin = chunk::origin_from_plain(&joined.header.origin);
-    if origin
-        .iter()
-        .any(|o| o.vertices.iter().any(|&v| v >= rig.face().positions.len()))
-    {
-        bail!(
-            "{}: the chunks' face does not match this rig's face (pass the same --mesh)",
-            a.rig.display()
-        );
-    }
-    let h = &joined.header;
-    let r = h.range;
-    let (weights, animated) = crate::pipeline::plan::clip_weights(&rig, h.fps);
-    if weights.len() != h.clip_frames {
-        bail!(
-            "{}: the chunks' clip has {} frames at {} fps, this rig's {}",
-            a.rig.display(),
-            h.clip_frames,
-            h.fps,
-            weights.len()
-        );
-    }
-    let written = Frames {
-        map: &h.face_map,
-        frames: &joined.frames,
-        weights: &weights[r.start..r.end],
-        clip: Clip::of(animated, h.fps, r.start, h.clip_frames),
-        triangles: &h.triangles,
-        origin: &origin,
-        fps: h.fps,
-    };
-    let report = out_file::write(
-        &rig,
-        &written,
-        &a.export,
-        &a.output,
-        Overwrite::from_force(a.force),
-    )?;
-    if let (Some(path), Some(rep)) = (&a.report, &report) {
-        let json = serde_json::to_vec_pretty(rep)?;
-        atomic::write(path, &json, Overwrite::from_force(a.force))?;
-    }
-    out.json_result(
-        &serde_json::json!({ "ok": true, "output": a.output, "frames": [r.start, r.end], "export": report }),
-    );
-    out.say(format!(
-        "merged frames {}:{} of {} chunks into {}",
-        r.start,
-        r.end,
-        a.chunks.len(),
-        a.output.display()
-    ));
-    if let Some(rep) = &report {
-        out_file::say(out, rep);
-    }
-    if r.start != 0 || r.end != joined.header.clip_frames {
-        out.note(format!(
-            "note: the chunks cover frames {}:{} of a {}-frame clip",
-            r.start, r.end, joined.header.clip_frames
-        ));
     }
     Ok(())
 }

@@ -89,6 +89,29 @@ pub enum BenchCommand {
         #[arg(long)]
         tracking: Option<f64>,
     },
+    /// Pre-roll: the rig run unsplit, then from rest at each start (no pre-roll), compared
+    /// frame by frame: the error at a chunk's first written frame against its pre-roll, and
+    /// the smallest pre-roll within 10 %; writes preroll.csv and preroll.png in DIR.
+    #[command(
+        after_help = "Example:\n  furrow bench preroll --rig rigs/face.glb --starts 60,120,180 --window 24 --out out/preroll"
+    )]
+    Preroll {
+        /// The rig.
+        #[arg(long, default_value = "rigs/face.glb")]
+        rig: std::path::PathBuf,
+        /// Frames the started runs begin at, from rest, comma-separated.
+        #[arg(long, value_delimiter = ',', default_values_t = vec![60usize, 120, 180])]
+        starts: Vec<usize>,
+        /// Frames each started run simulates (the largest pre-roll measured + 1).
+        #[arg(long, default_value_t = 24)]
+        window: usize,
+        /// Frames per second at which the clip is sampled.
+        #[arg(long, default_value_t = 30.0)]
+        fps: f64,
+        /// Output folder (preroll.csv, preroll.png).
+        #[arg(long, default_value = "out/preroll")]
+        out: std::path::PathBuf,
+    },
     /// Activation fit: 52 muscles on a face lattice of about N cells, a 335-frame clip.
     #[command(after_help = "Example:\n  furrow bench fit\n  furrow bench fit --cells 2000 --json")]
     Fit {
@@ -172,6 +195,13 @@ pub fn run(c: BenchCommand, out: &Output) -> anyhow::Result<()> {
             let c = crate::studies::muscles::compare_drivers(&loaded, &opts, tracking)?;
             print(out, "bench muscles", &serde_json::to_value(&c)?);
         }
+        BenchCommand::Preroll {
+            rig,
+            starts,
+            window,
+            fps,
+            out: dir,
+        } => preroll(&rig, &starts, window, fps, &dir, out)?,
         BenchCommand::Fit { cells, gn_frames } => {
             anyhow::ensure!(
                 (1..=1_000_000).contains(&cells),
@@ -231,6 +261,7 @@ fn bench_rig(
     crate::io::units::apply(&mut loaded, None, None);
     let count = crate::pipeline::plan::clip_weights(&loaded, fps).0.len();
     let opts = crate::pipeline::RunOptions {
+        preroll: None,
         scene: match scene {
             Some(p) => crate::scene::Scene::load(p)?,
             None => crate::scene::Scene::default(),
@@ -240,6 +271,43 @@ fn bench_rig(
         frames: Some(crate::pipeline::frames::FrameRange::parse(frames, count)?),
     };
     Ok((loaded, opts))
+}
+
+/// `furrow bench preroll`: how fast the clip's history fades on a rig.
+fn preroll(
+    rig: &std::path::Path,
+    starts: &[usize],
+    window: usize,
+    fps: f64,
+    dir: &std::path::Path,
+    out: &Output,
+) -> anyhow::Result<()> {
+    anyhow::ensure!(window >= 1, "--window must be at least 1");
+    anyhow::ensure!(!starts.is_empty(), "--starts needs at least one frame");
+    let end = starts.iter().max().copied().unwrap_or(0) + window;
+    let on = RigFrames {
+        rig: rig.to_path_buf(),
+        frames: format!("0:{end}"),
+        fps,
+        scene: None,
+        paths: super::RigPathsArgs::default(),
+    };
+    let (loaded, opts) = bench_rig(&on)?;
+    let curve = crate::studies::preroll::measure(&loaded, &opts, starts, window)?;
+    let files = crate::studies::preroll::write(&curve, dir)?;
+    out.json_result(&serde_json::json!({ "ok": true, "files": files, "curve": curve }));
+    out.say("bench preroll: worst amplitude error over the starts at a chunk's first frame");
+    for (p, e) in &curve.worst {
+        out.say(format!("  pre-roll {p:>3}  {:6.2} %", 100.0 * e));
+    }
+    match curve.preroll {
+        Some(p) => out.say(format!("  within 10 % from a pre-roll of {p} frames")),
+        None => out.say("  no measured pre-roll stays within 10 %"),
+    }
+    files
+        .iter()
+        .for_each(|f| out.say(format!("  wrote {}", f.display())));
+    Ok(())
 }
 
 /// `furrow bench select`: the selected skin against the whole skin on a rig.

@@ -94,6 +94,7 @@ pub fn run_demo(a: DemoArgs, out: &Output) -> anyhow::Result<crate::pipeline::re
         export: a.export.clone(),
         scene: None,
         frames: Some(a.frames.clone()).filter(|f| f != ":"),
+        preroll: None,
         fps: a.fps,
         frames_dir: a.frames_dir.then(|| a.out.join("frames")),
         report: Some(a.out.join("report.json")),

@@ -110,6 +110,7 @@ pub fn run(a: FitArgs, out: &Output) -> anyhow::Result<()> {
     let count = pipeline::plan::clip_weights(&rig, a.fps).0.len();
     let range = frame_range(a.frames.as_deref(), count)?;
     let opts = RunOptions {
+        preroll: None,
         scene,
         scene_path: a.scene.as_ref().map(|p| p.display().to_string()),
         fps: a.fps,

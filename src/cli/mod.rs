@@ -2,10 +2,12 @@
 
 mod animate;
 mod bench;
+mod chunks;
 mod demo;
 mod export;
 mod fit;
 mod inspect;
+mod merge;
 mod output;
 mod report;
 mod rig;
@@ -75,7 +77,13 @@ pub enum Command {
     #[command(
         after_help = "Example:\n  furrow merge out/part0.glb out/part1.glb --rig rigs/face.glb -o out/face_wrinkled.glb"
     )]
-    Merge(animate::MergeArgs),
+    Merge(merge::MergeArgs),
+    /// Print a clip's frame ranges for a farm (one `A:B` per line), balanced by expected
+    /// cost with a pre-roll per chunk; run each with `animate --frames A:B --preroll P`.
+    #[command(
+        after_help = "Example:\n  furrow chunks rigs/head.glb --count 8 --preroll 12\n  furrow animate rigs/head.glb --frames 0:52 --preroll 12 -o out/part_0.glb"
+    )]
+    Chunks(chunks::ChunksArgs),
     /// Run a synthetic scene (slab, cushions, cubes) and write its frames and wavelengths.
     #[command(after_help = "Example:\n  furrow scene examples/cushions.toml --out out/scenes")]
     Scene(scene::SceneArgs),
@@ -146,7 +154,8 @@ pub fn main() -> i32 {
         Command::Bench(c) => bench::run(c, &out),
         Command::Animate(a) => animate::run(a, &out),
         Command::Batch(a) => animate::batch(a, &out),
-        Command::Merge(a) => animate::merge(a, &out),
+        Command::Merge(a) => merge::merge(a, &out),
+        Command::Chunks(a) => chunks::run(a, &out),
         Command::Scene(a) => scene::run(a, &out),
         Command::Validate(c) => validate::run(c, &out),
         Command::Report(c) => report::run(c, &out),

@@ -24,9 +24,12 @@
 //!
 //! A clip is history-dependent (velocities, the wrinkle pattern), so a run limited to frames
 //! A:B simulates frames 0..B and writes A..B: its frames are identical to the same frames of
-//! an unsplit run, which is what `furrow merge` relies on.
+//! an unsplit run, which is what `furrow merge` relies on. With a pre-roll P it simulates
+//! max(0, A − P)..B instead, starting at rest in the pose of its first frame: the history
+//! fades within the pre-roll, and chunks of a clip run in parallel.
 
 pub mod chunk;
+pub mod farm;
 pub mod frames;
 pub mod layer;
 pub mod plan;
@@ -62,6 +65,11 @@ pub struct RunOptions {
     pub fps: f64,
     /// Frames to write (`None`: all).
     pub frames: Option<FrameRange>,
+    /// Frames simulated before the first written one, from rest (`None`: the clip's whole
+    /// history, from frame 0). The first of them is solved quasi-statically (the interior at
+    /// rest in that pose, the skin from the embedded surface), so a chunk of a farm starts
+    /// near the clip's state without simulating its whole past.
+    pub preroll: Option<usize>,
 }
 
 /// The result of a run: the exported face frames and the report.
@@ -109,7 +117,7 @@ pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<R
     // A clip's history leads to its first written frame; a still rig's shapes are each
     // solved alone, from rest (the state put back at rest for each), and only those that
     // compress some skin.
-    let first = if plan.animated { 0 } else { plan.range.start };
+    let first = plan.first_simulated();
     let mut at_rest = true;
     for k in first..end {
         progress("frames", k, end);
@@ -127,8 +135,13 @@ pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<R
             scratch = Scratch::new(model.lattice.node_count());
         }
         at_rest = false;
+        let frame_options = if plan.animated && k == first && k > 0 {
+            options.settled()
+        } else {
+            options
+        };
         let (record, composed) =
-            step::step_frame(rig, w, k, &model, &mut state, &mut scratch, options)?;
+            step::step_frame(rig, w, k, &model, &mut state, &mut scratch, frame_options)?;
         totals.add(&record);
         per_frame.push(record);
         if k >= plan.range.start {
@@ -295,9 +308,14 @@ fn finish_report(
             totals.frames_not_converged, totals.frames_simulated
         ));
     }
-    if plan.range.start > 0 && plan.animated {
+    let first = plan.first_simulated();
+    if plan.range.start > first && plan.animated {
+        let from = match plan.preroll {
+            Some(_) => "a pre-roll from rest",
+            None => "the clip's history",
+        };
         log.warnings.push(format!(
-            "frames 0..{} were simulated but not written (the clip's history leads to frame {})",
+            "frames {first}..{} were simulated but not written ({from} leads to frame {})",
             plan.range.start, plan.range.start
         ));
     }
@@ -324,6 +342,7 @@ fn finish_report(
         rig_scale: rig.scale.clone(),
         fps: opts.fps,
         frames: [plan.range.start, plan.range.end],
+        preroll: plan.preroll,
         materials: serde_json::json!({
             "skin": m.skin,
             "interior": m.interior,

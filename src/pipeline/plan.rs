@@ -134,8 +134,11 @@ pub struct Plan {
     /// Blend-shape weights per frame of the clip, sampled at the run's fps; for a still rig,
     /// each shape alone at weight 1 (see [`clip_weights`]).
     pub weights: Vec<Vec<f64>>,
-    /// Frames to write; frames 0..`range.end` are simulated (the clip's history).
+    /// Frames to write; frames [`Plan::first_simulated`]..`range.end` are simulated (the
+    /// clip's history).
     pub range: FrameRange,
+    /// Frames simulated before `range.start` from rest (`None`: all of them, from frame 0).
+    pub preroll: Option<usize>,
     /// Frames per second (Hz).
     pub fps: f64,
     /// Whether the rig has an animation of more than one frame.
@@ -226,6 +229,7 @@ impl Plan {
         Ok(Self {
             weights,
             range,
+            preroll: opts.preroll,
             fps: opts.fps,
             animated,
             materials,
@@ -234,6 +238,16 @@ impl Plan {
             driver: Driver::of(scene, rig),
             head_motion: head_motion(rig, scene, substeps > 0),
         })
+    }
+
+    /// The first frame simulated: 0 for a clip's whole history, `range.start − preroll`
+    /// (at least 0) with a pre-roll, and `range.start` for a still rig (each shape alone).
+    pub fn first_simulated(&self) -> usize {
+        match (self.animated, self.preroll) {
+            (false, _) => self.range.start,
+            (true, None) => 0,
+            (true, Some(p)) => self.range.start.saturating_sub(p),
+        }
     }
 
     /// Whether the interior runs backward Euler (otherwise it is quasi-static).

@@ -265,6 +265,10 @@ pub struct RunReport {
     pub fps: f64,
     /// Frames written [start, end).
     pub frames: [usize; 2],
+    /// Frames simulated from rest before the first written one (`--preroll`); absent when
+    /// the clip's whole history was simulated.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub preroll: Option<usize>,
     /// Materials used (SI).
     pub materials: serde_json::Value,
     /// Critical wavelength λ (m) and cluster width σ = λ/π (m).

@@ -11,5 +11,6 @@ pub mod benchmarks;
 pub mod fit;
 pub mod locality;
 pub mod muscles;
+pub mod preroll;
 pub mod stability;
 pub mod tradeoff;

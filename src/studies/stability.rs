@@ -276,7 +276,8 @@ impl CaseSet {
         }
     }
 
-    /// Degenerate triangles, and a shape that folds the skin over itself (refused).
+    /// Degenerate triangles, and a shape that folds the skin over itself (the fold followed
+    /// as an out-of-model region).
     fn meshes(&mut self) {
         let base = self.base;
         for &e in self.range(&[1e-4], &[1e-2, 1e-4]) {
@@ -343,6 +344,7 @@ pub fn run_case(c: &Case) -> StabilityRow {
         pipeline::run(
             &rig,
             &RunOptions {
+                preroll: None,
                 scene: c.scene.clone(),
                 scene_path: None,
                 fps: c.fps,
@@ -391,7 +393,15 @@ pub fn run_case(c: &Case) -> StabilityRow {
                 "converged"
             }
             .into();
-            row.message = out.report.warnings.join(" | ");
+            let outside = out.report.out_of_model.iter().flat_map(|o| o.summary());
+            row.message = out
+                .report
+                .warnings
+                .iter()
+                .cloned()
+                .chain(outside)
+                .collect::<Vec<_>>()
+                .join(" | ");
         }
     }
     row

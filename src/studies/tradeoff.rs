@@ -413,6 +413,7 @@ pub fn rig_sweep(
     for (i, s) in set.iter().enumerate() {
         progress(i, total);
         let opts = RunOptions {
+            preroll: None,
             scene: s.scene.clone(),
             scene_path: None,
             fps,

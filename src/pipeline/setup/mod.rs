@@ -490,6 +490,7 @@ pub(crate) mod test_support {
         });
         tweak(&mut scene);
         let opts = crate::pipeline::RunOptions {
+            preroll: None,
             scene: scene.clone(),
             scene_path: None,
             fps: 30.0,

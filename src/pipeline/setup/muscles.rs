@@ -511,6 +511,7 @@ mod tests {
         let mut scene = Scene::default();
         scene.muscles.source = Some("none".into());
         let opts = crate::pipeline::RunOptions {
+            preroll: None,
             scene,
             scene_path: None,
             fps: 30.0,
@@ -586,6 +587,7 @@ mod tests {
         let mut scene = Scene::default();
         scene.interior.cell_size = Some(0.01);
         let opts = |scene: &Scene| crate::pipeline::RunOptions {
+            preroll: None,
             scene: scene.clone(),
             scene_path: None,
             fps: 30.0,

@@ -331,9 +331,50 @@ pub struct Jolt {
     pub band_max_m: f64,
     /// The later frame of that change.
     pub band_frame: usize,
+    /// The 99th percentile of the per-vertex changes among vertices whose wrinkles fade (m;
+    /// the upper edge of a logarithmic histogram bin, within 1 %).
+    pub band_p99_m: f64,
     /// The 99th percentile of the per-vertex changes everywhere else (m; the upper edge of a
     /// logarithmic histogram bin, within 1 %).
     pub elsewhere_p99_m: f64,
+}
+
+/// Counts of positive lengths in logarithmic bins ([`BINS_PER_DECADE`]), for percentiles.
+#[derive(Debug, Default)]
+struct LogHistogram {
+    bins: BTreeMap<i64, u64>,
+    count: u64,
+}
+
+impl LogHistogram {
+    fn add(&mut self, c: f64) {
+        let bin = if c > 0.0 {
+            (c.log10() * BINS_PER_DECADE).ceil() as i64
+        } else {
+            i64::MIN
+        };
+        *self.bins.entry(bin).or_default() += 1;
+        self.count += 1;
+    }
+
+    /// The upper edge of the bin holding quantile `p` (0 for no counts).
+    fn quantile(&self, p: f64) -> f64 {
+        let rank = (p * self.count as f64).ceil() as u64;
+        let mut seen = 0;
+        self.bins
+            .iter()
+            .find_map(|(&bin, &n)| {
+                seen += n;
+                (seen >= rank).then_some(bin)
+            })
+            .map_or(0.0, |bin| {
+                if bin == i64::MIN {
+                    0.0
+                } else {
+                    10f64.powf(bin as f64 / BINS_PER_DECADE)
+                }
+            })
+    }
 }
 
 /// Positions of the refined skin vertices at each exported frame (m).
@@ -352,9 +393,8 @@ pub fn jolt(
     first: usize,
 ) -> Option<Jolt> {
     let fade = |j: usize| refined_fade(outside, target_of, first + j);
-    let (mut band_max, mut band_frame, mut any) = (0.0f64, 0, false);
-    let mut bins: BTreeMap<i64, u64> = BTreeMap::new();
-    let mut count = 0u64;
+    let (mut band_max, mut band_frame) = (0.0f64, 0);
+    let (mut band, mut elsewhere) = (LogHistogram::default(), LogHistogram::default());
     let mut before = fade(0);
     for j in 1..frames.len() {
         let now = fade(j);
@@ -365,44 +405,24 @@ pub fn jolt(
         for v in 0..now_x.len() {
             let c = ((now_x[v] - now_t[v]) - (was_x[v] - was_t[v])).norm();
             if faded(v) {
-                any = true;
+                band.add(c);
                 if c > band_max {
                     (band_max, band_frame) = (c, first + j);
                 }
             } else {
-                let bin = if c > 0.0 {
-                    (c.log10() * BINS_PER_DECADE).ceil() as i64
-                } else {
-                    i64::MIN
-                };
-                *bins.entry(bin).or_default() += 1;
-                count += 1;
+                elsewhere.add(c);
             }
         }
         before = now;
     }
-    if !any || count == 0 {
+    if band.count == 0 || elsewhere.count == 0 {
         return None;
     }
-    let rank = (0.99 * count as f64).ceil() as u64;
-    let mut seen = 0;
-    let p99 = bins
-        .iter()
-        .find_map(|(&bin, &n)| {
-            seen += n;
-            (seen >= rank).then_some(bin)
-        })
-        .map_or(0.0, |bin| {
-            if bin == i64::MIN {
-                0.0
-            } else {
-                10f64.powf(bin as f64 / BINS_PER_DECADE)
-            }
-        });
     Some(Jolt {
         band_max_m: band_max,
         band_frame,
-        elsewhere_p99_m: p99,
+        band_p99_m: band.quantile(0.99),
+        elsewhere_p99_m: elsewhere.quantile(0.99),
     })
 }
 

@@ -89,6 +89,22 @@ impl StepOptions {
     }
 }
 
+impl StepOptions {
+    /// The options for a pre-rolled run's first frame: the interior solved quasi-statically
+    /// (at rest in the frame's pose, no velocity) and the skin started on the embedded
+    /// surface B q, as a still rig's shapes are.
+    pub fn settled(self) -> Self {
+        Self {
+            schedule: InteriorSchedule {
+                substeps: 0,
+                skin_from_embedded: true,
+                ..self.schedule
+            },
+            ..self
+        }
+    }
+}
+
 /// Coupling passes per frame by default when generated muscles are fitted with the skin in
 /// the loop: the skin then stands pre-tensioned against them, and one pass per frame swings
 /// (a lifted sheet's interior alternated 2.93 / 0.56 mm about its 2 mm lift frame after
@@ -227,6 +243,9 @@ struct FrameStart {
     time: f64,
     last_target: Option<Vec<nalgebra::Vector3<f64>>>,
     x: Option<Vec<f64>>,
+    /// The skin's pinned vertices at the frame's start (a try that met the skin passing
+    /// through itself pins more; a redo starts from the frame's own pins).
+    pinned: Option<Vec<usize>>,
 }
 
 impl FrameStart {
@@ -243,6 +262,11 @@ impl FrameStart {
                 .as_ref()
                 .filter(|_| with_skin)
                 .map(|s| s.x().to_vec()),
+            pinned: state
+                .skin
+                .as_ref()
+                .filter(|_| with_skin)
+                .map(|s| s.pinned().to_vec()),
         }
     }
 
@@ -258,6 +282,11 @@ impl FrameStart {
     /// Put the interior and the skin back to the frame's start.
     fn restore(&self, state: &mut State) -> anyhow::Result<()> {
         self.rewind_interior(state);
+        if let (Some(skin), Some(pinned)) = (state.skin.as_mut(), &self.pinned) {
+            if skin.pinned() != pinned.as_slice() {
+                skin.set_pinned(pinned)?;
+            }
+        }
         if let (Some(skin), Some(x)) = (state.skin.as_mut(), &self.x) {
             skin.set_x(x)?;
         }
