@@ -87,7 +87,7 @@ fn each_file_loads_with_the_head_as_its_face_and_inspect_reads_it() {
         assert_eq!(f.name, face, "{file}: {}", rig.face_reason);
         let got: Vec<&str> = f.targets.iter().map(|t| t.name.as_str()).collect();
         assert_eq!(got, names, "{file}");
-        let skin = f.primitive_ranges[0].1;
+        let skin = f.primitives[0].count;
         assert!(
             (1800..=2400).contains(&skin),
             "{file}: {skin} skin vertices"
@@ -110,7 +110,7 @@ fn each_file_loads_with_the_head_as_its_face_and_inspect_reads_it() {
 /// The skin of a loaded face: its first primitive's positions (m) and triangles.
 fn skin(rig: &Rig) -> (Vec<Vector3<f64>>, Vec<[usize; 3]>, usize) {
     let f = rig.face();
-    let (start, count) = f.primitive_ranges[0];
+    let (start, count) = (f.primitives[0].first, f.primitives[0].count);
     let pos = f.positions[start..start + count].to_vec();
     let tris = f
         .triangles
@@ -411,9 +411,10 @@ fn the_parts_face_is_compact_and_its_mouth_pocket_is_apart_from_the_skin() {
         assert!(rig.extensions_used.iter().any(|u| u == e), "{e}");
     }
     assert!(rig.animations.is_empty());
-    let f = rig.face();
-    let (s0, sn) = f.primitive_ranges[0];
-    let (m0, mn) = f.primitive_ranges[4];
+    let f = rig.face_mesh();
+    let span = |k: usize| (f.primitives[k].first, f.primitives[k].count);
+    let (s0, sn) = span(0);
+    let (m0, mn) = span(4);
     let gap = f.positions[m0..m0 + mn]
         .iter()
         .map(|p| {
@@ -428,7 +429,7 @@ fn the_parts_face_is_compact_and_its_mouth_pocket_is_apart_from_the_skin() {
         "the mouth interior comes within {gap} m of the skin"
     );
     for k in [1, 2] {
-        let (e0, en) = f.primitive_ranges[k];
+        let (e0, en) = span(k);
         let tris: Vec<[usize; 3]> = f
             .triangles
             .iter()
@@ -442,7 +443,7 @@ fn the_parts_face_is_compact_and_its_mouth_pocket_is_apart_from_the_skin() {
 /// Pictures of the skin at rest and at each folding shape (front and from below-side), for a
 /// person to look at.
 #[test]
-#[ignore]
+#[ignore = "writes pictures of the folding shapes for a person to look at"]
 fn preview_the_folding_shapes() {
     use furrow::render::preview::{render, side_by_side, write_png, View};
     let Ok(dir) = std::env::var("AVATAR_PREVIEW_DIR") else {

@@ -103,18 +103,7 @@ pub struct Animated {
 /// Load, run and write one rig (shared by `animate`, `batch` and `demo`).
 pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
     let t0 = Instant::now();
-    if !(a.fps.is_finite() && a.fps > 0.0 && a.fps <= 1000.0) {
-        bail!("--fps must lie in (0, 1000], got {}", a.fps);
-    }
-    let scene = match &a.scene {
-        Some(p) => Scene::load(p)?,
-        None => Scene::default(),
-    };
-    scene.validate()?;
-    a.export.check()?;
-    if a.output.extension().and_then(|e| e.to_str()) != Some("glb") {
-        bail!("{}: the output must be a .glb file", a.output.display());
-    }
+    let scene = checked_scene(a)?;
     let chunk_file = chunk_path(&a.output);
     let mut outputs: Vec<&Path> = vec![&a.output];
     let write_chunk = a.frames.is_some() && !a.no_chunk;
@@ -127,19 +116,7 @@ pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
     preflight(&outputs, a.force)?;
     let bytes = std::fs::read(&a.rig)
         .with_context(|| format!("{}: cannot read the rig", a.rig.display()))?;
-    let mut rig = fio::load::load_bytes(
-        &a.rig,
-        &bytes,
-        &LoadOptions {
-            mesh: a.mesh.clone(),
-            animation: None,
-            skin_primitives: a
-                .skin_primitives
-                .clone()
-                .or_else(|| scene.rig.skin_primitives.clone()),
-            allow_outside_paths: a.paths.allow_outside_paths,
-        },
-    )?;
+    let mut rig = fio::load::load_bytes(&a.rig, &bytes, &load_options(a, &scene))?;
     out.note(&rig.face_reason);
     if rig.parts.parts.len() > 1 {
         out.note(rig.parts.summary());
@@ -226,6 +203,36 @@ pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
         files.push(r.clone());
     }
     Ok(Animated { run, files })
+}
+
+/// The scene of `--scene` (or the default), after the arguments that need no rig are checked.
+fn checked_scene(a: &AnimateArgs) -> anyhow::Result<Scene> {
+    if !(a.fps.is_finite() && a.fps > 0.0 && a.fps <= 1000.0) {
+        bail!("--fps must lie in (0, 1000], got {}", a.fps);
+    }
+    let scene = match &a.scene {
+        Some(p) => Scene::load(p)?,
+        None => Scene::default(),
+    };
+    scene.validate()?;
+    a.export.check()?;
+    if a.output.extension().and_then(|e| e.to_str()) != Some("glb") {
+        bail!("{}: the output must be a .glb file", a.output.display());
+    }
+    Ok(scene)
+}
+
+/// How the rig of `a` loads: the flags first, then the scene's `[rig]` keys.
+fn load_options(a: &AnimateArgs, scene: &Scene) -> LoadOptions {
+    LoadOptions {
+        mesh: a.mesh.clone(),
+        animation: None,
+        skin_primitives: a
+            .skin_primitives
+            .clone()
+            .or_else(|| scene.rig.skin_primitives.clone()),
+        allow_outside_paths: a.paths.allow_outside_paths,
+    }
 }
 
 /// The `--frames` range of a clip of `count` frames (clamped to the clip with

@@ -227,28 +227,13 @@ pub fn set_up(
     };
     log.stages.push(interior::record(plan, &stepper));
     log.stages.extend(records);
-    let pose_maps = outside::PoseMaps {
-        static_pins: simulated
-            .as_ref()
-            .map_or_else(Vec::new, |s| s.shell.pinned().to_vec()),
-        shell_of_refined: shell_of_refined(simulated.as_ref(), refined.mesh.positions.len()),
-        welded_of_refined: refined.ancestor.iter().map(|a| a.triangle as u32).collect(),
-        active: selection.map_or_else(Vec::new, |s| s.per_pose),
-    };
+    let pose_maps = pose_maps(simulated.as_ref(), &refined, selection);
     let (skin, sim_vertices, sigma) = match simulated {
         Some(s) => (Some(s.shell), s.vertices, s.sigma),
         None => (None, Vec::new(), f64::NAN),
     };
-    let corners = refined
-        .ancestor
-        .iter()
-        .map(|a| LoadedCorners {
-            triangle: welded.loaded_triangle[a.triangle],
-            bary: a.bary,
-        })
-        .collect();
     let model = Model {
-        corners,
+        corners: loaded_corners(&refined, &welded),
         skin_mesh: refined.mesh,
         target_of: refined.target_of,
         origin: refined.origin,
@@ -273,6 +258,33 @@ pub fn set_up(
         last_target: None,
     };
     Ok((model, state))
+}
+
+/// The maps from refined skin to shell, welded face and per-pose activity that place the
+/// out-of-model regions' pins.
+fn pose_maps(
+    simulated: Option<&skin::SimulatedSkin>,
+    refined: &refine::RefinedSkin,
+    selection: Option<select::Selection>,
+) -> outside::PoseMaps {
+    outside::PoseMaps {
+        static_pins: simulated.map_or_else(Vec::new, |s| s.shell.pinned().to_vec()),
+        shell_of_refined: shell_of_refined(simulated, refined.mesh.positions.len()),
+        welded_of_refined: refined.ancestor.iter().map(|a| a.triangle as u32).collect(),
+        active: selection.map_or_else(Vec::new, |s| s.per_pose),
+    }
+}
+
+/// Each refined skin vertex as a point of a loaded triangle (barycentric coordinates).
+fn loaded_corners(refined: &refine::RefinedSkin, welded: &weld::Welded) -> Vec<LoadedCorners> {
+    refined
+        .ancestor
+        .iter()
+        .map(|a| LoadedCorners {
+            triangle: welded.loaded_triangle[a.triangle],
+            bary: a.bary,
+        })
+        .collect()
 }
 
 /// The shell vertex of each of `count` refined vertices (`u32::MAX` where not simulated).
