@@ -1,4 +1,4 @@
-//! Quadratic against trilinear lattice (issue 5): where the wrinkle crests fall in the
+//! Quadratic against trilinear lattice: where the wrinkle crests fall in the
 //! element grid, and whether the element boundaries show in the skin. Run with `cargo test
 //! --release --test crest_locking -- --nocapture`.
 //!
@@ -8,7 +8,7 @@
 //! faces crease the skin (it shows 0.9–1.0 of the embedded surface's slope jump) and
 //! quadratic ones do not (|fraction| ≤ 0.1).
 //!
-//! The issue expects trilinear crests to lock to element boundaries and quadratic ones not
+//! One expects trilinear crests to lock to element boundaries and quadratic ones not
 //! to. Measured on the compressed slab, this does not happen with either order: the skin is
 //! tied to the interior only through cluster averages of width σ ≈ λ/2, which are blind at
 //! the wrinkle wavelength, so the interior follows about 2 % of the wrinkle and an affinely
@@ -156,7 +156,7 @@ fn faces_and_bent_surface_match_the_prescribed_interior() {
 /// read the `z-crests` line (skin height with the bend removed); the first line's phases
 /// are of the height above the embedded surface, which carries the trilinear facets.
 #[test]
-#[ignore]
+#[ignore = "an exploration that prints crest statistics, not a check"]
 fn explore() {
     let cells: Vec<usize> = std::env::var("CELLS")
         .unwrap_or("6,7,9,11".into())
@@ -279,7 +279,7 @@ fn trilinear_element_boundaries_crease_the_skin_quadratic_do_not() {
 /// Exploration (not a check): [`trilinear_element_boundaries_crease_the_skin_quadratic_do_not`]
 /// with settings from the environment (ORDERS = t,q; LEN, CELLS, BEND, PERIOD, PHASE, RATIO).
 #[test]
-#[ignore]
+#[ignore = "an exploration that prints facet statistics, not a check"]
 fn explore_facets() {
     use furrow::validate::crests::{facet_slab_settings, run_facets};
     for o in std::env::var("ORDERS").unwrap_or("t,q".into()).split(',') {

@@ -369,7 +369,7 @@ fn bad_input_is_named() {
 /// Cost of the coupling terms at the face rig's size (not a pass/fail test; run with
 /// `cargo test --release --test embedded coupling_terms_cost -- --ignored --nocapture`).
 #[test]
-#[ignore]
+#[ignore = "a benchmark that prints timings, not a check"]
 fn coupling_terms_cost_on_the_face_rig() {
     use furrow::lattice::LatticeSettings;
     let rig = furrow::rig::face::generate();

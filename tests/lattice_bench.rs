@@ -3,7 +3,7 @@
 #![allow(clippy::needless_range_loop)]
 
 #[test]
-#[ignore]
+#[ignore = "a benchmark that prints timings, not a check"]
 fn bench_lattice_1000_elements() {
     for elements in [125, 1000] {
         let v = furrow::fem::bench::bench_lattice(elements).unwrap();

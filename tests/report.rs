@@ -505,7 +505,7 @@ fn large_mesh_renders_at_512() {
 /// Timing of the 20k-triangle render (not a test of speed; prints the numbers):
 /// `cargo test --release --test report -- --ignored --nocapture bench_render`
 #[test]
-#[ignore]
+#[ignore = "a benchmark that prints timings, not a check"]
 fn bench_render_20k_triangles_512() {
     let mesh = patch(101, 0.0005);
     let view = View::default();

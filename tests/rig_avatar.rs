@@ -443,7 +443,7 @@ fn the_parts_face_is_compact_and_its_mouth_pocket_is_apart_from_the_skin() {
 /// Pictures of the skin at rest and at each folding shape (front and from below-side), for a
 /// person to look at.
 #[test]
-#[ignore]
+#[ignore = "writes pictures of the folding shapes for a person to look at"]
 fn preview_the_folding_shapes() {
     use furrow::render::preview::{render, side_by_side, write_png, View};
     let Ok(dir) = std::env::var("AVATAR_PREVIEW_DIR") else {

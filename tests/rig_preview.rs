@@ -62,7 +62,7 @@ fn render(
 }
 
 #[test]
-#[ignore]
+#[ignore = "writes preview pictures of the rigs for a person to look at"]
 fn write_previews() {
     let dir = std::env::var("RIG_PREVIEW_DIR").unwrap_or_else(|_| "/tmp/rig_preview".into());
     std::fs::create_dir_all(&dir).unwrap();
@@ -92,7 +92,7 @@ fn write_previews() {
 /// Wall time of `generate()` (ignored; a benchmark, not a check):
 /// `cargo test --release --test rig_preview time_generate -- --ignored --nocapture`.
 #[test]
-#[ignore]
+#[ignore = "a benchmark that prints timings, not a check"]
 fn time_generate() {
     let mut best = f64::MAX;
     for _ in 0..5 {

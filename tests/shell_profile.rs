@@ -7,7 +7,7 @@ use furrow::solver::kkt::{KktBlocks, KktSolver};
 use std::time::Instant;
 
 #[test]
-#[ignore]
+#[ignore = "a profile that prints where an iteration's time goes, not a check"]
 fn profile_one_iteration() {
     let faces: usize = std::env::var("FURROW_PROFILE_FACES")
         .ok()

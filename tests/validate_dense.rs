@@ -91,7 +91,7 @@ fn bad_cases_are_refused_with_the_field_named() {
 /// The full sweep and the resolution study (about a minute in the test profile):
 /// `cargo test --test validate_dense -- --ignored --nocapture`. Prints JSON rows.
 #[test]
-#[ignore]
+#[ignore = "a minute-long sweep that prints JSON rows; run by hand"]
 fn sweep_and_resolution_study() {
     use furrow::validate::dense::{resolution_study, sweep};
     let base = DenseCase::new(Bilayer {

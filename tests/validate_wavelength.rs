@@ -112,10 +112,10 @@ fn constraints_are_blind_at_the_kernel_zero() {
     assert!(t_long > 0.8, "{t_long}");
 }
 
-/// The full grid (5 ratios × 4 thicknesses; about 2–3 minutes in the test profile):
+/// The paper's full grid (5 ratios × 4 thicknesses; about 2–3 minutes in the test profile):
 /// `cargo test --test validate_wavelength full_sweep -- --ignored --nocapture`.
 #[test]
-#[ignore]
+#[ignore = "the full 20-slab grid takes minutes; `furrow validate wavelength` runs it"]
 fn full_sweep() {
     use furrow::validate::wavelength::sweep;
     let ratios = [1e2, 3e2, 1e3, 3e3, 1e4];

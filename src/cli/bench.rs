@@ -30,12 +30,13 @@ pub enum BenchCommand {
     },
     /// The benchmark table: shell assembly and warm solve at several face counts (with the
     /// growth exponent), one lattice step, the activation fit per frame and optionally the
-    /// whole demo; writes bench.csv and bench.md in DIR.
+    /// whole demo; writes bench_suite.csv and bench_suite.md in DIR (`--out examples/report`
+    /// refreshes the table `docs/performance.md` quotes).
     #[command(
         after_help = "Example:\n  furrow bench suite --out out/bench\n  furrow bench suite --faces 2000,8000 --no-demo --out out/bench-quick"
     )]
     Suite {
-        /// Output folder (bench.csv, bench.md; the demo's files under demo/).
+        /// Output folder (bench_suite.csv, bench_suite.md; the demo's files under demo/).
         #[arg(long, default_value = "out/bench")]
         out: std::path::PathBuf,
         /// Face counts of the shell benchmarks, comma-separated.
@@ -50,7 +51,7 @@ pub enum BenchCommand {
         /// Leave out the whole-demo run.
         #[arg(long)]
         no_demo: bool,
-        /// Replace existing bench.csv / bench.md.
+        /// Replace existing bench_suite.csv / bench_suite.md.
         #[arg(long)]
         force: bool,
     },
@@ -369,7 +370,7 @@ fn suite(
         (1..=1_000_000).contains(&cells),
         "--cells must be between 1 and 1,000,000, got {cells}"
     );
-    let (csv, md) = (dir.join("bench.csv"), dir.join("bench.md"));
+    let (csv, md) = (dir.join("bench_suite.csv"), dir.join("bench_suite.md"));
     let overwrite = Overwrite::from_force(force);
     atomic::check_free(&[&csv, &md], overwrite)?;
     let settings = SuiteSettings {

@@ -56,10 +56,7 @@ impl DemoArgs {
 pub const DEMO_FPS: f64 = 30.0;
 
 /// The demo's frames: the whole clip (262 frames, 8.7 s at 30 fps: each of the rig's nine
-/// shapes alone, then four combinations). With the skin's lagged single-precision solver it
-/// ran in 100–128 s on two cores (the spread is the shared machine), 87 s once the
-/// factorisation and solves ran across the elimination tree on both cores, every frame
-/// converged; 280 s before it.
+/// shapes alone, then four combinations).
 pub const DEMO_FRAMES: &str = ":";
 
 /// The project's face rig: `rigs/face.glb` here, else in the source checkout.

@@ -35,7 +35,7 @@ use std::time::Instant;
 /// The skin's Newton tolerance of a synthetic scene by default (RMS residual force per
 /// vertex relative to E_x h/(1−ν_x²) × edge, as `solver.shell_tolerance`): tighter than a
 /// rig's, since these scenes measure the wavelength and sag (on a skin of 10⁴ vertices it
-/// is the 10⁻⁶ of the residual's L2 norm these scenes used before).
+/// is about 10⁻⁶ of the residual's L2 norm).
 const SYNTHETIC_SHELL_TOLERANCE: f64 = 1e-8;
 
 /// What one copy did.

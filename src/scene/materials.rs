@@ -49,7 +49,7 @@ pub const SKIN_PRESETS: [SkinPreset; 4] = [
             poisson: 0.4,
             thickness: 2.0e-3,
         },
-        note: "upholstery leather: E ≈ 10–100 MPa, 1–2 mm (the couch of DESIGN.md)",
+        note: "upholstery leather: E ≈ 10–100 MPa, 1–2 mm (a couch's cover)",
     },
     SkinPreset {
         name: "rubber",
@@ -145,7 +145,7 @@ mod tests {
         // Face skin on flesh: λ = 2π·1 mm·(1−0.45²)·… ≈ 2 cm.
         let face = lam("skin", "flesh");
         assert!((0.015..0.025).contains(&face), "{face}");
-        // Leather on foam (DESIGN.md's couch, ν differ slightly): ≈ 3.7 cm.
+        // Leather on foam (a couch, ν differ slightly): ≈ 3.7 cm.
         let couch = lam("leather", "foam");
         assert!((0.033..0.042).contains(&couch), "{couch}");
         assert!(skin_preset("nope").is_none());

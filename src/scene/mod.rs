@@ -16,11 +16,16 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 pub use thickness::{ThicknessRegion, ThicknessTexture};
 
-/// A whole scene file (see the README for every key and its unit).
+/// A whole scene file. Every key is optional; `docs/scenes.md` lists each with its unit,
+/// default and meaning, generated from the doc comments of this module and
+/// [`thickness`]: each field's doc ends with a `- unit:` and a `- default:` line
+/// (`tests/docs.rs` checks that the page is current).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Scene {
-    /// A name for reports.
+    /// The scene's name: `furrow scene` names its output files `NAME.glb` and `NAME.json`.
+    /// - unit: –
+    /// - default: the scene file's name without its extension
     pub name: Option<String>,
     /// The rig file's units.
     pub rig: RigSection,
@@ -46,16 +51,20 @@ pub struct Scene {
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct RigSection {
-    /// Metres per file unit, or `"auto"` (default): a face larger or smaller than a human
-    /// face by a power of ten is simulated at human size and written back in its own units.
-    /// A scene whose materials are for another scale (a robot) sets `scale = 1`. Boxes and
-    /// regions of the scene are in simulated metres (after this scale).
+    /// Metres per file unit, or `"auto"`: a face larger or smaller than a human face by a
+    /// power of ten is simulated at human size and written back in its own units. A scene
+    /// whose materials are for another scale (a robot) sets `scale = 1`. Boxes and regions
+    /// of the scene are in simulated metres (after this scale). `--scale` overrides it.
+    /// - unit: m per file unit
+    /// - default: `"auto"`
     pub scale: Option<crate::io::units::ScaleSetting>,
     /// The face mesh's skin primitives, by index in the mesh or material name (e.g.
-    /// `[0, "M_BackHead"]`); the others ride along unchanged. Default: decided from the
-    /// materials (alpha-blended and alpha-masked cards ride along) and the geometry (the
-    /// largest surface the shapes move is skin; closed or small surfaces apart from it ride
-    /// along).
+    /// `[0, "M_BackHead"]`); the others ride along unchanged. `--skin-primitives` overrides
+    /// it.
+    /// - unit: –
+    /// - default: decided from the materials (alpha-blended and alpha-masked cards ride
+    ///   along) and the geometry (the largest surface the shapes move is skin; closed or
+    ///   small surfaces apart from it ride along)
     #[serde(skip_serializing_if = "Option::is_none")]
     pub skin_primitives: Option<Vec<crate::io::parts::PrimitivePick>>,
 }
@@ -64,50 +73,94 @@ pub struct RigSection {
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SkinSection {
-    /// Preset name (`skin`, `leather`, `rubber`, `latex`); default `skin`.
+    /// Material preset: `skin`, `leather`, `rubber` or `latex` (see the presets table).
+    /// - unit: –
+    /// - default: `"skin"`
     pub preset: Option<String>,
-    /// Young's modulus E_x (Pa), overrides the preset.
+    /// Young's modulus E_x of the skin; overrides the preset's.
+    /// - unit: Pa
+    /// - default: the preset's
     pub young: Option<f64>,
-    /// Poisson's ratio ν_x, overrides the preset.
+    /// Poisson's ratio ν_x of the skin, in (−1, 0.5); overrides the preset's.
+    /// - unit: –
+    /// - default: the preset's
     pub poisson: Option<f64>,
-    /// Uniform thickness h (m), overrides the preset; the skin's thickness wherever no
-    /// attribute, texture or region gives another.
+    /// Uniform thickness h, overriding the preset's: the skin's thickness wherever no
+    /// attribute, texture, lid or region gives another.
+    /// - unit: m
+    /// - default: the preset's
     pub thickness: Option<f64>,
     /// Regions of another thickness (`[[skin.regions]]`, boxes or spheres in model metres,
-    /// each with its `thickness` in m): a triangle whose centroid lies in one takes its
-    /// thickness; later regions win. Applied on top of the attribute or texture.
+    /// each with its `thickness`): a triangle whose centroid lies in one takes its
+    /// thickness; later regions win. Applied on top of the attribute, texture or lids.
+    /// - unit: m
+    /// - default: none
     pub regions: Vec<ThicknessRegion>,
-    /// Name of a per-vertex float glTF attribute of the face holding the thickness (m), e.g.
-    /// `_THICKNESS`; a triangle takes the mean of its vertices'.
+    /// Name of a per-vertex SCALAR float glTF attribute of the face holding the thickness in
+    /// metres, e.g. `"_THICKNESS"`; a triangle takes the mean of its vertices'. Refused when
+    /// missing, not a scalar float, or not positive. Not with `thickness_texture`.
+    /// - unit: – (values in m)
+    /// - default: none
     pub thickness_attribute: Option<String>,
-    /// A grey texture sampled at TEXCOORD_0 giving the thickness (grey 0..1 → min..max m).
+    /// A grey texture sampled at the face's TEXCOORD_0 giving the thickness
+    /// (`{ path = "h.png", min = 0.0002, max = 0.001 }`, grey 0..1 → min..max m). With any
+    /// varying thickness each triangle is refined for its own λ and the cluster width grows
+    /// with the local thickness, so each region wrinkles at its own λ.
+    /// - unit: –, m, m
+    /// - default: none
     pub thickness_texture: Option<ThicknessTexture>,
-    /// The eyelids: `auto` (default) gives the skin the rig's blink shapes move (see
-    /// [`thickness::lid_triangles`]) the thickness `lid_thickness`; `off` leaves it as the rest
-    /// of the skin. Only where no attribute or texture gives the thickness; regions still win.
+    /// The eyelids: `"auto"` gives the skin the rig's blink shapes move (see
+    /// [`thickness::lid_triangles`]) the thickness `lid_thickness`; `"off"` leaves it as the
+    /// rest of the skin. Only where no attribute or texture gives the thickness; regions
+    /// still win.
+    /// - unit: –
+    /// - default: `"auto"`
     pub lids: Option<String>,
-    /// Thickness of the eyelids' skin (m); default half of `thickness` (eyelid skin, about
-    /// 0.5 mm, is the body's thinnest, about half the face's).
+    /// Thickness of the eyelids' skin (eyelid skin, about 0.5 mm, is the body's thinnest,
+    /// about half the face's).
+    /// - unit: m
+    /// - default: half of `thickness`
     pub lid_thickness: Option<f64>,
-    /// Most subdivision levels the skin may be refined by to hold enough vertices per
-    /// wavelength (default 2).
+    /// Most 1-to-4 subdivision levels the simulated skin may be refined by to hold
+    /// `vertices_per_wavelength`; a skin that needs more is refused with the numbers (at most
+    /// 4).
+    /// - unit: levels
+    /// - default: 3
     pub refine_limit: Option<usize>,
-    /// Shell vertices wanted per critical wavelength (default 6).
+    /// Skin vertices wanted per critical wavelength λ: the simulated triangles are refined
+    /// ⌈log₂(N ā / λ)⌉ times (ā their mean edge) by the modified butterfly rule, with a
+    /// graded band to the coarse skin left out. In [2, 64].
+    /// - unit: –
+    /// - default: 6
     pub vertices_per_wavelength: Option<f64>,
-    /// Names of the meshes that are skin (default: the face furrow picks).
+    /// Names of the meshes that are skin; furrow checks that the face it simulates is among
+    /// them.
+    /// - unit: –
+    /// - default: the face furrow picks
     pub meshes: Vec<String>,
-    /// The part of the skin to simulate: boxes in world space (m); outside them the skin
-    /// follows the interior (the embedding). Empty: all of it.
+    /// The part of the skin to simulate: boxes `{ min = [x,y,z], max = [x,y,z] }` in world
+    /// space; outside them the skin keeps the blend shapes.
+    /// - unit: m
+    /// - default: everything
     pub mask: Vec<Aabb>,
-    /// Which skin the shell simulates: `compressed` (default: the triangles some frame of the
-    /// clip compresses past `compression_threshold`, plus a margin of one λ; the rest follows
-    /// the blend shapes exactly) or `all`.
+    /// Which skin the shell simulates: `"compressed"` (the triangles some frame of the clip,
+    /// or for a still rig some shape at weight 1, compresses past `compression_threshold`,
+    /// plus a margin of one λ; the rest follows the blend shapes exactly and stays as coarse
+    /// as the input) or `"all"`.
+    /// - unit: –
+    /// - default: `"compressed"`
     pub simulate: Option<String>,
-    /// Compression (1 − smaller principal stretch, dimensionless) beyond which a triangle can
-    /// wrinkle; default half the bilayer's onset strain ε_c = ¼ (3 Ē_q / Ē_x)^(2/3).
+    /// Compression 1 − s_min (s_min the smaller principal stretch against rest) beyond which
+    /// a triangle can wrinkle, in [0, 0.5).
+    /// - unit: – (strain)
+    /// - default: half the bilayer's onset strain ε_c = ¼ (3 Ē_q / Ē_x)^(2/3), Ē = E / (1 − ν²)
+    ///   (about 1.2 % for skin on flesh)
     pub compression_threshold: Option<f64>,
-    /// The membrane law: `biot` (default: corotated linear, stable in compression) or
-    /// `stvk` (Saint Venant–Kirchhoff, which softens past 42 % compression; the reference).
+    /// The membrane law: `"biot"` (corotated linear in the principal stretches, stable in
+    /// compression) or `"stvk"` (Saint Venant–Kirchhoff, which softens past 42 %
+    /// compression; the reference). Both have the same small-strain behaviour.
+    /// - unit: –
+    /// - default: `"biot"`
     pub membrane: Option<String>,
 }
 
@@ -115,9 +168,13 @@ pub struct SkinSection {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Aabb {
-    /// Lower corner (m).
+    /// Lower corner.
+    /// - unit: m
+    /// - default: required
     pub min: [f64; 3],
-    /// Upper corner (m).
+    /// Upper corner.
+    /// - unit: m
+    /// - default: required
     pub max: [f64; 3],
 }
 
@@ -132,25 +189,46 @@ impl Aabb {
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct InteriorSection {
-    /// Preset name (`flesh`, `foam`, `gel`); default `flesh`.
+    /// Material preset: `flesh`, `foam` or `gel` (see the presets table).
+    /// - unit: –
+    /// - default: `"flesh"`
     pub preset: Option<String>,
-    /// Young's modulus E_q (Pa), overrides the preset.
+    /// Young's modulus E_q of the interior; overrides the preset's.
+    /// - unit: Pa
+    /// - default: the preset's
     pub young: Option<f64>,
-    /// Poisson's ratio ν_q, overrides the preset.
+    /// Poisson's ratio ν_q of the interior; overrides the preset's.
+    /// - unit: –
+    /// - default: the preset's
     pub poisson: Option<f64>,
-    /// Density (kg/m³), overrides the preset.
+    /// Density of the interior (mass, gravity); overrides the preset's.
+    /// - unit: kg/m³
+    /// - default: the preset's
     pub density: Option<f64>,
-    /// Lattice cell edge (m); default from `target_cells`.
+    /// Lattice cell edge. Not with `target_cells`.
+    /// - unit: m
+    /// - default: rigs: from `target_cells`, or under generated muscles (when neither key is
+    ///   given) the coarsest lattice whose own projection holds the clip within 4 % of its
+    ///   motion; synthetic scenes: half the box's z size
     pub cell_size: Option<f64>,
-    /// Approximate cell count over the bounding box when no cell size is given (default 500).
+    /// Approximate cell count over the bounding box when no cell size is given.
+    /// - unit: cells
+    /// - default: 500
     pub target_cells: Option<usize>,
-    /// Flesh depth behind an open surface (m); default 10 % of the bounding-box diagonal.
+    /// Flesh depth behind an open surface; deeper lattice nodes are bone (pinned).
+    /// - unit: m
+    /// - default: 10 % of the bounding-box diagonal
     pub depth: Option<f64>,
-    /// `quadratic` (default) or `trilinear` elements.
+    /// Element kind: `"quadratic"` (27-node B-spline hexahedra) or `"trilinear"` (8-node,
+    /// for comparison).
+    /// - unit: –
+    /// - default: `"quadratic"`
     pub elements: Option<String>,
-    /// Tracking stiffness factor κ (dimensionless, ≥ 0): each skin vertex is pulled towards
-    /// its blend-shape position with stiffness κ E_q A_v / ℓ. Default 10 when tracking drives
-    /// the interior, 1 with muscles; 0 leaves the flesh to its elasticity, bone and muscles.
+    /// Tracking stiffness factor κ (≥ 0): each skin vertex is pulled towards its blend-shape
+    /// position with stiffness κ E_q A_v / ℓ (A_v its area, ℓ the cell edge); 0 leaves the
+    /// flesh to its elasticity, bone and muscles.
+    /// - unit: –
+    /// - default: 1 when muscles drive the interior, 10 when tracking does
     pub tracking: Option<f64>,
 }
 
@@ -158,15 +236,23 @@ pub struct InteriorSection {
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DynamicsSection {
-    /// Run backward Euler (default: yes when the rig is animated; a still pose is solved
-    /// quasi-statically).
+    /// Run backward Euler; without it each frame is solved quasi-statically.
+    /// - unit: –
+    /// - default: rigs: `true` when the rig is animated, `false` for a still rig; synthetic
+    ///   scenes: `false`
     pub enabled: Option<bool>,
-    /// Time step (s); default 0.02, or 1/fps when that is smaller.
+    /// Largest time step: each frame is split into equal sub-steps no longer than this.
+    /// - unit: s
+    /// - default: 0.02
     pub dt: Option<f64>,
-    /// Apply gravity (default false for faces: the blend shapes were sculpted under gravity).
+    /// Gravity on the interior (faces were sculpted under gravity, so off by default).
+    /// - unit: –
+    /// - default: `false`
     pub gravity: Option<bool>,
-    /// Feel the face node's animated motion (a head that turns and nods) as inertial forces
-    /// in the head's frame (default true; needs dynamics).
+    /// Feel the face node's animated translation and rotation (and its ancestors'), a head
+    /// that turns and nods, as the inertial forces of the head's frame (needs dynamics).
+    /// - unit: –
+    /// - default: `true`
     pub head_motion: Option<bool>,
 }
 
@@ -174,32 +260,42 @@ pub struct DynamicsSection {
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct MuscleSection {
-    /// `auto` (muscles generated from the blend shapes, activations fitted per frame by a
-    /// QP; the default when the rig has a blend shape that moves it), `none` (the interior
-    /// tracks the blended surface directly, no QP; the default for a rig without blend
-    /// shapes), or the path of a muscle TOML file.
+    /// `"auto"` (actuation muscles generated from the blend shapes, their activations fitted
+    /// to every frame by a QP, with a weak tracking for what they cannot make), `"none"` (the
+    /// interior tracks the blended surface, no QP), or the path of a muscle TOML file. Default
+    /// muscles that cannot be made for a rig, or that miss its shapes by more than 20 % RMS on
+    /// average, leave the interior to tracking with a warning; asked for explicitly, the first
+    /// is an error and the second drives anyway.
+    /// - unit: –
+    /// - default: `"auto"` when a blend shape of the rig moves it, else `"none"`
     pub source: Option<String>,
-    /// How the muscles hold the skin (default `reached` under muscles; see
-    /// [`SKIN_HOLDS`]): `reached`: the muscles hold the skin's pull on the lattice at the
-    /// state the interior reaches, every step, so the skin rides on the flesh the muscles
-    /// shape and does not load it; `shapes`: each generated muscle's actuation is fitted
-    /// holding the skin's force at its blend shape (`skin_at_shapes` says how it is found),
-    /// which makes `solver.coupling_iterations` default to 2; `none`: the skin pulls on the
-    /// muscle-driven interior and nothing holds it.
+    /// How the muscles hold the skin's pull on the lattice (see [`SKIN_HOLDS`]):
+    /// `"reached"`: at the state the interior reaches, every step, so the skin rides on the
+    /// flesh the muscles shape and does not load it; `"shapes"`: each generated muscle's
+    /// actuation is fitted holding the skin's force at its blend shape (`skin_at_shapes` says
+    /// how it is found), which makes `solver.coupling_iterations` default to 2; `"none"`: the
+    /// skin pulls on the muscle-driven interior and nothing holds it.
+    /// - unit: –
+    /// - default: `"reached"`
     pub skin_hold: Option<String>,
     /// The older name of `skin_hold = "shapes"` (true) and `"none"` (false): an error that
     /// says so.
+    /// - unit: –
+    /// - default: none (refused)
     pub skin_in_fit: Option<bool>,
-    /// Gauss–Newton re-linearisations of each frame's activation fit (default 0: the QP on
-    /// the muscles' responses at rest alone): each solves the muscle-driven interior's
-    /// nonlinear equilibrium at the fitted activations, takes the responses there and fits
-    /// again, so that the corotational flesh's departure from the linear model is corrected.
+    /// Gauss–Newton re-linearisations of each frame's activation fit (at most 50): each
+    /// solves the muscle-driven interior's nonlinear equilibrium at the fitted activations,
+    /// takes the muscles' responses there and fits again; 0 fits on the responses at rest.
+    /// - unit: –
+    /// - default: 0
     pub gauss_newton: Option<usize>,
     /// How the skin's force at each blend shape is found for `skin_hold = "shapes"`:
-    /// `tension_field` (default: the membrane relaxed over wrinkles at the shape's smooth
-    /// surface, each wrinkled direction carrying the wrinkles' critical force D (2π/λ)²;
-    /// milliseconds per shape) or `solved` (the reference: the skin solved quasi-statically
-    /// from rest with its clusters on the shape's lattice fit; seconds per shape).
+    /// `"tension_field"` (the membrane relaxed over wrinkles at the shape's smooth surface,
+    /// each wrinkled direction carrying the wrinkles' critical force D (2π/λ)²; milliseconds
+    /// per shape) or `"solved"` (the reference: the skin solved quasi-statically from rest
+    /// with its clusters on the shape's lattice fit; seconds per shape).
+    /// - unit: –
+    /// - default: `"tension_field"`
     pub skin_at_shapes: Option<String>,
 }
 
@@ -216,38 +312,54 @@ pub const SKIN_SOLVERS: [&str; 3] = ["lagged", "patches", "global"];
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SolverSection {
-    /// Shell Newton tolerance: the RMS residual force per skin vertex relative to the skin's
-    /// stretch stiffness × mean edge (default 1e-6 on rigs, 1e-8 in synthetic scenes).
+    /// Skin Newton tolerance: the RMS residual force per simulated skin vertex, relative to
+    /// the skin's stretch stiffness E_x h / (1 − ν_x²) × mean edge.
+    /// - unit: –
+    /// - default: 1e-6 on rigs, 1e-8 in synthetic scenes
     pub shell_tolerance: Option<f64>,
-    /// Shell Newton iteration limit (default 60).
+    /// Skin Newton iteration limit per frame.
+    /// - unit: iterations
+    /// - default: 60 on rigs, 100 in synthetic scenes
     pub shell_iterations: Option<usize>,
-    /// Interior Newton iterations per step (default 4 on rigs, 20 in synthetic scenes); a
-    /// step that does not converge within them is retried as two half steps.
+    /// Interior Newton iterations per step; a step that does not converge within them is
+    /// retried as two half steps (down to 1/16 of the sub-step).
+    /// - unit: iterations
+    /// - default: 4 on rigs, 20 in synthetic scenes
     pub interior_iterations: Option<usize>,
-    /// The interior Newton matrix: `consistent` (default: with the rotation's derivative,
-    /// quadratic convergence) or `frozen` (the warped stiffness R K₀ Rᵀ, the reference).
+    /// The interior's Newton matrix: `"consistent"` (with the rotation's derivative,
+    /// quadratic convergence) or `"frozen"` (the warped stiffness R K₀ Rᵀ, linear
+    /// convergence; the reference).
+    /// - unit: –
+    /// - default: `"consistent"`
     pub interior_tangent: Option<String>,
-    /// Load stepping of the skin: a frame whose skin solve does not converge directly is
-    /// redone with its constraint targets moved in 2, then 4, … up to 2^levels equal steps
-    /// (default 2; 0 turns it off).
+    /// Load stepping of the skin: a frame whose skin solve does not converge, or ends with
+    /// the skin through itself, is redone with its constraint targets moved in 2, then 4, …
+    /// up to 2^levels equal steps (at most 6); 0 turns it off.
+    /// - unit: levels
+    /// - default: 2
     pub skin_continuation: Option<usize>,
-    /// When the skin's stiffness Bᵀ K_x B seen by the interior is recomputed: `once` (at
-    /// rest; default, the force Bᵀ F_x is always current) or `every_frame` (the paper).
+    /// When the interior's view of the skin's stiffness Bᵀ K_x B is rebuilt: `"once"` (at
+    /// rest; the force Bᵀ F_x is always current) or `"every_frame"` (the paper).
+    /// - unit: –
+    /// - default: `"once"`
     pub skin_stiffness: Option<String>,
-    /// Most solves of the interior and the skin per frame (default 2 with generated muscles
-    /// fitted holding the skin at their shapes, `muscles.skin_hold = "shapes"`; 1 otherwise): the staggered coupling (interior with the skin's force
-    /// linearised, then the skin on the interior) is repeated from the frame's start, each
-    /// time linearised about the last skin, until the interior moves by less than a
-    /// thousandth of the frame's motion. 1 is the paper's one pass per frame, whose coupling
-    /// settles over the next frames.
+    /// Most interior–skin passes per frame (1 to 10): the staggered coupling (interior with
+    /// the skin's force linearised, then the skin on the interior) is repeated from the
+    /// frame's start, linearised about the last skin and relaxed by Aitken's Δ² factor, until
+    /// the interior moves by less than a thousandth of the frame's motion. 1 is the paper's
+    /// one pass per frame, whose coupling settles over the next frames.
+    /// - unit: passes
+    /// - default: 2 when generated muscles hold the skin at their shapes
+    ///   (`muscles.skin_hold = "shapes"`), else 1
     pub coupling_iterations: Option<usize>,
-    /// How the skin's Newton directions are solved: `lagged` (default: GMRES preconditioned
-    /// with a single-precision factor of the whole skin, kept across iterations and frames
-    /// while it converges within 10 solves), `patches` (the same, corrected by fresh factors
-    /// of only the patches whose Hessian changed) or `global` (the reference: a
-    /// double-precision factor, made afresh whenever the last one does not converge within
-    /// 5 solves). All solve each direction to the same forcing term and stop at the same
-    /// residual test.
+    /// How the skin's Newton directions are solved: `"lagged"` (GMRES preconditioned with a
+    /// single-precision factor of the whole skin, kept across iterations and frames while it
+    /// converges within 10 solves), `"patches"` (the same, corrected by fresh factors of only
+    /// the patches whose Hessian changed) or `"global"` (the reference: a double-precision
+    /// factor, made afresh whenever the last one does not converge within 5 solves). All
+    /// solve each direction to the same forcing term and stop at the same residual test.
+    /// - unit: –
+    /// - default: `"lagged"`
     pub skin_solver: Option<String>,
 }
 
@@ -255,40 +367,60 @@ pub struct SolverSection {
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ExportSection {
-    /// `wrinkles_on_blend` (default: the blend-shape surface plus the skin's wrinkles, so the
-    /// artist's shape is kept exactly) or `simulated` (the simulated skin itself).
+    /// `"wrinkles_on_blend"` (the blend-shape surface plus the skin's wrinkles x − B q, so
+    /// the artist's shape is kept exactly) or `"simulated"` (the simulated skin itself, with
+    /// the interior's low-frequency motion).
+    /// - unit: –
+    /// - default: `"wrinkles_on_blend"`
     pub surface: Option<String>,
 }
 
-/// `[geometry]` of a synthetic scene.
+/// `[geometry]` of a synthetic scene (`furrow scene` only).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Geometry {
-    /// `slab`, `cushion` or `cube`.
+    /// `"slab"`, `"cushion"` or `"cube"`.
+    /// - unit: –
+    /// - default: required
     pub kind: String,
-    /// Size along x, y, z (m); y is up.
+    /// Size along x, y, z (z up in the scene; the written glTF is y up).
+    /// - unit: m
+    /// - default: required
     pub size: [f64; 3],
-    /// Skin edge length (m).
+    /// Skin edge length on the top face (at most half the smallest size).
+    /// - unit: m
+    /// - default: required
     pub skin_edge: f64,
-    /// How many copies side by side (each may take its own skin, see `skins`).
+    /// How many copies side by side, 1 to 16 (each may take its own skin, see `skins`).
+    /// - unit: –
+    /// - default: the number of `skins`, at least 1
     #[serde(default)]
     pub copies: Option<usize>,
-    /// Skin presets or overrides per copy (default: the `[skin]` section for all).
+    /// Skin of each copy (`[[geometry.skins]]`, the keys of `[skin]`).
+    /// - unit: –
+    /// - default: the `[skin]` section for every copy
     #[serde(default)]
     pub skins: Vec<SkinSection>,
 }
 
-/// `[load]` of a synthetic scene.
+/// `[load]` of a synthetic scene (`furrow scene` only): `compression`, `weight` or both.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Load {
-    /// In-plane compression strain along x reached at the last frame (0.1 = 10 %).
+    /// In-plane compression strain along x reached at the last frame (0.1 = 10 %), in
+    /// [0, 0.6).
+    /// - unit: – (strain)
+    /// - default: none
     #[serde(default)]
     pub compression: Option<f64>,
-    /// A weight pressing on the top (kg), spread over the top face.
+    /// A weight pressing on the middle third of the top face.
+    /// - unit: kg
+    /// - default: none
     #[serde(default)]
     pub weight: Option<f64>,
-    /// Frames to reach the full load.
+    /// Frames to reach the full load (1 to 10,000).
+    /// - unit: frames
+    /// - default: required
     pub frames: usize,
 }
 

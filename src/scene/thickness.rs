@@ -19,15 +19,25 @@ use std::path::Path;
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ThicknessRegion {
-    /// Box lower corner (m).
+    /// Box lower corner (with `max`).
+    /// - unit: m
+    /// - default: none
     pub min: Option<[f64; 3]>,
-    /// Box upper corner (m).
+    /// Box upper corner (with `min`).
+    /// - unit: m
+    /// - default: none
     pub max: Option<[f64; 3]>,
-    /// Sphere centre (m).
+    /// Sphere centre (with `radius`).
+    /// - unit: m
+    /// - default: none
     pub centre: Option<[f64; 3]>,
-    /// Sphere radius (m).
+    /// Sphere radius (with `centre`).
+    /// - unit: m
+    /// - default: none
     pub radius: Option<f64>,
-    /// Skin thickness inside (m).
+    /// Skin thickness inside the region.
+    /// - unit: m
+    /// - default: required
     pub thickness: f64,
 }
 
@@ -85,11 +95,17 @@ impl ThicknessRegion {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ThicknessTexture {
-    /// Image file; a relative path is taken from the scene file's folder.
+    /// Image file (PNG); a relative path is taken from the scene file's folder.
+    /// - unit: –
+    /// - default: required
     pub path: String,
-    /// Thickness at grey 0 (black), m.
+    /// Thickness at grey 0 (black).
+    /// - unit: m
+    /// - default: required
     pub min: f64,
-    /// Thickness at grey 1 (white), m.
+    /// Thickness at grey 1 (white).
+    /// - unit: m
+    /// - default: required
     pub max: f64,
 }
 
@@ -290,7 +306,7 @@ pub const LID_MOTION_SHARE: f64 = 0.1;
 /// more than [`LID_MOTION_SHARE`] of that shape's largest displacement. Empty without blink
 /// shapes. Why they matter: a blink stretches the lid's skin by about a third, and skin as
 /// thick as the face's elsewhere would pull the muscle-driven flesh about the eyes with it
-/// until the forehead buckles; real eyelid skin is about half as thick (see the README).
+/// until the forehead buckles; real eyelid skin is about half as thick.
 /// Returns one flag per triangle and the names of the shapes used.
 pub fn lid_triangles(face: &crate::io::mesh::MeshInstance) -> (Vec<bool>, Vec<String>) {
     let mut moved = vec![false; face.positions.len()];

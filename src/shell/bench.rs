@@ -9,7 +9,7 @@
 //! with a quarter of the faces, coarse to fine, instead of the flat sheet); the measured solve then moves the boundary to 1.05 % and re-solves from that
 //! state, as one animation frame follows the previous one. Both solves use
 //! [`HessianMode::Auto`](crate::solver::HessianMode) and the energy merit in the line search
-//! (the residual-only rule of DESIGN.md crawls once the sheet wrinkles).
+//! (the residual-only rule crawls once the sheet wrinkles).
 
 use super::sheet::equilateral_sheet;
 use super::{Shell, ShellMaterial};

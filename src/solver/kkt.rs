@@ -7,14 +7,15 @@
 //! [ γC      −δI  ] [μ ] = [b]
 //! ```
 //!
-//! with γ balancing the rows, τ ≥ 0 an optional shift and δ (1e-4 γ from the Newton solver) a small negative
-//! regularisation of the constraint block.
+//! with γ balancing the rows, τ ≥ 0 an optional shift and δ (1e-6 γ from the Newton solver)
+//! a small negative regularisation of the constraint block.
 //!
 //! Why this method: the KKT matrix is symmetric indefinite. With δ > 0 and K + τI positive
 //! definite it is *quasi-definite*, so an LDLᵀ factorisation without pivoting exists for any
 //! symmetric ordering (Vanderbei 1995). That lets us use faer's supernodal sparse LDLᵀ with
-//! an AMD fill-reducing ordering computed once (the symbolic analysis is cached here and
-//! reused across Newton iterations and frames). It costs the same as a Cholesky of the same
+//! a fill-reducing ordering computed once, METIS's nested dissection or AMD, whichever needs
+//! fewer flops ([`super::ordering`]; the symbolic analysis is cached here and reused across
+//! Newton iterations and frames). It costs the same as a Cholesky of the same
 //! pattern, about half of a sparse LU with partial pivoting, and unlike a null-space method
 //! it keeps the sparsity of the cluster constraints. The error δ introduces is removed by
 //! GMRES on the unregularised matrix preconditioned with the factor ([`super::gmres`]); the
@@ -69,12 +70,10 @@ pub struct KktFactorInfo {
 
 /// The floating-point precision of a KKT factor. The factor only preconditions GMRES, which
 /// works on the double-precision matrix, so a single-precision factor changes the cost of a
-/// Newton direction, not its accuracy: on the face rig's skin KKT (31,242 rows) it factorises
-/// in 106 ms against 157 and solves in 4.9 ms against 11 (METIS order, one run), and GMRES
-/// reaches 1e-10 in 10 iterations with it against 9 with the double factor. Its negative
-/// pivots counted the same inertia as the double factor's on every dumped matrix of the
-/// demo's buckling frames (15 matrices, shifted and unshifted, 0 to 14 extra negative
-/// eigenvalues).
+/// Newton direction, not its accuracy: it factorises and solves faster than a double factor,
+/// GMRES needs about one iteration more with it, and its negative pivots count the same
+/// inertia as the double factor's on buckling skins (a factor whose inertia differs is made
+/// again in double precision).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum FactorPrecision {

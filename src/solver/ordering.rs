@@ -7,10 +7,9 @@
 //! only AMD, which is local (minimum degree) and leaves wide fronts at the top of the
 //! elimination tree. METIS (Karypis and Kumar 1998) finds small vertex separators by
 //! multilevel bisection of the graph itself, so it also sees the wide cluster rows of the
-//! coupling as the long edges they are. On the face rig's skin KKT (30,093 free dofs, 1,149
-//! cluster rows) it needs 3.9·10⁹ flops against AMD's 6.2·10⁹ (factor 157 against 186 ms,
-//! solve 11 against 16 ms, one run); the coordinate bisection used before needed 5.2·10¹⁰
-//! there, since a plane cut through the clusters makes thick separators.
+//! coupling as the long edges they are: on a face's skin it needs fewer flops than AMD, and
+//! far fewer than a coordinate bisection, whose plane cuts through the clusters make thick
+//! separators.
 //!
 //! The graph is ordered at the level of *groups* (a skin vertex's three dofs, a cluster's
 //! three coordinate rows) weighted by their size: a third of the nodes to bisect, and a

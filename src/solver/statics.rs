@@ -103,11 +103,8 @@ pub struct StaticSettings {
     /// Tightest relative residual ‖r‖/‖b‖ a GMRES solve of a KKT system is asked for.
     /// Newton asks for less while it is far from the answer (inexact Newton: the forcing
     /// term of Eisenstat and Walker, at most 1e-3, and never tighter than needed to land 10×
-    /// under `tolerance`); this is the floor. On the face demo the forcing terms and this
-    /// floor gave the same wrinkles as solving every direction to 1e-10 (largest depth
-    /// difference 0.8 nm over 40 frames). The iterative refinement used before (a fixed
-    /// 3 steps, residuals 1e-5 to 1e-11) left frames 13 and 14 of the demo unconverged;
-    /// GMRES converges them.
+    /// under `tolerance`); this is the floor, which gives the same wrinkles as solving every
+    /// direction to 1e-10.
     pub linear_tolerance: f64,
     /// Most factor solves (GMRES iterations) a Newton direction may spend with a *lagged*
     /// factorisation, one of an earlier iterate or of the previous solve, before a fresh
@@ -116,15 +113,14 @@ pub struct StaticSettings {
     /// used only while the last factor was of the exact, unshifted Hessian with the right
     /// inertia, and only when the direction has positive curvature; else the direction is
     /// factorised afresh with the inertia test. A failed attempt costs its solves on top
-    /// of the factorisation, so the cap is small: on the 20k-face benchmark sheet (one run)
-    /// caps of 0, 5, 8 and 12 gave warm solves of 0.79, 0.57, 0.82 and 1.19 s; on the face
-    /// demo a cap of 8 cut the skin time from 71 s to 50 s (see README, Benchmarks).
+    /// of the factorisation, so the cap is small: a larger one spends more on failed
+    /// attempts than it saves in factorisations.
     pub lagged_solves: usize,
     /// Maximum trial steps per line search.
     pub max_line_search: usize,
     /// Also accept steps that satisfy Armijo on the energy merit (the Lagrangian with the
-    /// new multipliers), not only on the residual norm. DESIGN.md prescribes the residual
-    /// rule alone (`false`); thin shells moving out of plane need `true` (see
+    /// new multipliers), not only on the residual norm. The residual rule alone is `false`;
+    /// thin shells moving out of plane need `true` (see
     /// [`super::linesearch`]).
     pub energy_merit: bool,
     /// Solve Newton directions with the lagged global factor and fresh factors of only the
@@ -432,12 +428,9 @@ const PINNED: usize = usize::MAX;
 const FORCING_MAX: f64 = 1e-3;
 
 /// Largest relative tolerance of a KKT solve within 100× of the target residual, where
-/// landing 10× below the target asks less than [`FORCING_MAX`]. The capture head's quiet
-/// frames end with one Newton step from about 2e-3 N to a target of 3.6e-4 N: solved to
-/// 1e-2 instead of 1e-3 it takes fewer GMRES solves with the lagged factor, and the
-/// shorter runs keep that factor longer (head frames 0–40: skin 20.1 → 18.0 s, 10 → 6
-/// factorisations, 264 → 225 solves, 88 → 89 Newton iterations, the deepest wrinkle the
-/// same to 4 nm).
+/// landing 10× below the target asks less than [`FORCING_MAX`]: a last Newton step solved
+/// this loosely takes fewer GMRES solves with the lagged factor, which then lasts longer,
+/// and lands on the same equilibrium.
 const FORCING_NEAR: f64 = 0.1;
 
 /// Relative tolerance of the KKT solve for the Newton direction at residual norm `rn` (N)
@@ -460,11 +453,11 @@ enum Source {
 }
 
 /// Regularisation δ of the constraint block, relative to γ. The factorisation sees the
-/// penalty K + (γ²/δ) CᵀC on the free block; δ = 1e-4 γ keeps that penalty (1e4 γ) strong
-/// enough for the inertia test yet small enough that its round-off (1e4 γ × 1e-16) stays far
-/// below the soft bending eigenvalues of a thin skin (with δ = 1e-8 γ the Euler test strip
-/// lost its lowest mode in round-off). GMRES preconditioned with the factor removes δ from the
-/// solution.
+/// penalty K + (γ²/δ) CᵀC on the free block; δ = 1e-6 γ keeps that penalty (1e6 γ) strong
+/// enough for the inertia test yet small enough that its round-off (1e6 γ × 1e-16) stays far
+/// below the soft bending eigenvalues of a thin skin (a much smaller δ loses a thin strip's
+/// lowest buckling mode in round-off). GMRES preconditioned with the factor removes δ from
+/// the solution.
 const KKT_DELTA: f64 = 1e-6;
 
 /// The fixed data of one solve: the energy, the problem, its free-dof set-up and the row

@@ -1,6 +1,7 @@
 //! The benchmark table: shell energy assembly, shell solve at several face counts with the
 //! growth exponent of its cost, one interior (lattice) step, the activation fit per frame
-//! (and, from the CLI, the whole demo), as CSV rows and a markdown table for the README.
+//! (and, from the CLI, the whole demo), as CSV rows and a markdown table (the one
+//! `docs/performance.md` quotes).
 //!
 //! Each benchmark is the same code as its `furrow bench …` subcommand; this module only
 //! runs them in one process (so ratios between them come from one machine state) and fits
@@ -257,7 +258,7 @@ fn value(rows: &[BenchRow], b: &str, size: usize, m: &str) -> Option<f64> {
         .map(|r| r.value)
 }
 
-/// A markdown table for the README: the shell at each size (assembly, iterations,
+/// A markdown table (`docs/performance.md`): the shell at each size (assembly, iterations,
 /// factorisation, total) with the growth exponents, then the lattice, fit and demo lines.
 pub fn to_markdown(rows: &[BenchRow]) -> String {
     let fmt = |v: Option<f64>, scale: f64, digits: usize| {

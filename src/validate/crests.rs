@@ -1,6 +1,6 @@
 //! Where the wrinkle crests fall relative to the lattice's element grid: the check that
 //! trilinear elements lock the wrinkles to element boundaries and quadratic B-spline
-//! elements do not (issue 5).
+//! elements do not.
 //!
 //! Measurement, on the compressed slab ([`super::slab`]):
 //! 1. the wrinkle wavelength λ_m of the skin's height profile ([`super::measure::wavelength`]);

@@ -4,8 +4,9 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-/// The sample files the tests read from `../shared/data/` (README, "Test data"): Khronos glTF
-/// sample models and RobotExpressive. Under CI every one must be present.
+/// The sample files the tests read from `../shared/data/` (docs/testing.md, "Test data and
+/// credits"): Khronos glTF sample models and RobotExpressive. Under CI every one must be
+/// present.
 pub const SHARED_FILES: [&str; 5] = [
     "AnimatedMorphCube.glb",
     "AnimatedMorphSphere.glb",
@@ -40,11 +41,11 @@ pub fn shared_data(name: &str) -> Option<PathBuf> {
     }
     assert!(
         !tools_required(),
-        "{} is missing: CI runs every test on the outside sample files (README, \"Test data\")",
+        "{} is missing: CI runs every test on the outside sample files (docs/testing.md, \"Test data and credits\")",
         p.display()
     );
     note(&format!(
-        "skipped: {} not found (outside sample file; README, \"Test data\", says where it comes from)",
+        "skipped: {} not found (outside sample file; docs/testing.md, \"Test data and credits\", says where it comes from)",
         p.display()
     ));
     None

@@ -7,19 +7,14 @@
 //! is taken. The projection is the muscles' own first step ([`fit_node_displacements`]: least
 //! squares through the embedding with the elastic regulariser, the jaw's bone turned), so it
 //! is the floor of their fit. The measure is not monotone in the cell size (where the cells
-//! fall on the mouth matters: `rigs/face.glb` fits its clip within 6.3 % at 23 mm and 4.3 %
-//! at 22 mm), hence a ladder rather than a bisection; it is walked every
+//! fall on the mouth matters), hence a ladder rather than a bisection; it is walked every
 //! [`COARSE_STRIDE`]-th rung first, then rung by rung below the last coarse miss ([`climb`]).
 //! The muscles' fit is held on the skin's subdivided surface as well as at the rig's
 //! vertices ([`crate::muscle::samples`]), as the skin the pipeline renders lies between them;
 //! the projection's miss is the larger of its misses at the vertices and over the whole
-//! subdivided surface (held only on the latter the face would take 22.1 mm, where its clip is
-//! fitted to 4.1 % at the vertices against 3.0 % on the 21.6 mm lattice it takes). A slit
-//! parts only on cells well under its length (a quadratic B-spline spans three cells): the
-//! capture head's 48 mm mouth holds its lips shut on its default 35.9 mm cells (its clip
-//! missed by 19.7 %) and is taken at 17.2 mm (3.1 %, six times the default's elements, ten
-//! lattices tried in 12 s), where its muscles make its shapes and its first 26 frames wrinkle
-//! within 8.2 % of tracking at κ = 1000 per 2λ region.
+//! subdivided surface. A slit parts only on cells well under its length (a quadratic
+//! B-spline spans three cells), so a mouth on cells near its own length is held shut and the
+//! ladder climbs below them.
 
 use crate::io::model::MorphTarget;
 use crate::lattice::Lattice;

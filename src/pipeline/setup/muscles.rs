@@ -74,13 +74,8 @@ impl MuscleDrive {
 
 /// The mean shape error (RMS over the vertices each shape moves, as a fraction of the shape's
 /// displacement) beyond which generated muscles do not drive a rig by default: they do not
-/// reproduce it. Measured (2026-11-26): on `rigs/face.glb` the muscles make its shapes within
-/// 7.3 % on average and drive its clip in 113 s (tracking 85 s), missing the shape by 24 % of
-/// the motion against tracking's 30 %; on `rigs/head.glb` on its 36 mm default lattice (now
-/// only when a scene sets it: the ladder takes 17.2 mm), which cannot resolve its 52 capture
-/// shapes (projection residual 37 % on average), within 37.4 %, and its whole
-/// clip took 969 s under them (2.7 s of skin per frame, 33 frames redone by tracking, the
-/// shape missed by 42 %) against 422 s tracked (1.1 s of skin per frame, missed by 48 %).
+/// reproduce it, and on a lattice too coarse for its shapes they cost more time and redone
+/// frames than tracking while missing the shapes about as much.
 pub const MUSCLE_SHAPE_LIMIT: f64 = 0.2;
 
 /// Why muscles by default should leave a rig to tracking, if they should: generated muscles
@@ -497,12 +492,8 @@ mod tests {
     /// The tension-field force at a shape is the solved skin's (the reference) within 15 %
     /// on the demo face's brow raise and smile and 20 % on its pucker, and several times
     /// closer than the unrelaxed skin's force at the same smooth surface B q, which fights the
-    /// compression the skin relieves by wrinkling. Measured (2026-11-27): 6.4, 8.8 and 14.8 %
-    /// (unrelaxed 51, 51 and 50 %). The pucker's rose to 16.3 % when the weld stopped zipping
-    /// the lips shut (the solved skin's lip edges follow the interior, pinned at the slit) and
-    /// to 27.2 % when the ring beside the slit was pinned too, while the relaxed membrane
-    /// still relaxed those pinned triangles; it leaves them unrelaxed now, as the solved skin
-    /// does.
+    /// compression the skin relieves by wrinkling. The relaxed membrane leaves the triangles
+    /// pinned beside the lips' slit unrelaxed, as the solved skin does.
     #[test]
     fn the_tension_field_force_is_near_the_solved_skins_at_the_face_shapes() {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("rigs/face.glb");

@@ -2,16 +2,13 @@
 //! H x = H B q (its clusters follow the lattice at low frequency; wrinkles are what they
 //! leave free), from the last frame's skin. The skin has no contact: a solve that ends with
 //! the skin through itself is redone in load steps (`solver.skin_continuation`), and one that
-//! still does is recorded as `self_intersecting`, not as converged (the capture head's
-//! muscle-driven blink: one of its two crossed frames converges in two steps). Only the
-//! skin's own crossings count, not those it inherits from the interior's embedded surface
-//! B q: where the artist's lips close, the embedded lips cross each other by the interior's
-//! miss of the shape (demo frames 157–163 and 238–245 under a 22 mm lattice's muscles), and
-//! the skin pinned to them at the slit with them, though the exported t + (x − B q) keeps
-//! the artist's lips apart. Judged on x itself, that clip had 52 frames redone by tracking
-//! (259 s); the 21.6 mm clip with the slit's first ring pinned as well
-//! ([`crate::pipeline::setup::skin::pin_slits`]) had 74 (265 s), and none with inherited
-//! crossings left out (103.9 s).
+//! still does is recorded as `self_intersecting`, not as converged. Only the skin's own
+//! crossings count, not those it inherits from the interior's embedded surface B q: where
+//! the artist's lips close, the embedded lips cross each other by the interior's miss of the
+//! shape, and the skin pinned to them at the slit
+//! ([`crate::pipeline::setup::skin::pin_slits`]) crosses with them, though the exported
+//! t + (x − B q) keeps the artist's lips apart; counting those would redo such frames by
+//! tracking for nothing.
 
 use crate::coupling::embedded::EmbeddedShell;
 use crate::mesh::intersect::{first_self_intersection_beyond, self_intersections_beyond};
