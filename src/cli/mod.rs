@@ -81,7 +81,7 @@ pub enum Command {
     /// Print a clip's frame ranges for a farm (one `A:B` per line), balanced by expected
     /// cost with a pre-roll per chunk; run each with `animate --frames A:B --preroll P`.
     #[command(
-        after_help = "Example:\n  furrow chunks rigs/head.glb --count 8 --preroll 12\n  furrow animate rigs/head.glb --frames 0:52 --preroll 12 -o out/part_0.glb"
+        after_help = "Example:\n  furrow chunks rigs/face.glb --count 4 --preroll 9\n  furrow animate rigs/face.glb --frames 0:104 --preroll 9 -o out/part_0.glb"
     )]
     Chunks(chunks::ChunksArgs),
     /// Run a synthetic scene (slab, cushions, cubes) and write its frames and wavelengths.

@@ -12,10 +12,13 @@ use crate::io::load::Rig;
 use crate::mesh::TriMesh;
 use rayon::prelude::*;
 
-/// Frames simulated from rest before a chunk's first written frame by default: the pre-roll
-/// after which the first written frame's wrinkles are within 10 % (amplitude error) of an
-/// unsplit run's on the project's rigs (`furrow bench preroll` measures the curve).
-pub const DEFAULT_PREROLL: usize = 12;
+/// Frames simulated from rest before a chunk's first written frame by default: on the demo
+/// rig the error at a chunk's first written frame against an unsplit run falls below 0.1 % from
+/// a pre-roll of 9 frames at every start measured (`furrow bench preroll --rig rigs/face.glb
+/// --starts 60,120,180 --window 20`, `examples/report/preroll/face/`). On the capture-shaped
+/// head it settles at 12–14 % and stays there (the pre-rolled skin buckles onto another
+/// branch; `examples/report/preroll/head/`), so a longer pre-roll does not help there.
+pub const DEFAULT_PREROLL: usize = 9;
 
 /// The cost of a frame whose whole skin is compressed, relative to a frame that compresses
 /// none (whose cost is 1): a frame costs 1 + `COMPRESSED_FRAME_COST` × (its compressed
