@@ -229,14 +229,24 @@ fn checked_scene(a: &AnimateArgs) -> anyhow::Result<Scene> {
 
 /// How the rig of `a` loads: the flags first, then the scene's `[rig]` keys.
 fn load_options(a: &AnimateArgs, scene: &Scene) -> LoadOptions {
+    rig_load_options(&a.mesh, &a.skin_primitives, scene, a.paths)
+}
+
+/// How a rig loads for a subcommand: its `--mesh`, its `--skin-primitives` (else the scene's
+/// `[rig] skin_primitives`) and its `--allow-outside-paths`.
+pub fn rig_load_options(
+    mesh: &Option<String>,
+    skin_primitives: &Option<Vec<crate::io::parts::PrimitivePick>>,
+    scene: &Scene,
+    paths: super::RigPathsArgs,
+) -> LoadOptions {
     LoadOptions {
-        mesh: a.mesh.clone(),
+        mesh: mesh.clone(),
         animation: None,
-        skin_primitives: a
-            .skin_primitives
+        skin_primitives: skin_primitives
             .clone()
             .or_else(|| scene.rig.skin_primitives.clone()),
-        allow_outside_paths: a.paths.allow_outside_paths,
+        allow_outside_paths: paths.allow_outside_paths,
     }
 }
 

@@ -1,7 +1,7 @@
 //! `furrow chunks`: the frame ranges of a clip for a farm, balanced by expected cost.
 
 use super::Output;
-use crate::io::{self as fio, LoadOptions};
+use crate::io as fio;
 use crate::pipeline::farm::{self, DEFAULT_PREROLL};
 use crate::pipeline::frames::FrameRange;
 use crate::pipeline::setup::select::onset_strain;
@@ -55,18 +55,8 @@ pub fn run(a: ChunksArgs, out: &Output) -> anyhow::Result<()> {
         None => Scene::default(),
     };
     scene.validate()?;
-    let rig = fio::load::load(
-        &a.rig,
-        &LoadOptions {
-            mesh: a.mesh.clone(),
-            animation: None,
-            skin_primitives: a
-                .skin_primitives
-                .clone()
-                .or_else(|| scene.rig.skin_primitives.clone()),
-            allow_outside_paths: a.paths.allow_outside_paths,
-        },
-    )?;
+    let load = super::animate::rig_load_options(&a.mesh, &a.skin_primitives, &scene, a.paths);
+    let rig = fio::load::load(&a.rig, &load)?;
     if rig.track.is_none() {
         anyhow::bail!(
             "{}: the rig has no animation; a still rig's shapes are solved each alone (run \
