@@ -2,15 +2,12 @@
 
 mod common;
 
+use common::{furrow, run_ok};
+
 use furrow::io::load::{load_bytes, LoadOptions};
 use furrow::pipeline::{self, RunOptions};
 use furrow::scene::Scene;
 use std::path::{Path, PathBuf};
-use std::process::Command;
-
-fn furrow() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_furrow"))
-}
 
 fn write_sheet(dir: &Path, name: &str) -> PathBuf {
     let p = dir.join(name);
@@ -22,17 +19,6 @@ fn write_other_sheet(dir: &Path) -> PathBuf {
     let p = dir.join("other.glb");
     std::fs::write(&p, common::sheet_rig(20, 0.1, 0.1, 0.3)).unwrap();
     p
-}
-
-fn run_ok(args: &[&str]) -> String {
-    let o = furrow().args(args).output().unwrap();
-    assert!(
-        o.status.success(),
-        "furrow {args:?} failed:\n{}\n{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    );
-    String::from_utf8_lossy(&o.stdout).into_owned()
 }
 
 /// RMS over the vertices in `pick` of the wrinkle detail (wrinkled − blend-shape surface).

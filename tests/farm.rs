@@ -4,24 +4,10 @@
 
 mod common;
 
+use common::{furrow, run_ok};
+
 use serde_json::Value;
 use std::path::Path;
-use std::process::Command;
-
-fn furrow() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_furrow"))
-}
-
-fn run_ok(args: &[&str]) -> String {
-    let o = furrow().args(args).output().unwrap();
-    assert!(
-        o.status.success(),
-        "furrow {args:?} failed:\n{}\n{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    );
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
 
 fn path(dir: &Path, name: &str) -> String {
     dir.join(name).to_str().unwrap().to_string()

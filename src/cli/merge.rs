@@ -3,15 +3,16 @@
 //! ones cross-fade over their overlap and the report measures how far the neighbours
 //! disagree there (and, given an unsplit run's chunk, how far the merge is from it).
 
-use super::animate::chunk_path;
+use super::animate::{chunk_path, rig_load_options};
 use super::export::{self as out_file, ExportArgs, Frames};
 use super::Output;
+use crate::io as fio;
 use crate::io::atomic::{self, Overwrite};
 use crate::io::units::ScaleSetting;
-use crate::io::{self as fio, LoadOptions};
 use crate::pipeline::chunk::{self, Chunk, Joined, Seam};
 use crate::pipeline::frames::FrameRange;
 use crate::pipeline::layer::Clip;
+use crate::scene::Scene;
 use crate::studies::tradeoff::{amplitude_error, AmplitudeMap};
 use anyhow::{bail, Context};
 use nalgebra::Vector3;
@@ -115,16 +116,8 @@ pub fn merge(a: MergeArgs, out: &Output) -> anyhow::Result<()> {
             a.rig.display()
         );
     }
-    let mut rig = fio::load::load_bytes(
-        &a.rig,
-        &bytes,
-        &LoadOptions {
-            mesh: a.mesh.clone(),
-            animation: None,
-            skin_primitives: a.skin_primitives.clone(),
-            allow_outside_paths: a.paths.allow_outside_paths,
-        },
-    )?;
+    let load = rig_load_options(&a.mesh, &a.skin_primitives, &Scene::default(), a.paths);
+    let mut rig = fio::load::load_bytes(&a.rig, &bytes, &load)?;
     // The frames are in the metres they were simulated in: write them back in file units.
     let m = whole.header.metres_per_unit;
     crate::io::units::apply(
@@ -193,18 +186,12 @@ fn chunk_file(p: &Path) -> PathBuf {
 fn reference_chunk(path: &Path, whole: &Chunk) -> anyhow::Result<Chunk> {
     let c = chunk::read(path)?;
     let (h, w) = (&c.header, &whole.header);
-    if h.rig_hash != w.rig_hash || h.settings_hash != w.settings_hash || h.fps != w.fps {
-        bail!(
-            "{}: the reference was made from another rig or with other settings than the chunks",
-            path.display()
-        );
-    }
-    if h.vertices != w.vertices || h.triangles != w.triangles {
-        bail!(
-            "{}: the reference's skin differs from the chunks'",
-            path.display()
-        );
-    }
+    chunk::same_run(
+        w,
+        "the chunks",
+        h,
+        &format!("{} (the reference)", path.display()),
+    )?;
     if h.range.start > w.range.start || h.range.end < w.range.end {
         bail!(
             "{}: the reference covers frames {}:{}, the chunks {}:{}",

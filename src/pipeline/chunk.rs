@@ -342,8 +342,9 @@ fn kind(h: &ChunkHeader) -> String {
     }
 }
 
-/// Refuse chunk `h` (file `name`) when it is not of the run of `h0` (file `first`).
-fn same_run(h0: &ChunkHeader, first: &str, h: &ChunkHeader, name: &str) -> anyhow::Result<()> {
+/// Refuse chunk `h` (file `name`) when it is not of the run of `h0` (file `first`): another
+/// rig file, other settings or fps, or another skin topology.
+pub fn same_run(h0: &ChunkHeader, first: &str, h: &ChunkHeader, name: &str) -> anyhow::Result<()> {
     if h.rig_hash != h0.rig_hash {
         bail!("{name}: made from another rig file than {first}");
     }

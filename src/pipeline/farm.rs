@@ -7,10 +7,9 @@
 
 use super::frames::FrameRange;
 use super::plan::clip_weights;
-use super::setup::select::smaller_stretch;
+use super::setup::select::largest_compression;
 use crate::io::load::Rig;
 use crate::mesh::TriMesh;
-use rayon::prelude::*;
 
 /// Frames simulated from rest before a chunk's first written frame by default: on the demo
 /// rig the error at a chunk's first written frame against an unsplit run falls below 0.1 % from
@@ -36,20 +35,12 @@ pub fn frame_costs(rig: &Rig, fps: f64, threshold: f64) -> Vec<f64> {
         .collect();
     let total: f64 = areas.iter().sum::<f64>().max(f64::MIN_POSITIVE);
     let (weights, _) = clip_weights(rig, fps);
-    weights
-        .par_iter()
-        .map(|w| {
-            let pose = rig.blend(w);
-            let compressed: f64 = rest
-                .triangles
-                .iter()
-                .zip(&areas)
-                .filter(|(t, _)| {
-                    let s = smaller_stretch(t.map(|v| rest.positions[v]), t.map(|v| pose[v]));
-                    1.0 - s > threshold
-                })
-                .map(|(_, a)| a)
-                .sum();
+    let poses = weights.iter().map(|w| (rig.blend(w), None));
+    let (_, per_pose) = largest_compression(&rest, poses, threshold);
+    per_pose
+        .iter()
+        .map(|beyond| {
+            let compressed: f64 = beyond.iter().map(|&t| areas[t]).sum();
             1.0 + COMPRESSED_FRAME_COST * compressed / total
         })
         .collect()

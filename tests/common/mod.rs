@@ -304,3 +304,20 @@ pub fn sheet_rig(n: usize, size: f64, strain: f64, seconds: f64) -> Vec<u8> {
         .collect();
     squeeze_rig("sheet", &mesh, deltas, seconds)
 }
+
+/// The `furrow` binary this test build made, as a command.
+pub fn furrow() -> std::process::Command {
+    std::process::Command::new(env!("CARGO_BIN_EXE_furrow"))
+}
+
+/// Run `furrow ARGS…`, asserting it succeeds (else printing its output); its stdout.
+pub fn run_ok(args: &[&str]) -> String {
+    let o = furrow().args(args).output().unwrap();
+    assert!(
+        o.status.success(),
+        "furrow {args:?} failed:\n{}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
