@@ -7,6 +7,7 @@ mod common;
 
 use furrow::io::load::{load_bytes, LoadOptions};
 use furrow::io::model::{MorphTarget, WeightKeys};
+use furrow::pipeline::record::Stage;
 use furrow::pipeline::{self, RunOptions};
 use furrow::scene::Scene;
 use nalgebra::{UnitQuaternion, Vector3};
@@ -116,7 +117,7 @@ fn lag_per_frame(rig_bytes: &[u8], dt: f64, tracking: f64) -> Vec<f64> {
     assert!(rig.motion.is_some(), "the node's rotation is read");
     let opts = options(dt, tracking);
     let out = pipeline::run(&rig, &opts, &|_, _, _| {}).unwrap();
-    let interior = out.report.stage("interior");
+    let interior = out.report.stage(Stage::Interior);
     let why = format!("{:?}", interior.unwrap());
     assert!(why.contains("inertial forces"), "{why}");
     assert!(why.contains("up to 30.0° from the displayed pose"), "{why}");

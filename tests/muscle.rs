@@ -18,11 +18,11 @@ use furrow::muscle::generate::{
     generate_muscles, synthetic_arkit_targets, BlendShapes, GenerateSettings, ARKIT_NAMES,
 };
 use furrow::muscle::samples::{ShapeSamples, SAMPLE_LEVELS};
-use furrow::muscle::{
-    ActiveEnergy, FitSettings, Fitter, Forward, ForwardStatus, FrameStatus, Muscle,
-};
+use furrow::muscle::{ActiveEnergy, FitSettings, Fitter, Forward, FrameStatus, Muscle};
+use furrow::pipeline::record::Stage;
 use furrow::pipeline::{self, RunOptions};
 use furrow::scene::Scene;
+use furrow::solver::SolveStatus;
 use nalgebra::{Rotation3, Vector3};
 use std::path::Path;
 
@@ -204,7 +204,7 @@ fn muscle_block_shortens_by_the_stiffness_balance() {
         fw.tolerance = 1e-11;
         fw.max_newton = 80;
         let (q, rep) = fw.equilibrium(&[a], &rest).unwrap();
-        assert_eq!(rep.status, ForwardStatus::Converged, "{rep:?}");
+        assert_eq!(rep.status, SolveStatus::Converged, "{rep:?}");
         let mut err: f64 = 0.0;
         for n in 0..lat.node_count() {
             let want = affine(&rest[3 * n..3 * n + 3]);
@@ -298,7 +298,7 @@ fn gauss_newton_recovers_activations_of_the_nonlinear_model() {
     let mut gn = Fitter::new(&lat, &mat, muscles, exact_settings(4)).unwrap();
     let truth = [0.9, 0.2, 0.6, 0.8, 0.4, 0.7];
     let (target, rep) = gn.predict(&truth).unwrap();
-    assert_eq!(rep.status, ForwardStatus::Converged);
+    assert_eq!(rep.status, SolveStatus::Converged);
     let fl = lin.fit_frame(&target).unwrap();
     let fg = gn.fit_frame(&target).unwrap();
     let (el, eg) = (
@@ -919,7 +919,7 @@ fn activations_that_made_a_frame_are_recovered() {
     let (mut gn, _) = face_fitter(4);
     let truth: Vec<f64> = (0..n).map(|_| 0.2 + 0.6 * rng.next_f64()).collect();
     let (target, rep) = gn.predict(&truth).unwrap();
-    assert_eq!(rep.status, ForwardStatus::Converged);
+    assert_eq!(rep.status, SolveStatus::Converged);
     let fl = lin.fit_frame(&target).unwrap();
     let fg = gn.fit_frame(&target).unwrap();
     let (el, eg) = (
@@ -995,7 +995,7 @@ fn muscles_make_their_shapes(rig: &str, hold: &str) {
     let skin_in_fit = hold == "shapes";
     assert_each_makes_its_shape(rig, &loaded, &out);
     assert_eq!(out.report.totals.frames_not_converged, 0);
-    let record = out.report.stage("muscles").unwrap();
+    let record = out.report.stage(Stage::Muscles).unwrap();
     println!("{}", record.why);
     assert_eq!(
         record.why.contains("the skin in the fit"),
@@ -1063,7 +1063,7 @@ fn head_run(scene: Scene) -> (furrow::io::load::Rig, pipeline::RunOutput) {
 #[test]
 fn default_muscles_drive_the_capture_head_on_the_lattice_chosen_for_them() {
     let (loaded, out) = head_run(Scene::default());
-    let lattice = out.report.stage("lattice").unwrap();
+    let lattice = out.report.stage(Stage::Lattice).unwrap();
     println!("{}", lattice.why);
     assert!(
         lattice.why.contains("chosen for the muscles"),
@@ -1071,10 +1071,10 @@ fn default_muscles_drive_the_capture_head_on_the_lattice_chosen_for_them() {
         lattice.why
     );
     assert!(lattice.why.contains("cell 17.2 mm"), "{}", lattice.why);
-    assert!(out.report.stage("fit").unwrap().is_ran());
+    assert!(out.report.stage(Stage::Fit).unwrap().is_ran());
     assert!(out.report.warnings.is_empty(), "{:?}", out.report.warnings);
     assert_each_makes_its_shape("rigs/head.glb", &loaded, &out);
-    let record = out.report.stage("muscles").unwrap();
+    let record = out.report.stage(Stage::Muscles).unwrap();
     assert!(
         record.why.contains("hold the skin's pull"),
         "{}",
@@ -1165,7 +1165,7 @@ fn the_jaw_bone_turns_with_its_muscle_and_its_response_is_the_equilibriums_deriv
     let mut a = vec![0.0; m];
     (a[0], a[1]) = (0.6, 0.3);
     let (q, rep) = fwd.equilibrium(&a, &rest).unwrap();
-    assert_eq!(rep.status, ForwardStatus::Converged);
+    assert_eq!(rep.status, SolveStatus::Converged);
     assert!((bone.angle_of(&q) - 0.6 * 0.2).abs() < 1e-12);
     for n in (0..nn).filter(|&n| lat.pinned[n] && !bone.nodes.contains(&n)) {
         assert_eq!(q[3 * n..3 * n + 3], rest[3 * n..3 * n + 3]);
@@ -1178,7 +1178,7 @@ fn the_jaw_bone_turns_with_its_muscle_and_its_response_is_the_equilibriums_deriv
     let mut ae = zero.clone();
     ae[0] = eps;
     let (qe, rep) = fwd.equilibrium(&ae, &rest).unwrap();
-    assert_eq!(rep.status, ForwardStatus::Converged);
+    assert_eq!(rep.status, SolveStatus::Converged);
     let fd: Vec<f64> = qe.iter().zip(&rest).map(|(x, r)| (x - r) / eps).collect();
     let scale = fd.iter().fold(0.0f64, |s, v| s.max(v.abs()));
     let miss = max_diff(&cols[0], &fd);
@@ -1199,7 +1199,7 @@ fn the_face_rigs_jaw_muscle_turns_its_bone() {
     let (_, out) = muscle_driven("rigs/face.glb", "143:144", None);
     let jaw = out.report.jaw.as_ref().expect("the face's jaw hinge");
     let nodes = jaw.bone_nodes.expect("bone nodes that turn with the jaw");
-    let record = out.report.stage("muscles").unwrap();
+    let record = out.report.stage(Stage::Muscles).unwrap();
     println!("{}", record.why);
     let bone = out.report.sizes["bone_nodes"].as_u64().unwrap() as usize;
     assert!(nodes > 0 && nodes < bone, "{nodes} of {bone}");

@@ -6,6 +6,7 @@ mod common;
 
 use furrow::io::atomic::Overwrite;
 use furrow::io::export::{self, FrameSet};
+use furrow::pipeline::record::Stage;
 use furrow::pipeline::{self, RunOptions};
 use furrow::scene::Scene;
 use furrow::studies::locality::compare_selection;
@@ -36,7 +37,7 @@ fn the_stretched_half_is_left_out_and_equals_the_blend_shapes_bit_for_bit() {
     let rig = sheet();
     let out = pipeline::run(&rig, &options(compressed()), &|_, _, _| {}).unwrap();
     let r = &out.report;
-    let select = r.stage("select").unwrap();
+    let select = r.stage(Stage::Select).unwrap();
     assert!(select.is_ran(), "{}", select.why);
     let simulated = r.sizes["simulated_vertices"].as_u64().unwrap() as usize;
     let skin = r.sizes["skin_vertices"].as_u64().unwrap() as usize;
@@ -69,7 +70,7 @@ fn the_stretched_half_is_left_out_and_equals_the_blend_shapes_bit_for_bit() {
     // whole sheet refined.
     let coarse = r.sizes["loaded_vertices"].as_u64().unwrap() as usize;
     let band = 0.05 + r.wavelength_m + 2.0 * 0.1 / 24.0 + 1e-9;
-    let refine = r.stage("refine").unwrap();
+    let refine = r.stage(Stage::Refine).unwrap();
     println!("refine: {}", refine.why);
     assert!(
         refine.is_ran() && refine.why.contains("green"),
@@ -160,7 +161,7 @@ fn simulate_all_turns_the_selection_off_and_a_bad_key_is_refused() {
     let mut scene = Scene::default();
     scene.skin.simulate = Some("all".into());
     let out = pipeline::run(&rig, &options(scene.clone()), &|_, _, _| {}).unwrap();
-    let select = out.report.stage("select").unwrap();
+    let select = out.report.stage(Stage::Select).unwrap();
     assert!(!select.is_ran());
     assert_eq!(
         out.report.sizes["simulated_vertices"],

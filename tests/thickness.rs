@@ -8,6 +8,7 @@ mod common;
 use furrow::math::fd::{check_gradient, check_hessian};
 use furrow::math::rng::Lcg;
 use furrow::math::Energy;
+use furrow::pipeline::record::Stage;
 use furrow::shell::sheet::equilateral_sheet;
 use furrow::shell::{Shell, ShellMaterial};
 
@@ -634,7 +635,7 @@ fn pipeline_reports_thickness_and_wavelength_ranges() {
         .report
         .stages
         .iter()
-        .find(|s| s.stage == "shell")
+        .find(|s| s.stage == Stage::Shell)
         .unwrap();
     assert!(
         shell.why.contains("each triangle refined for its own λ"),

@@ -210,6 +210,6 @@ mod tests {
         assert_eq!(v["elements"], 8);
         assert_eq!(v["nodes"], 64);
         assert!(v["step_s"].as_f64().unwrap() > 0.0);
-        assert_eq!(v["status"], "Converged");
+        assert_eq!(v["status"], "converged");
     }
 }

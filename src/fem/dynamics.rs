@@ -34,7 +34,7 @@ use super::FemError;
 use crate::math::sparse::SpdSolver;
 use crate::math::Energy;
 use crate::solver::newton::{self, Check, NewtonLimits, NewtonProblem, Rejection, Verdict};
-use crate::solver::SolveStatus as NewtonStatus;
+pub use crate::solver::SolveStatus;
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
@@ -189,26 +189,13 @@ impl<'a> ExtraTerms<'a> {
     }
 }
 
-/// The numerical outcome of a solve.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-pub enum SolveStatus {
-    /// The residual met the tolerance.
-    Converged,
-    /// `max_newton` iterations were used without meeting the tolerance.
-    IterationLimit,
-    /// The line search could not decrease the potential; the last good state is kept.
-    Stalled,
-}
-
-impl From<NewtonStatus> for SolveStatus {
-    /// The Newton core's status: a failed line search, a step too short to make progress
-    /// and (never produced here) a non-finite residual are all `Stalled`.
-    fn from(s: NewtonStatus) -> Self {
-        match s {
-            NewtonStatus::Converged => SolveStatus::Converged,
-            NewtonStatus::IterationLimit => SolveStatus::IterationLimit,
-            NewtonStatus::LineSearchFailed | NewtonStatus::NotFinite => SolveStatus::Stalled,
-        }
+/// The interior's outcome from the Newton core's: a failed line search, a step too short to
+/// make progress and (never produced here) a non-finite residual are all `Stalled`, since the
+/// stepper keeps its last good state.
+fn interior_status(s: SolveStatus) -> SolveStatus {
+    match s {
+        SolveStatus::LineSearchFailed | SolveStatus::NotFinite => SolveStatus::Stalled,
+        other => other,
     }
 }
 
@@ -1282,7 +1269,7 @@ impl BackwardEuler {
         };
         let record = newton::solve(&mut problem, &limits)?;
         let mut report = problem.report;
-        report.status = record.status.into();
+        report.status = interior_status(record.status);
         report.iterations = record.iterations;
         let (es, en) = self.eval_clock.get();
         report.energy_s = es;
@@ -1405,7 +1392,7 @@ impl NewtonProblem for EulerNewton<'_, '_> {
     /// exact Hessian is tried first (quadratic convergence); when it is not positive
     /// definite or gives no descent direction, its stress term is projected and the system
     /// solved again.
-    fn direction(&mut self, iteration: usize) -> Result<Option<NewtonStatus>, FemError> {
+    fn direction(&mut self, iteration: usize) -> Result<Option<SolveStatus>, FemError> {
         let time_step = self.terms.inertia.is_some();
         let nfree = self.be.system.as_ref().expect("system built").nfree;
         let solver = self.be.resolved_solver(3 * nfree, time_step);
@@ -1480,7 +1467,7 @@ impl NewtonProblem for EulerNewton<'_, '_> {
 
     /// Move to the trial; a step shorter than 1e-14 cells ends the solve (converged when
     /// the residual meets the tolerance, else stalled).
-    fn accept(&mut self, t: f64) -> Option<NewtonStatus> {
+    fn accept(&mut self, t: f64) -> Option<SolveStatus> {
         let (p, g) = self.line.accepted.take().expect("accepted trial");
         self.y.copy_from_slice(&self.line.trial);
         self.phi = p;
@@ -1490,16 +1477,16 @@ impl NewtonProblem for EulerNewton<'_, '_> {
         self.report.relative_residual = self.res / self.reference;
         if t * self.line.step_max < 1e-14 * self.be.interior.cell_size {
             return Some(if self.converged() {
-                NewtonStatus::Converged
+                SolveStatus::Converged
             } else {
-                NewtonStatus::LineSearchFailed
+                SolveStatus::LineSearchFailed
             });
         }
         None
     }
 
     fn rejected(&mut self) -> Rejection {
-        Rejection::Stop(NewtonStatus::LineSearchFailed)
+        Rejection::Stop(SolveStatus::LineSearchFailed)
     }
 }
 

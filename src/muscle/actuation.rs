@@ -27,7 +27,7 @@
 //! at the smooth shape, instead overshot (85 % miss): the muscles fought compressions the
 //! skin relieves by wrinkling.
 
-use super::forward::{embed_flat, Coupling, Forward, ForwardStatus};
+use super::forward::{embed_flat, Coupling, Forward};
 use super::jaw::JawBone;
 use super::model::{Muscle, DEFAULT_MAX_CONTRACTION};
 use super::MuscleError;
@@ -35,6 +35,7 @@ use crate::fem::Interior;
 use crate::lattice::Lattice;
 use crate::math::sparse::triplets_mul_add;
 use crate::math::Energy;
+use crate::solver::SolveStatus;
 
 /// Relative force tolerance of the equilibria an actuation is checked with: far below the
 /// fit's own tolerance on the surface.
@@ -233,7 +234,7 @@ impl<'a> Plant<'a> {
                 |b| b.2.clone(),
             );
             let (q, rep) = one.equilibrium_loaded(&[1.0], &start, Some(&load))?;
-            trial.converged = rep.status == ForwardStatus::Converged;
+            trial.converged = rep.status == SolveStatus::Converged;
             let miss: Vec<f64> = (0..q.len()).map(|i| rest[i] + u[i] - q[i]).collect();
             let bmiss = self.surface(&miss);
             trial.miss = rms_over(&bmiss, None, moved) / norm;

@@ -22,10 +22,11 @@
 use super::forward::{embed_flat, Coupling, Forward, ForwardReport};
 use super::jaw::JawBone;
 use super::model::Muscle;
-use super::qp::{solve_qp, QpProblem, QpSolution, QpStatus};
+use super::qp::{solve_qp, QpProblem, QpSolution};
 use super::MuscleError;
 use crate::fem::{Interior, Material};
 use crate::lattice::Lattice;
+use crate::solver::SolveStatus;
 use nalgebra::Vector3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -115,7 +116,10 @@ pub struct FrameFit {
     pub rms_displacement: f64,
     /// Outcome.
     pub status: FrameStatus,
-    /// Clarabel's status of the last QP of the frame.
+    /// The outcome of the frame's last QP (`NotFinite` for a target with a non-finite
+    /// coordinate, where no QP ran).
+    pub qp_status: SolveStatus,
+    /// Clarabel's own name for the last QP's status, for the user.
     pub clarabel_status: String,
     /// Gauss–Newton re-linearisations done.
     pub gauss_newton: usize,
@@ -382,6 +386,7 @@ impl Fitter {
             rms_residual: f64::NAN,
             rms_displacement: f64::NAN,
             status: FrameStatus::Fitted,
+            qp_status: SolveStatus::Converged,
             clarabel_status: String::new(),
             gauss_newton: 0,
             forward: None,
@@ -395,6 +400,7 @@ impl Fitter {
             .collect();
         if d.iter().any(|v| !v.is_finite()) {
             fit.status = FrameStatus::InvalidTarget;
+            fit.qp_status = SolveStatus::NotFinite;
             fit.clarabel_status = "NotRun".into();
             fit.rms_residual = f64::INFINITY;
             fit.total_s = t0.elapsed().as_secs_f64();
@@ -416,9 +422,10 @@ impl Fitter {
         let sol = self.qp(&self.jtj0, &jtd, &bounds);
         fit.qp_s += tq.elapsed().as_secs_f64();
         fit.clarabel_status = sol.clarabel_status.clone();
+        fit.qp_status = sol.status;
         let mut a = match sol.status {
-            QpStatus::Solved => sol.activations,
-            QpStatus::Failed => {
+            SolveStatus::Converged => sol.activations,
+            _ => {
                 fit.status = FrameStatus::QpFailedKeptPrevious;
                 self.prev_a.clone()
             }
@@ -451,11 +458,12 @@ impl Fitter {
                 let sol = self.qp(&jtj, &jtd, &bounds);
                 fit.qp_s += tq.elapsed().as_secs_f64();
                 fit.clarabel_status = sol.clarabel_status.clone();
+                fit.qp_status = sol.status;
                 fit.gauss_newton += 1;
                 q_start = q;
                 match sol.status {
-                    QpStatus::Solved => a = sol.activations,
-                    QpStatus::Failed => {
+                    SolveStatus::Converged => a = sol.activations,
+                    _ => {
                         fit.status = FrameStatus::GaussNewtonStopped;
                         break;
                     }

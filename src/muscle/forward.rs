@@ -25,6 +25,7 @@ use crate::fem::dynamics::StiffnessMatrix;
 use crate::fem::Interior;
 use crate::math::sparse::{triplets_mul_add, SpdSolver};
 use crate::math::Energy;
+use crate::solver::SolveStatus;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -76,17 +77,6 @@ pub fn embed_flat(embed: &[(usize, usize, f64)], y: &[f64], vertices: usize) -> 
     x
 }
 
-/// The numerical outcome of an equilibrium solve.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-pub enum ForwardStatus {
-    /// The free-DOF force residual met the tolerance.
-    Converged,
-    /// The iteration limit was reached first.
-    IterationLimit,
-    /// The line search could not lower the energy; the last good state is kept.
-    Stalled,
-}
-
 /// Muscles need bone: a lattice without bone (pinned) nodes would be moved rigidly by them.
 /// The error says how to give it bone. `pinned` flags each lattice node.
 pub fn check_bone(pinned: &[bool]) -> Result<(), MuscleError> {
@@ -102,7 +92,7 @@ pub fn check_bone(pinned: &[bool]) -> Result<(), MuscleError> {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ForwardReport {
     /// Outcome.
-    pub status: ForwardStatus,
+    pub status: SolveStatus,
     /// Newton iterations.
     pub iterations: usize,
     /// Hessian factorisations (modified Newton reuses one while it converges fast).
@@ -429,7 +419,7 @@ impl Forward {
         let mut e = self.energy(&q, a, load, Some(&mut g));
         let mut res = self.free_norm(&g);
         let mut report = ForwardReport {
-            status: ForwardStatus::IterationLimit,
+            status: SolveStatus::IterationLimit,
             iterations: 0,
             factorisations: 0,
             residual: res,
@@ -440,7 +430,7 @@ impl Forward {
         let mut refactor = true;
         for _ in 0..self.max_newton {
             if res <= self.tolerance * reference {
-                report.status = ForwardStatus::Converged;
+                report.status = SolveStatus::Converged;
                 break;
             }
             if refactor {
@@ -475,7 +465,7 @@ impl Forward {
                     refactor = true;
                     continue;
                 }
-                report.status = ForwardStatus::Stalled;
+                report.status = SolveStatus::Stalled;
                 break;
             };
             q.copy_from_slice(&trial);
@@ -487,8 +477,8 @@ impl Forward {
             report.residual = res;
             report.relative_residual = res / reference;
         }
-        if report.status == ForwardStatus::IterationLimit && res <= self.tolerance * reference {
-            report.status = ForwardStatus::Converged;
+        if report.status == SolveStatus::IterationLimit && res <= self.tolerance * reference {
+            report.status = SolveStatus::Converged;
         }
         Ok((q, report))
     }

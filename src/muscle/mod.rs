@@ -64,12 +64,12 @@ pub mod rigfile;
 pub mod samples;
 
 pub use fit::{FitSettings, Fitter, FrameFit, FrameStatus};
-pub use forward::{Coupling, Forward, ForwardReport, ForwardStatus};
+pub use forward::{Coupling, Forward, ForwardReport};
 pub use generate::{generate_muscles, GenerateSettings, Generated};
 pub use model::{
     full_forces, linearised_terms, unit_forces, ActiveEnergy, Muscle, DEFAULT_MAX_CONTRACTION,
 };
-pub use qp::{solve_qp, QpProblem, QpSolution, QpStatus};
+pub use qp::{solve_qp, QpProblem, QpSolution};
 
 /// Errors of the muscle layer (bad input; numerical outcomes are statuses).
 #[derive(Debug, thiserror::Error)]

@@ -10,6 +10,7 @@
 //! the right sign). Either way the returned activations are clamped to the bounds, so bounds
 //! hold exactly.
 
+use crate::solver::SolveStatus;
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
     DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
@@ -34,13 +35,19 @@ pub struct QpProblem<'a> {
     pub bounds: &'a [[f64; 2]],
 }
 
-/// How the QP ended.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-pub enum QpStatus {
-    /// Clarabel solved it (possibly to reduced accuracy) and the answer is used.
-    Solved,
-    /// Clarabel failed; no answer (the caller keeps its last good activations).
-    Failed,
+/// How clarabel's status maps onto the solver outcome: `Solved` and `AlmostSolved` answer
+/// the QP; the rest leave no answer.
+pub fn outcome_of(status: SolverStatus) -> SolveStatus {
+    match status {
+        SolverStatus::Solved | SolverStatus::AlmostSolved => SolveStatus::Converged,
+        SolverStatus::MaxIterations | SolverStatus::MaxTime => SolveStatus::IterationLimit,
+        SolverStatus::PrimalInfeasible
+        | SolverStatus::DualInfeasible
+        | SolverStatus::AlmostPrimalInfeasible
+        | SolverStatus::AlmostDualInfeasible => SolveStatus::Infeasible,
+        SolverStatus::InsufficientProgress => SolveStatus::Stalled,
+        _ => SolveStatus::Failed,
+    }
 }
 
 /// The answer of one QP.
@@ -48,8 +55,8 @@ pub enum QpStatus {
 pub struct QpSolution {
     /// Activations (within bounds), or empty when the QP failed.
     pub activations: Vec<f64>,
-    /// Used or failed.
-    pub status: QpStatus,
+    /// `Converged` when the answer is used; otherwise why there is none.
+    pub status: SolveStatus,
     /// Clarabel's own status, as it names it (e.g. "Solved", "AlmostSolved", "MaxIterations").
     pub clarabel_status: String,
     /// Clarabel's interior-point iterations.
@@ -61,9 +68,9 @@ pub struct QpSolution {
 /// Solve one activation QP (see the module notes).
 pub fn solve_qp(p: &QpProblem) -> QpSolution {
     let m = p.jtd.len();
-    let failed = |status: String, it: u32| QpSolution {
+    let failed = |outcome: SolveStatus, status: String, it: u32| QpSolution {
         activations: Vec::new(),
-        status: QpStatus::Failed,
+        status: outcome,
         clarabel_status: status,
         iterations: it,
         polished: false,
@@ -71,7 +78,7 @@ pub fn solve_qp(p: &QpProblem) -> QpSolution {
     if m == 0 {
         return QpSolution {
             activations: Vec::new(),
-            status: QpStatus::Solved,
+            status: SolveStatus::Converged,
             clarabel_status: "Empty".into(),
             iterations: 0,
             polished: true,
@@ -83,7 +90,7 @@ pub fn solve_qp(p: &QpProblem) -> QpSolution {
         .map(|i| -p.jtd[i] - 2.0 * p.lambda_time * p.previous[i])
         .collect();
     if (0..m * m).any(|k| !p.jtj[k].is_finite()) || lin.iter().any(|v| !v.is_finite()) {
-        return failed("NonFiniteData".into(), 0);
+        return failed(SolveStatus::NotFinite, "NonFiniteData".into(), 0);
     }
     // Scale the objective to order one (clarabel's tolerances are absolute and relative).
     let scale = (0..m).map(|i| hess(i, i)).fold(0.0f64, f64::max);
@@ -129,17 +136,17 @@ pub fn solve_qp(p: &QpProblem) -> QpSolution {
         .expect("valid clarabel settings");
     let mut solver = match DefaultSolver::new(&pm, &q, &am, &b, &cones, settings) {
         Ok(s) => s,
-        Err(e) => return failed(format!("SetupError({e})"), 0),
+        Err(e) => return failed(SolveStatus::Failed, format!("SetupError({e})"), 0),
     };
     solver.solve();
     let sol = &solver.solution;
     let status = format!("{:?}", sol.status);
-    let ok = matches!(
-        sol.status,
-        SolverStatus::Solved | SolverStatus::AlmostSolved
-    );
-    if !ok || sol.x.iter().any(|v| !v.is_finite()) {
-        return failed(status, sol.iterations);
+    let outcome = outcome_of(sol.status);
+    if !outcome.is_converged() {
+        return failed(outcome, status, sol.iterations);
+    }
+    if sol.x.iter().any(|v| !v.is_finite()) {
+        return failed(SolveStatus::NotFinite, status, sol.iterations);
     }
     let clamp = |a: &mut Vec<f64>| {
         for (v, bd) in a.iter_mut().zip(p.bounds) {
@@ -154,7 +161,7 @@ pub fn solve_qp(p: &QpProblem) -> QpSolution {
     clamp(&mut a);
     QpSolution {
         activations: a,
-        status: QpStatus::Solved,
+        status: SolveStatus::Converged,
         clarabel_status: status,
         iterations: sol.iterations,
         polished: is_polished,
@@ -259,7 +266,7 @@ mod tests {
             bounds: &[[0.0, 1.0], [0.0, 1.0]],
         };
         let s = solve_qp(&p);
-        assert_eq!(s.status, QpStatus::Solved);
+        assert_eq!(s.status, SolveStatus::Converged);
         assert!(s.polished);
         assert!((s.activations[0] - 0.3).abs() < 1e-14);
         assert_eq!(s.activations[1], 1.0);

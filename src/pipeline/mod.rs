@@ -49,7 +49,7 @@ use crate::scene::Scene;
 use frames::FrameRange;
 use nalgebra::Vector3;
 use plan::Plan;
-use record::{FrameRecord, RunReport, StagePlan, Totals};
+use record::{FrameRecord, RunReport, Stage, StagePlan, Totals};
 use setup::{Log, Model, State};
 use std::time::Instant;
 use step::{Scratch, StepOptions};
@@ -270,7 +270,7 @@ fn shell_stage(plan: &Plan, model: &Model) -> StagePlan {
         None => String::new(),
     };
     StagePlan::ran(
-        "shell",
+        Stage::Shell,
         format!(
             "quasi-static skin with H x = H B q, λ = {:.2} mm, σ = {:.2} mm{varies}{lids}",
             plan.skin.lambda * 1e3,

@@ -4,7 +4,7 @@
 //! here builds a mesh or a solver: a plan that exists is a run that may start.
 
 use super::frames::FrameRange;
-use super::record::StagePlan;
+use super::record::{Stage, StagePlan};
 use super::RunOptions;
 use crate::coupling::wavelength::Bilayer;
 use crate::io::load::Rig;
@@ -258,7 +258,7 @@ impl Plan {
     /// The `load` stage's record: the face chosen and the clip.
     pub fn load_stage(&self, rig: &Rig) -> StagePlan {
         StagePlan::ran(
-            "load",
+            Stage::Load,
             format!(
                 "{}; {} frames at {} fps",
                 rig.face_reason,

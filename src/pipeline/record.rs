@@ -2,14 +2,89 @@
 
 use serde::Serialize;
 
+/// A stage of a run's set-up and frames, in the order they run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Stage {
+    /// Reading the rig: the face chosen and the clip.
+    Load,
+    /// Welding the face's vertices that share a position into one surface.
+    Weld,
+    /// Choosing the skin that can wrinkle (the rest rides on the interior).
+    Select,
+    /// Finding the poses that leave the skin's model (folds, crossings, collapsed triangles).
+    Outside,
+    /// Refining the skin to resolve the critical wavelength.
+    Refine,
+    /// Building the volumetric lattice of the interior.
+    Lattice,
+    /// The low-frequency clusters that tie the skin to the interior.
+    Clusters,
+    /// Making the muscles of the interior from the rig's shapes.
+    Muscles,
+    /// Fitting the muscle activations to each frame (a QP).
+    Fit,
+    /// The interior's step (backward Euler or quasi-static).
+    Interior,
+    /// The skin's thin-shell statics.
+    Shell,
+}
+
+impl Stage {
+    /// The snake_case name written to reports.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            Stage::Load => "load",
+            Stage::Weld => "weld",
+            Stage::Select => "select",
+            Stage::Outside => "outside",
+            Stage::Refine => "refine",
+            Stage::Lattice => "lattice",
+            Stage::Clusters => "clusters",
+            Stage::Muscles => "muscles",
+            Stage::Fit => "fit",
+            Stage::Interior => "interior",
+            Stage::Shell => "shell",
+        }
+    }
+}
+
+impl std::fmt::Display for Stage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.pad(self.as_str())
+    }
+}
+
+/// Whether a stage ran; its `why` says why (or why not).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StageStatus {
+    /// The stage ran.
+    Ran,
+    /// The stage was left out: the scene or the rig does not need it.
+    Skipped,
+    /// The stage could not run on this rig, and tracking the blended surface took its place
+    /// (default muscles that cannot drive the rig).
+    Tracked,
+}
+
+impl std::fmt::Display for StageStatus {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.pad(match self {
+            StageStatus::Ran => "ran",
+            StageStatus::Skipped => "skipped",
+            StageStatus::Tracked => "tracked",
+        })
+    }
+}
+
 /// Whether a stage ran, and why (or why not).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct StagePlan {
-    /// Stage name: `load`, `weld`, `refine`, `lattice`, `muscles`, `fit`, `interior`, `shell`,
-    /// `export`, `frames_dir`, `preview`.
-    pub stage: String,
-    /// `ran` or `skipped`.
-    pub status: String,
+    /// The stage.
+    pub stage: Stage,
+    /// Whether it ran.
+    pub status: StageStatus,
     /// The reason, for the user.
     pub why: String,
     /// Wall time of the stage's set-up or of the whole stage when it is not per frame (ms).
@@ -18,36 +93,46 @@ pub struct StagePlan {
 
 impl StagePlan {
     /// A stage that ran.
-    pub fn ran(stage: &str, why: impl Into<String>, ms: f64) -> Self {
+    pub fn ran(stage: Stage, why: impl Into<String>, ms: f64) -> Self {
         Self {
-            stage: stage.into(),
-            status: "ran".into(),
+            stage,
+            status: StageStatus::Ran,
             why: why.into(),
             ms,
         }
     }
     /// A stage that was left out.
-    pub fn skipped(stage: &str, why: impl Into<String>) -> Self {
+    pub fn skipped(stage: Stage, why: impl Into<String>) -> Self {
         Self {
-            stage: stage.into(),
-            status: "skipped".into(),
+            stage,
+            status: StageStatus::Skipped,
+            why: why.into(),
+            ms: 0.0,
+        }
+    }
+    /// A stage that could not run, with tracking in its place.
+    pub fn tracked(stage: Stage, why: impl Into<String>) -> Self {
+        Self {
+            stage,
+            status: StageStatus::Tracked,
             why: why.into(),
             ms: 0.0,
         }
     }
     /// Whether the stage ran.
     pub fn is_ran(&self) -> bool {
-        self.status == "ran"
+        self.status == StageStatus::Ran
     }
 }
 
 /// One stage's numerical outcome in one frame.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct StageRecord {
-    /// `converged`, `iteration_limit`, `line_search_failed`, `stalled`, `not_finite`,
-    /// `self_intersecting` (the skin: a solve that ended with the skin through itself),
-    /// `failed` (for a QP: clarabel's status), or `ok` for stages without iterations.
-    pub status: String,
+    /// How the stage's solve ended (for the fit: its last QP's outcome).
+    pub status: crate::solver::SolveStatus,
+    /// Fit: why tracking drove this muscle-driven frame instead of the muscles, when it did.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tracked: Option<Tracked>,
     /// Newton (or interior-point) iterations.
     pub iterations: usize,
     /// Final residual: N for the shell and the interior, m (RMS surface distance) for the fit.
@@ -101,6 +186,7 @@ impl StageRecord {
         };
         self.status = later.status;
         self.residual = later.residual;
+        self.tracked = later.tracked.or(self.tracked.take());
     }
 }
 
@@ -184,8 +270,28 @@ pub enum NotSimulated {
     CompressesNothing,
 }
 
-/// What a muscle-driven frame's fit status says when tracking drove the frame instead.
-pub const TRACKED_FRAME: &str = "tracking drives this frame";
+/// Why tracking drove a muscle-driven frame, and the detail for the user.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Tracked {
+    /// What failed.
+    pub because: TrackedBecause,
+    /// The failed solve's outcome or error, for the user.
+    pub detail: String,
+}
+
+/// What made tracking drive a muscle-driven frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TrackedBecause {
+    /// The activation fit failed (its QP left no answer, or the target is not finite).
+    FitFailed,
+    /// The muscle-driven interior did not converge.
+    InteriorNotConverged,
+    /// The skin on the muscle-driven interior did not converge.
+    SkinNotConverged,
+    /// The muscle-driven frame failed with an error.
+    FrameFailed,
+}
 
 /// Totals over the run.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
@@ -197,7 +303,7 @@ pub struct Totals {
     /// Frames whose shell or interior did not converge.
     pub frames_not_converged: usize,
     /// Muscle-driven runs: frames that tracking drove instead (the fit failed, or the
-    /// muscle-driven frame did not converge and was redone; see `per_frame[].fit.status`).
+    /// muscle-driven frame did not converge and was redone; see `per_frame[].fit.tracked`).
     pub frames_tracked: usize,
     /// Milliseconds per stage summed over frames.
     pub fit_ms: f64,
@@ -224,11 +330,11 @@ impl Totals {
     /// shell did not converge (the fit's QP status is reported per frame only).
     pub fn add(&mut self, frame: &FrameRecord) {
         let unconverged =
-            |r: &Option<StageRecord>| r.as_ref().is_some_and(|r| r.status != "converged");
+            |r: &Option<StageRecord>| r.as_ref().is_some_and(|r| !r.status.is_converged());
         if unconverged(&frame.interior) || unconverged(&frame.shell) {
             self.frames_not_converged += 1;
         }
-        let tracked = |r: &StageRecord| r.status.contains(TRACKED_FRAME);
+        let tracked = |r: &StageRecord| r.tracked.is_some();
         self.frames_tracked += usize::from(frame.fit.as_ref().is_some_and(tracked));
         self.frames_simulated += 1;
         let ms = |r: &Option<StageRecord>| r.as_ref().map_or(0.0, |r| r.ms);
@@ -307,9 +413,9 @@ pub struct RunReport {
 }
 
 impl RunReport {
-    /// The record of the set-up stage named `name` (`load`, `weld`, …, `shell`), if planned.
-    pub fn stage(&self, name: &str) -> Option<&StagePlan> {
-        self.stages.iter().find(|s| s.stage == name)
+    /// The record of the set-up stage `stage`, if planned.
+    pub fn stage(&self, stage: Stage) -> Option<&StagePlan> {
+        self.stages.iter().find(|s| s.stage == stage)
     }
 }
 
@@ -327,7 +433,7 @@ mod tests {
             ..Default::default()
         };
         let mut first = StageRecord {
-            status: "iteration_limit".into(),
+            status: crate::solver::SolveStatus::IterationLimit,
             iterations: 3,
             residual: 1.0,
             ms: 10.0,
@@ -337,7 +443,7 @@ mod tests {
             ..Default::default()
         };
         first.then(StageRecord {
-            status: "converged".into(),
+            status: crate::solver::SolveStatus::Converged,
             iterations: 2,
             residual: 1e-6,
             ms: 5.0,
@@ -346,7 +452,7 @@ mod tests {
             time: Some(time(0.5)),
             ..Default::default()
         });
-        assert_eq!(first.status, "converged");
+        assert_eq!(first.status, crate::solver::SolveStatus::Converged);
         assert_eq!((first.iterations, first.factorizations), (5, 1));
         assert_eq!((first.linear_solves, first.load_steps), (7, 2));
         assert_eq!((first.ms, first.residual), (15.0, 1e-6));

@@ -1,28 +1,57 @@
 //! Outcome of a nonlinear solve: a status and the measurements a report needs.
 
-/// How a nonlinear solve ended. Only `Converged` means the returned state is an equilibrium
-/// within tolerance; the others must be reported, never silently used.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+/// How a solve ended: the one outcome type of every solver in furrow (the skin's statics,
+/// the interior's backward Euler, the muscles' equilibrium and the activation QP). Only
+/// `Converged` means the returned state is a solution within tolerance; the others must be
+/// reported, never silently used. Serialised in snake_case (`"converged"`, …).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum SolveStatus {
-    /// Residual below tolerance.
+    /// Residual below tolerance (for a QP: clarabel's `Solved` or `AlmostSolved`).
+    #[default]
     Converged,
     /// The line search found no step that reduces the residual norm enough (Armijo).
     LineSearchFailed,
-    /// The iteration limit was reached before convergence.
+    /// The iteration limit was reached before convergence (for a QP: clarabel's
+    /// `MaxIterations` or `MaxTime`).
     IterationLimit,
-    /// A NaN or infinity appeared in the energy, residual or step.
+    /// A NaN or infinity appeared in the energy, residual, step or answer.
     NotFinite,
+    /// The line search could not lower the potential; the last good state is kept (the
+    /// interior's and the muscles' equilibrium solves, and clarabel's `InsufficientProgress`).
+    Stalled,
+    /// The skin's solve ended with the skin through itself.
+    SelfIntersecting,
+    /// A QP has no feasible point, or its dual none (clarabel's infeasibility statuses).
+    Infeasible,
+    /// A QP's solver failed for another reason (set-up error, numerical error).
+    Failed,
 }
 
 impl SolveStatus {
-    /// A short lower-case name for reports and JSON.
+    /// The snake_case name written to reports and JSON.
     pub fn as_str(&self) -> &'static str {
         match self {
             SolveStatus::Converged => "converged",
             SolveStatus::LineSearchFailed => "line_search_failed",
             SolveStatus::IterationLimit => "iteration_limit",
             SolveStatus::NotFinite => "not_finite",
+            SolveStatus::Stalled => "stalled",
+            SolveStatus::SelfIntersecting => "self_intersecting",
+            SolveStatus::Infeasible => "infeasible",
+            SolveStatus::Failed => "failed",
         }
+    }
+
+    /// Whether the solve met its tolerance.
+    pub fn is_converged(&self) -> bool {
+        *self == SolveStatus::Converged
+    }
+}
+
+impl std::fmt::Display for SolveStatus {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
     }
 }
 

@@ -6,6 +6,7 @@
 
 use super::tradeoff::{amplitude_error, amplitude_map, region_size, AmplitudeMap};
 use crate::io::load::Rig;
+use crate::pipeline::record::Stage;
 use crate::pipeline::{self, RunOptions, RunOutput};
 use serde::Serialize;
 
@@ -77,7 +78,7 @@ fn run_with(
         r.per_frame.iter().map(f).sum::<f64>() / frames
     };
     let muscles_setup_ms = r
-        .stage("muscles")
+        .stage(Stage::Muscles)
         .filter(|s| s.is_ran())
         .map_or(0.0, |s| s.ms);
     let run = DriverRun {

@@ -92,7 +92,7 @@ pub struct StabilityRow {
     /// `converged` (every stage of every frame), `not_converged` (a named solver status in
     /// some frame, outputs finite), `refused` (the run stopped with a message before writing
     /// anything) or `non_finite` (a NaN or infinity in an output: a bug).
-    pub outcome: String,
+    pub outcome: CaseOutcome,
     /// The interior's worst status over the frames, with the count (`converged`,
     /// `iterationlimit (2/5)`, …).
     pub interior_status: String,
@@ -306,9 +306,9 @@ fn worst<'a>(recs: impl Iterator<Item = &'a StageRecord>) -> (String, usize, f64
         n += 1;
         it += r.iterations;
         res = res.max(r.residual);
-        if r.status != "converged" {
+        if !r.status.is_converged() {
             bad += 1;
-            first.get_or_insert_with(|| r.status.clone());
+            first.get_or_insert(r.status);
         }
     }
     let s = match (n, first) {
@@ -319,13 +319,38 @@ fn worst<'a>(recs: impl Iterator<Item = &'a StageRecord>) -> (String, usize, f64
     (s, it, res, bad)
 }
 
+/// How a stability case ended, over all its frames and stages.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CaseOutcome {
+    /// Every stage of every frame converged.
+    Converged,
+    /// A solver ended with another status in some frame; the outputs are finite.
+    NotConverged,
+    /// The run stopped with a message before writing anything.
+    Refused,
+    /// A NaN or infinity in an output: a bug.
+    NonFinite,
+}
+
+impl std::fmt::Display for CaseOutcome {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.pad(match self {
+            CaseOutcome::Converged => "converged",
+            CaseOutcome::NotConverged => "not_converged",
+            CaseOutcome::Refused => "refused",
+            CaseOutcome::NonFinite => "non_finite",
+        })
+    }
+}
+
 /// Run one case.
 pub fn run_case(c: &Case) -> StabilityRow {
     let t = Instant::now();
     let mut row = StabilityRow {
         case: c.name.clone(),
         parameter: c.parameter.clone(),
-        outcome: "refused".into(),
+        outcome: CaseOutcome::Refused,
         interior_status: "-".into(),
         interior_iterations: 0,
         interior_residual: 0.0,
@@ -386,13 +411,12 @@ pub fn run_case(c: &Case) -> StabilityRow {
                 .any(|p| !p.iter().all(|v| v.is_finite()))
                 || !row.wrinkle_depth_max_m.is_finite();
             row.outcome = if row.non_finite {
-                "non_finite"
+                CaseOutcome::NonFinite
             } else if ib + sb > 0 {
-                "not_converged"
+                CaseOutcome::NotConverged
             } else {
-                "converged"
-            }
-            .into();
+                CaseOutcome::Converged
+            };
             let outside = out.report.out_of_model.iter().flat_map(|o| o.summary());
             row.message = out
                 .report
@@ -421,7 +445,7 @@ pub fn inverted_interior(steps: usize) -> StabilityRow {
     let mut row = StabilityRow {
         case: "inverted_start".into(),
         parameter: "interior alone, squeezed to −½ through the pinned layer".into(),
-        outcome: "refused".into(),
+        outcome: CaseOutcome::Refused,
         interior_status: "-".into(),
         interior_iterations: 0,
         interior_residual: 0.0,
@@ -555,16 +579,16 @@ fn judge_recovery(
     row.interior_status = match last {
         None => "-".into(),
         Some(SolveStatus::Converged) => "converged".into(),
-        Some(s) => format!("{} ({bad}/{})", format!("{s:?}").to_lowercase(), row.frames),
+        Some(s) => format!("{s} ({bad}/{})", row.frames),
     };
     row.outcome = if row.non_finite {
-        "non_finite".into()
+        CaseOutcome::NonFinite
     } else if last.is_none() {
-        "refused".into()
+        CaseOutcome::Refused
     } else if last == Some(SolveStatus::Converged) && back {
-        "converged".into()
+        CaseOutcome::Converged
     } else {
-        "not_converged".into()
+        CaseOutcome::NotConverged
     };
     if row.message.is_empty() {
         row.message = format!(
@@ -701,8 +725,8 @@ mod tests {
 
     #[test]
     fn worst_status_names_the_first_failure_and_counts() {
-        let rec = |s: &str, it: usize, r: f64| StageRecord {
-            status: s.into(),
+        let rec = |s: SolveStatus, it: usize, r: f64| StageRecord {
+            status: s,
             iterations: it,
             residual: r,
             ms: 0.0,
@@ -711,9 +735,9 @@ mod tests {
             ..Default::default()
         };
         let v = [
-            rec("converged", 2, 1e-9),
-            rec("iteration_limit", 60, 1e-3),
-            rec("stalled", 5, 1e-5),
+            rec(SolveStatus::Converged, 2, 1e-9),
+            rec(SolveStatus::IterationLimit, 60, 1e-3),
+            rec(SolveStatus::Stalled, 5, 1e-5),
         ];
         let (s, it, res, bad) = worst(v.iter());
         assert_eq!(s, "iteration_limit (2/3)");

@@ -6,7 +6,7 @@ use crate::fem::{BackwardEuler, Interior, LinearSolver, StepSettings, GRAVITY};
 use crate::lattice::Lattice;
 use crate::mesh::TriMesh;
 use crate::pipeline::plan::{Driver, Plan, DEFAULT_DT};
-use crate::pipeline::record::StagePlan;
+use crate::pipeline::record::{Stage, StagePlan};
 use crate::scene::Scene;
 use std::collections::BTreeMap;
 
@@ -141,7 +141,7 @@ pub fn record(plan: &Plan, stepper: &BackwardEuler) -> StagePlan {
             plan.driver.name()
         )
     };
-    StagePlan::ran("interior", why, 0.0)
+    StagePlan::ran(Stage::Interior, why, 0.0)
 }
 
 /// Lumped vertex areas (one third of each adjacent triangle), m².

@@ -3,7 +3,7 @@
 
 use crate::lattice::{ElementOrder, Lattice, LatticeSettings};
 use crate::mesh::TriMesh;
-use crate::pipeline::record::StagePlan;
+use crate::pipeline::record::{Stage, StagePlan};
 use crate::scene::InteriorSection;
 use anyhow::Context;
 use std::time::Instant;
@@ -43,7 +43,7 @@ pub fn build_lattice(
 /// appended (empty for the scene's own).
 fn record(lattice: &Lattice, how: &str, start: Instant) -> StagePlan {
     StagePlan::ran(
-        "lattice",
+        Stage::Lattice,
         format!(
             "{} elements, {} nodes ({} bone), cell {:.1} mm{how}",
             lattice.elements.len(),
@@ -96,7 +96,7 @@ mod tests {
         };
         let (lattice, record) = build_lattice(&sheet, &interior, "sheet.glb").unwrap();
         assert!(record.is_ran());
-        assert_eq!(record.stage, "lattice");
+        assert_eq!(record.stage, Stage::Lattice);
         assert!(!lattice.elements.is_empty());
         assert!((lattice.cell_size - 0.01).abs() < 1e-12);
         assert!(record

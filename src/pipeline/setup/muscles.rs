@@ -13,7 +13,7 @@ use crate::muscle::jaw::{Hinge, JawBone};
 use crate::muscle::samples::{ShapeSamples, SAMPLE_LEVELS};
 use crate::muscle::{Coupling, FitSettings, Fitter, GenerateSettings, Generated, MuscleError};
 use crate::pipeline::plan::SkinHold;
-use crate::pipeline::record::StagePlan;
+use crate::pipeline::record::{Stage, StagePlan};
 use crate::scene::Scene;
 use crate::solver::SolveStatus;
 use anyhow::{bail, Context};
@@ -264,7 +264,7 @@ pub fn build_muscles(
     };
     let records = [
         StagePlan::ran(
-            "muscles",
+            Stage::Muscles,
             format!(
                 "{n} muscles {}{made}{}{}; a weak tracking (κ = {MUSCLE_TRACKING}) carries what they cannot make",
                 drive.origin,
@@ -274,7 +274,7 @@ pub fn build_muscles(
             t.elapsed().as_secs_f64() * 1e3,
         ),
         StagePlan::ran(
-            "fit",
+            Stage::Fit,
             "activations per frame: clarabel QP on the muscles' responses in this interior, the tracking's own pull removed (warm-started)",
             0.0,
         ),
@@ -468,17 +468,23 @@ pub fn skipped(scene: &Scene) -> [StagePlan; 2] {
 /// The `muscles` and `fit` records of a run whose default muscles could not be made
 /// (`error` says why): the interior tracks the blended surface.
 pub fn fell_back(error: &anyhow::Error) -> [StagePlan; 2] {
-    without_muscles(format!(
-        "muscles cannot drive this rig ({error:#}): the interior tracks the blended surface \
-         directly"
-    ))
+    [
+        StagePlan::tracked(
+            Stage::Muscles,
+            format!(
+                "muscles cannot drive this rig ({error:#}): the interior tracks the blended \
+                 surface directly"
+            ),
+        ),
+        StagePlan::skipped(Stage::Fit, "no muscles: no activation QP"),
+    ]
 }
 
 /// The `muscles` record skipped for `why`, and the `fit` record that follows from it.
 fn without_muscles(why: String) -> [StagePlan; 2] {
     [
-        StagePlan::skipped("muscles", why),
-        StagePlan::skipped("fit", "no muscles: no activation QP"),
+        StagePlan::skipped(Stage::Muscles, why),
+        StagePlan::skipped(Stage::Fit, "no muscles: no activation QP"),
     ]
 }
 
@@ -600,7 +606,11 @@ mod tests {
             "{:?}",
             log.warnings
         );
-        let record = log.stages.iter().find(|s| s.stage == "muscles").unwrap();
+        let record = log
+            .stages
+            .iter()
+            .find(|s| s.stage == Stage::Muscles)
+            .unwrap();
         assert!(
             !record.is_ran() && record.why.contains("no bone"),
             "{record:?}"

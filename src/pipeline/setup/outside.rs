@@ -23,7 +23,7 @@ use crate::mesh::intersect::self_intersections_beyond;
 use crate::mesh::quality::triangle_quality;
 use crate::mesh::TriMesh;
 use crate::pipeline::plan::Plan;
-use crate::pipeline::record::StagePlan;
+use crate::pipeline::record::{Stage, StagePlan};
 use crate::pipeline::setup::skin::DEGENERATE_QUALITY;
 use crate::pipeline::step::blend::weld_positions;
 use nalgebra::Vector3;
@@ -464,11 +464,11 @@ pub fn find(rig: &Rig, plan: &Plan, welded: &Welded) -> (OutOfModel, StagePlan) 
     let ms = t.elapsed().as_secs_f64() * 1e3;
     let record = if out.regions.is_empty() {
         StagePlan::skipped(
-            "outside",
+            Stage::Outside,
             "no pose folds, crosses or collapses the skin: all of it stays in the model",
         )
     } else {
-        StagePlan::ran("outside", out.summary().join("; "), ms)
+        StagePlan::ran(Stage::Outside, out.summary().join("; "), ms)
     };
     (out, record)
 }

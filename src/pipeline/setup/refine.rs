@@ -12,7 +12,7 @@ use crate::io::mesh::MeshInstance;
 use crate::lattice::Lattice;
 use crate::mesh::TriMesh;
 use crate::pipeline::plan::SkinScale;
-use crate::pipeline::record::StagePlan;
+use crate::pipeline::record::{Stage, StagePlan};
 use crate::scene::SkinSection;
 use anyhow::Context;
 use std::time::Instant;
@@ -130,13 +130,13 @@ fn refine_record(r: &RefineReport, t: Instant) -> StagePlan {
     let lambda_mm = r.wavelength * 1e3;
     if r.region_triangles == 0 {
         return StagePlan::skipped(
-            "refine",
+            Stage::Refine,
             "no skin is simulated (see select): the skin stays as it is",
         );
     }
     if r.levels == 0 {
         return StagePlan::skipped(
-            "refine",
+            Stage::Refine,
             format!(
                 "the simulated skin already holds {:.1} vertices per wavelength (λ = {lambda_mm:.2} mm)",
                 r.vertices_per_wavelength
@@ -159,7 +159,7 @@ fn refine_record(r: &RefineReport, t: Instant) -> StagePlan {
         )
     };
     StagePlan::ran(
-        "refine",
+        Stage::Refine,
         format!(
             "{} level(s) of {} subdivision on {region}: {} → {} triangles, {} → {} vertices; mean \
              edge {:.2} → {:.2} mm ({:.1} vertices per λ = {lambda_mm:.2} mm)",

@@ -16,7 +16,7 @@ use crate::io::load::Rig;
 use crate::mesh::grid::PointGrid;
 use crate::mesh::TriMesh;
 use crate::pipeline::plan::Plan;
-use crate::pipeline::record::StagePlan;
+use crate::pipeline::record::{Stage, StagePlan};
 use crate::pipeline::step::blend::weld_positions;
 use crate::scene::{Materials, Scene};
 use nalgebra::{Matrix2, Vector3};
@@ -185,7 +185,7 @@ pub fn select_skin(
 ) -> (Option<Selection>, StagePlan) {
     if scene.skin.simulate.as_deref() == Some("all") {
         let why = "skin.simulate = all: the whole skin is simulated";
-        return (None, StagePlan::skipped("select", why));
+        return (None, StagePlan::skipped(Stage::Select, why));
     }
     let t = Instant::now();
     let onset = onset_strain(&plan.materials);
@@ -216,7 +216,7 @@ pub fn select_skin(
         if plan.animated { "frames" } else { "shapes at weight 1" },
         margin * 1e3
     );
-    let record = StagePlan::ran("select", why, t.elapsed().as_secs_f64() * 1e3);
+    let record = StagePlan::ran(Stage::Select, why, t.elapsed().as_secs_f64() * 1e3);
     (Some(s), record)
 }
 

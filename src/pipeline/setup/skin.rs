@@ -8,7 +8,7 @@ use crate::coupling::embedded::{sigma_for_wavelength, EmbeddedShell};
 use crate::coupling::refine;
 use crate::mesh::grid::PointGrid;
 use crate::mesh::TriMesh;
-use crate::pipeline::record::StagePlan;
+use crate::pipeline::record::{Stage, StagePlan};
 use crate::scene::Scene;
 use crate::solver::patch::PatchSettings;
 use crate::solver::statics::{HessianMode, LinearAlgebra, StaticSettings};
@@ -186,7 +186,7 @@ fn slit_vertices(mesh: &TriMesh) -> Vec<bool> {
 /// was compressed enough to wrinkle (the `select` stage).
 pub fn skipped_shell(scene: &Scene, compressed: bool) -> StagePlan {
     StagePlan::skipped(
-        "shell",
+        Stage::Shell,
         if !compressed {
             "no frame compresses the skin past the wrinkling threshold: the whole skin follows the blend shapes".to_string()
         } else if scene.skin.mask.is_empty() {
@@ -450,7 +450,7 @@ fn shell_over(
 fn clusters_record(sim: &SimulatedSkin, t: Instant) -> StagePlan {
     let st = sim.shell.cluster_stats();
     StagePlan::ran(
-        "clusters",
+        Stage::Clusters,
         format!(
             "{} clusters of σ = {:.2} mm, {:.0} vertices each on average, {:.1} per vertex",
             st.clusters,
@@ -600,7 +600,7 @@ mod tests {
         let (rig, _) = sheet_rig(face);
         let (_, state, log) = set_up_sheet(&rig, Driver::Tracking, 0, |_| {});
         let weld = &log.stages[0];
-        assert_eq!(weld.stage, "weld");
+        assert_eq!(weld.stage, Stage::Weld);
         assert!(
             weld.why
                 .contains("3 vertices at a welded vertex kept apart"),

@@ -7,7 +7,7 @@ use crate::io::mesh::MeshInstance;
 use crate::io::model::MorphTarget;
 use crate::mesh::grid::PointGrid;
 use crate::mesh::TriMesh;
-use crate::pipeline::record::StagePlan;
+use crate::pipeline::record::{Stage, StagePlan};
 use anyhow::{bail, Context};
 use nalgebra::Vector3;
 use std::time::Instant;
@@ -39,7 +39,7 @@ pub fn weld_face(face: &MeshInstance, path: &str) -> anyhow::Result<(Welded, Sta
         bail!("{path}: the face '{}' has no triangles", face.name);
     }
     let record = StagePlan::ran(
-        "weld",
+        Stage::Weld,
         format!(
             "{} loaded vertices → {} skin vertices ({} triangles dropped as collapsed; {} \
              vertices at a welded vertex kept apart, as blend shapes part them)",

@@ -4,7 +4,7 @@
 //! then their active energy linearised at the interior's state.
 
 use crate::fem::BackwardEuler;
-use crate::pipeline::record::StageRecord;
+use crate::pipeline::record::{StageRecord, Tracked, TrackedBecause};
 use crate::pipeline::setup::interior::Tracking;
 use crate::pipeline::setup::muscles::MuscleDrive;
 use nalgebra::Vector3;
@@ -19,17 +19,13 @@ pub fn fit_activations(
     let f = muscles.fitter.fit_frame(target)?;
     muscles.previous = std::mem::replace(&mut muscles.activations, f.activations.clone());
     muscles.fallback = f.status != crate::muscle::FrameStatus::Fitted;
+    let tracked = muscles.fallback.then(|| Tracked {
+        because: TrackedBecause::FitFailed,
+        detail: format!("{:?} (clarabel: {})", f.status, f.clarabel_status),
+    });
     Ok(StageRecord {
-        status: if muscles.fallback {
-            format!(
-                "{} ({}); {}",
-                format!("{:?}", f.status).to_lowercase(),
-                f.clarabel_status,
-                crate::pipeline::record::TRACKED_FRAME
-            )
-        } else {
-            "converged".into()
-        },
+        status: f.qp_status,
+        tracked,
         iterations: f.gauss_newton + 1,
         residual: f.rms_residual,
         ms: t.elapsed().as_secs_f64() * 1e3,

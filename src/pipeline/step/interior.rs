@@ -64,7 +64,7 @@ pub fn advance(
 ) -> anyhow::Result<StageRecord> {
     let t = Instant::now();
     let mut record = StageRecord {
-        status: "converged".into(),
+        status: SolveStatus::Converged,
         iterations: 0,
         residual: 0.0,
         ms: 0.0,
@@ -359,10 +359,8 @@ fn rep_finite(state: &State) -> bool {
 /// Record a solve's residual and, when it did not converge, its status.
 fn note(record: &mut StageRecord, rep: &SolveReport) {
     record.residual = rep.residual;
-    match rep.status {
-        SolveStatus::Converged => {}
-        SolveStatus::IterationLimit => record.status = "iteration_limit".into(),
-        SolveStatus::Stalled => record.status = "stalled".into(),
+    if !rep.status.is_converged() {
+        record.status = rep.status;
     }
 }
 

@@ -11,7 +11,7 @@ pub mod interior;
 pub mod skin;
 
 use super::plan::SkinHold;
-use super::record::{FrameRecord, NotSimulated, StageRecord};
+use super::record::{FrameRecord, NotSimulated, StageRecord, Tracked, TrackedBecause};
 use super::setup::{outside, Model, State};
 use crate::io::load::Rig;
 use crate::math::vector::{dot, norm};
@@ -318,15 +318,21 @@ fn advance_driven(
     let Some(start) = start.filter(|_| muscled) else {
         return result;
     };
-    let converged = |r: &StageRecord| r.status == "converged";
-    let why = match &result {
+    let converged = |r: &StageRecord| r.status.is_converged();
+    let tracked = match &result {
         Ok((i, s)) if converged(i) && s.as_ref().is_none_or(converged) => return result,
-        Ok((i, s)) if !converged(i) => format!("the muscle-driven interior: {}", i.status),
-        Ok((_, s)) => format!(
-            "the skin on the muscle-driven interior: {}",
-            s.as_ref().map_or("", |s| s.status.as_str())
-        ),
-        Err(e) => format!("the muscle-driven frame: {e:#}"),
+        Ok((i, _)) if !converged(i) => Tracked {
+            because: TrackedBecause::InteriorNotConverged,
+            detail: i.status.to_string(),
+        },
+        Ok((_, s)) => Tracked {
+            because: TrackedBecause::SkinNotConverged,
+            detail: s.as_ref().map_or(String::new(), |s| s.status.to_string()),
+        },
+        Err(e) => Tracked {
+            because: TrackedBecause::FrameFailed,
+            detail: format!("{e:#}"),
+        },
     };
     start.restore(state)?;
     let m = state
@@ -336,8 +342,7 @@ fn advance_driven(
     m.fallback = true;
     m.relax();
     if let Some(f) = fit.as_mut() {
-        let tracked = crate::pipeline::record::TRACKED_FRAME;
-        f.status = format!("{}; {tracked} ({why})", f.status);
+        f.tracked = Some(tracked);
     }
     let (interior, shell) =
         advance_coupled(model, state, scratch, schedule, target, k, Some(&start))?;
@@ -529,8 +534,8 @@ mod tests {
         let (rec, composed) =
             step_to_target(&target, 0, &model, &mut state, &mut scratch, options(0)).unwrap();
         let interior = rec.interior.as_ref().unwrap();
-        assert_eq!(interior.status, "converged", "{interior:?}");
-        assert_eq!(rec.shell.as_ref().unwrap().status, "converged");
+        assert!(interior.status.is_converged(), "{interior:?}");
+        assert!(rec.shell.as_ref().unwrap().status.is_converged());
         assert!(rec.fit.is_none());
         // The tracking pulls the middle up most of the 2 mm lift (κ = 10: ~90 %).
         let rise = middle_rise(&model, &state);
@@ -550,7 +555,7 @@ mod tests {
         let (rec, _) =
             step_to_target(&target, 0, &model, &mut state, &mut scratch, options(2)).unwrap();
         let interior = rec.interior.as_ref().unwrap();
-        assert_eq!(interior.status, "converged");
+        assert!(interior.status.is_converged());
         assert!(
             interior.iterations >= 2,
             "one solve per sub-step: {interior:?}"
@@ -649,7 +654,7 @@ mod tests {
         let mut motion = 0.0;
         for k in 0..8 {
             let (r, _) = step_to_target(&target, k, &model, &mut state, &mut scratch, o).unwrap();
-            assert_eq!(r.shell.as_ref().unwrap().status, "converged");
+            assert!(r.shell.as_ref().unwrap().status.is_converged());
             misses.push(r.shape_miss_m);
             motion = r.shape_motion_m;
         }
@@ -712,7 +717,7 @@ mod tests {
             let mut o = options(2);
             o.schedule.skin_held = held;
             let (r, _) = step_to_target(&target, 0, &model, &mut state, &mut scratch, o).unwrap();
-            assert_eq!(r.shell.as_ref().unwrap().status, "converged");
+            assert!(r.shell.as_ref().unwrap().status.is_converged());
             assert_eq!(interior::skin_is_held(o.schedule, &state), held);
             state.muscles.as_mut().unwrap().fallback = true;
             assert!(!interior::skin_is_held(o.schedule, &state), "tracked");
@@ -828,7 +833,7 @@ mod tests {
                 None,
             )
             .unwrap();
-            assert_eq!(rec.status, "converged");
+            assert!(rec.status.is_converged());
             middle_rise(&model, &state)
         };
         let tracking = rise_after(Driver::Tracking, false);

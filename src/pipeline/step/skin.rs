@@ -13,6 +13,7 @@
 use crate::coupling::embedded::EmbeddedShell;
 use crate::mesh::intersect::{first_self_intersection_beyond, self_intersections_beyond};
 use crate::pipeline::record::{SolveTime, StageRecord};
+use crate::solver::SolveStatus;
 use std::time::Instant;
 
 /// Solve the skin for node positions `q` (flat, m) at `loosening` times its statics'
@@ -104,7 +105,7 @@ fn solve_once(
     } else {
         skin.solve_loosened(q, loosening)?
     };
-    let mut status = rep.status.as_str().to_string();
+    let mut status = rep.status;
     // A solve that took no step left the skin where the last check saw it.
     let crossed = match checked {
         Some((ok, x)) if x == skin.x() => !ok,
@@ -115,11 +116,12 @@ fn solve_once(
     };
     let mut crossing = Vec::new();
     if result && crossed {
-        status = "self_intersecting".into();
+        status = SolveStatus::SelfIntersecting;
         crossing = self_intersections_beyond(&rest, skin.x(), Some(&bq));
     }
     let record = StageRecord {
         status,
+        tracked: None,
         iterations: rep.iterations,
         residual: rep.residual,
         ms: t.elapsed().as_secs_f64() * 1e3,
