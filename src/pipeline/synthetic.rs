@@ -20,7 +20,7 @@
 use crate::coupling::embedded::{sigma_for_wavelength, two_step_with, EmbeddedShell, InteriorMode};
 use crate::coupling::wavelength::Bilayer;
 use crate::fem::{BackwardEuler, Interior, LinearSolver, StepSettings, GRAVITY};
-use crate::lattice::{shape, ElementOrder, Lattice};
+use crate::lattice::{shape, Lattice};
 use crate::mesh::TriMesh;
 use crate::scene::{Load, Scene, SkinSection};
 use crate::shell::sheet::equilateral_sheet;
@@ -212,10 +212,7 @@ fn copy_lattice(scene: &Scene) -> anyhow::Result<(Lattice, [usize; 3], f64)> {
         (w / cell).round().max(1.0) as usize,
         (d / cell).round().max(1.0) as usize,
     ];
-    let order = match scene.interior.elements.as_deref() {
-        Some("trilinear") => ElementOrder::Trilinear,
-        _ => ElementOrder::Quadratic,
-    };
+    let order = scene.interior.lattice_settings().order;
     let cells = dims[0] * dims[1] * dims[2];
     if cells > 20_000 {
         bail!("the lattice would have {cells} cells; increase `interior.cell_size`");
