@@ -33,6 +33,7 @@
 
 mod continuation;
 mod direction;
+mod forcing;
 mod inertia;
 mod layout;
 mod model;

@@ -1,7 +1,7 @@
 //! One quasi-static solve as the Newton core's problem ([`crate::solver::newton`]): the
 //! convergence check, the direction, and the search line along it with its trial points.
 
-use super::direction::forcing;
+use super::forcing::forcing;
 use super::model::{Model, Point};
 use super::{SolverError, StaticSolver};
 use crate::solver::linesearch::{judge, EnergyMerit, Trial};

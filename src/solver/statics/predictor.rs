@@ -2,7 +2,7 @@
 //! linearised response of the free dofs to that motion about the previous solution, which
 //! becomes Newton's first iterate when its residual is smaller than the warm start's.
 
-use super::direction::forcing;
+use super::forcing::forcing;
 use super::model::{Model, Point};
 use super::{SolverError, StaticSolver};
 use crate::solver::status::SolveReport;
