@@ -146,13 +146,7 @@ fn options(dt: f64, tracking: f64) -> RunOptions {
          cell_size = 0.005\ntracking = {tracking}\n[dynamics]\nenabled = true\ndt = {dt}\n\
          [muscles]\nsource = \"none\"\n[export]\nsurface = \"simulated\"\n"
     );
-    RunOptions {
-        preroll: None,
-        scene: Scene::parse(&text, "turn.toml").unwrap(),
-        scene_path: None,
-        fps: 30.0,
-        frames: None,
-    }
+    RunOptions::new(Scene::parse(&text, "turn.toml").unwrap())
 }
 
 /// The flesh's fundamental angular frequency ω (rad/s) as the model has it, for the turn's

@@ -1,4 +1,4 @@
-//! Muscles and the activation fit (issues 6 and 20): the active energy's derivatives and
+//! Muscles and the activation fit: the active energy's derivatives and
 //! invariance, the stiffness balance of a contracting block, recovery of known activations,
 //! bounds, unreachable and degenerate targets, generated muscles on the face rig and on 52
 //! ARKit shapes, and the TOML rig file. Generated muscles are actuations (they change the
@@ -28,14 +28,9 @@ use std::path::Path;
 
 type V3 = Vector3<f64>;
 
-/// Closed box mesh [0, a.x] × [0, a.y] × [0, a.z], each face split into m × m quads (the unit
-/// cube of `furrow::mesh::cube_mesh` scaled per axis).
+/// Closed box mesh [0, a.x] × [0, a.y] × [0, a.z], each face split into m × m quads.
 fn box_mesh(a: V3, m: usize) -> TriMesh {
-    let mut cube = furrow::mesh::cube_mesh(1.0, m);
-    for p in &mut cube.positions {
-        *p = p.component_mul(&a);
-    }
-    cube
+    furrow::mesh::box_mesh(V3::zeros(), a, m)
 }
 
 /// A lattice over a box of `cells` cells of edge `h` (m).
@@ -945,13 +940,8 @@ fn muscle_driven(
     scene.muscles.source = Some(MuscleSource::Auto);
     scene.muscles.skin_hold = skin_hold;
     let count = furrow::pipeline::plan::clip_weights(&loaded, 30.0).0.len();
-    let opts = RunOptions {
-        preroll: None,
-        scene,
-        scene_path: None,
-        fps: 30.0,
-        frames: Some(furrow::pipeline::frames::FrameRange::parse(frames, count).unwrap()),
-    };
+    let opts = RunOptions::new(scene)
+        .frames(furrow::pipeline::frames::FrameRange::parse(frames, count).unwrap());
     let out = pipeline::run(&loaded, &opts, &|_, _, _| {}).unwrap();
     (loaded, out)
 }
@@ -1043,13 +1033,8 @@ fn head_run(scene: Scene) -> (furrow::io::load::Rig, pipeline::RunOutput) {
     let mut loaded = furrow::io::load::load(&path, &Default::default()).unwrap();
     furrow::io::units::apply(&mut loaded, None, None);
     let count = furrow::pipeline::plan::clip_weights(&loaded, 30.0).0.len();
-    let opts = RunOptions {
-        preroll: None,
-        scene,
-        scene_path: None,
-        fps: 30.0,
-        frames: Some(furrow::pipeline::frames::FrameRange::parse("0:1", count).unwrap()),
-    };
+    let opts = RunOptions::new(scene)
+        .frames(furrow::pipeline::frames::FrameRange::parse("0:1", count).unwrap());
     let out = pipeline::run(&loaded, &opts, &|_, _, _| {}).unwrap();
     (loaded, out)
 }

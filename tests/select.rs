@@ -18,13 +18,7 @@ fn compressed() -> Scene {
 }
 
 fn options(scene: Scene) -> RunOptions {
-    RunOptions {
-        preroll: None,
-        scene,
-        scene_path: None,
-        fps: 30.0,
-        frames: None,
-    }
+    RunOptions::new(scene)
 }
 
 /// The sheet compressed on its left half and stretched on its right (10 cm, 15 %).

@@ -13,13 +13,7 @@ use furrow::studies::tradeoff::{sheet_rig, SheetRig};
 fn options(solver: SkinSolver) -> RunOptions {
     let mut scene = Scene::default();
     scene.solver.skin_solver = Some(solver);
-    RunOptions {
-        preroll: None,
-        scene,
-        scene_path: None,
-        fps: 30.0,
-        frames: None,
-    }
+    RunOptions::new(scene)
 }
 
 /// The sheet compressed on its left half and stretched on its right (10 cm, 15 %).

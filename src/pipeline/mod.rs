@@ -74,6 +74,38 @@ pub struct RunOptions {
     pub preroll: Option<usize>,
 }
 
+impl RunOptions {
+    /// Every frame of the clip at 30 frames per second under `scene`, the whole history
+    /// simulated, no scene file named.
+    pub fn new(scene: Scene) -> Self {
+        Self {
+            scene,
+            scene_path: None,
+            fps: 30.0,
+            frames: None,
+            preroll: None,
+        }
+    }
+
+    /// Only the frames `range` written.
+    pub fn frames(mut self, range: FrameRange) -> Self {
+        self.frames = Some(range);
+        self
+    }
+
+    /// The clip sampled at `fps` frames per second (Hz).
+    pub fn fps(mut self, fps: f64) -> Self {
+        self.fps = fps;
+        self
+    }
+
+    /// `frames` frames simulated from rest before the first written one.
+    pub fn preroll(mut self, frames: usize) -> Self {
+        self.preroll = Some(frames);
+        self
+    }
+}
+
 /// The result of a run: the exported face frames and the report.
 #[derive(Debug, Clone)]
 pub struct RunOutput {

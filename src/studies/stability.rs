@@ -368,13 +368,7 @@ pub fn run_case(c: &Case) -> StabilityRow {
     let result = c.rig.build().and_then(|rig| {
         pipeline::run(
             &rig,
-            &RunOptions {
-                preroll: None,
-                scene: c.scene.clone(),
-                scene_path: None,
-                fps: c.fps,
-                frames: None,
-            },
+            &RunOptions::new(c.scene.clone()).fps(c.fps),
             &|_, _, _| {},
         )
     });

@@ -495,13 +495,7 @@ pub(crate) mod test_support {
             Driver::Tracking => crate::scene::MuscleSource::None,
         });
         tweak(&mut scene);
-        let opts = crate::pipeline::RunOptions {
-            preroll: None,
-            scene: scene.clone(),
-            scene_path: None,
-            fps: 30.0,
-            frames: None,
-        };
+        let opts = crate::pipeline::RunOptions::new(scene.clone());
         let mut plan = Plan::new(rig, &opts).unwrap();
         plan.skin.lambda = 0.01;
         plan.skin.lambda_max = 0.01;

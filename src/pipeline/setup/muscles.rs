@@ -507,13 +507,7 @@ mod tests {
         crate::io::units::apply(&mut rig, None, None);
         let mut scene = Scene::default();
         scene.muscles.source = Some(MuscleSource::None);
-        let opts = crate::pipeline::RunOptions {
-            preroll: None,
-            scene,
-            scene_path: None,
-            fps: 30.0,
-            frames: None,
-        };
+        let opts = crate::pipeline::RunOptions::new(scene);
         let plan = Plan::new(&rig, &opts).unwrap();
         let (model, mut state) =
             set_up(&rig, &opts.scene, &plan, &mut Log::default(), &|_, _, _| {}).unwrap();
@@ -577,13 +571,7 @@ mod tests {
         let (rig, _) = sheet_rig(face_of(cube));
         let mut scene = Scene::default();
         scene.interior.cell_size = Some(0.01);
-        let opts = |scene: &Scene| crate::pipeline::RunOptions {
-            preroll: None,
-            scene: scene.clone(),
-            scene_path: None,
-            fps: 30.0,
-            frames: None,
-        };
+        let opts = |scene: &Scene| crate::pipeline::RunOptions::new(scene.clone());
         let plan = Plan::new(&rig, &opts(&scene)).unwrap();
         assert_eq!(
             plan.driver,

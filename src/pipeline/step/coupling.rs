@@ -163,12 +163,11 @@ pub(super) const PASS_LOOSENING: f64 = 1000.0;
 /// a constant force (the skin's, solved, against the first pass's linear model of it), so
 /// it is taken as the first pass's sub-steps' linear response to that force
 /// ([`interior::linear_pass`]: two triangular solves per sub-step with the last Newton
-/// factor; demo whole clip muscle-driven, interior 23.2 s against 45.5 s, same miss of the
-/// shape); where there is no such factor (conjugate gradients, a halved sub-step,
+/// factor, about half the cost of stepping again, with the same miss of the shape); where there is no such factor (conjugate gradients, a halved sub-step,
 /// quasi-static frames) the sub-steps are taken again, starting Newton where the last
 /// pass's ended. `start` is the frame's start (needed when a second pass may run). Returns
 /// the interior's and the skin's records, summed over the passes.
-fn advance_coupled(
+pub(super) fn advance_coupled(
     model: &Model,
     state: &mut State,
     scratch: &mut Scratch,

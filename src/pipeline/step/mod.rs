@@ -112,10 +112,8 @@ impl StepOptions {
 
 /// Coupling passes per frame by default when generated muscles are fitted with the skin in
 /// the loop: the skin then stands pre-tensioned against them, and one pass per frame swings
-/// (a lifted sheet's interior alternated 2.93 / 0.56 mm about its 2 mm lift frame after
-/// frame) or lags (the demo's brow raise), so the frame takes two relaxed passes
-/// ([`advance_coupled`]): on the demo's whole clip they give the interior's miss of the
-/// shape of three (24.0 % against 23.9 % of the motion) in 137 s against 180 s.
+/// about the shape or lags it, so the frame takes two relaxed passes
+/// ([`coupling::advance_coupled`]), which miss the shape as three do, in less time.
 const SKIN_IN_FIT_PASSES: usize = 2;
 
 impl Model {

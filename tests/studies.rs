@@ -1,5 +1,5 @@
 //! `furrow report tradeoff` and `furrow report stability` on a reduced set: small sheet rigs,
-//! few frames. Run with `cargo test --release --test reports`.
+//! few frames. Run with `cargo test --release --test studies`.
 
 use furrow::pipeline::record::StageRecord;
 use furrow::scene::{MuscleSource, Scene};
@@ -154,13 +154,7 @@ fn a_muscle_driven_frame_that_does_not_converge_is_redone_by_tracking() {
         ..SheetRig::default()
     })
     .unwrap();
-    let opts = furrow::pipeline::RunOptions {
-        preroll: None,
-        scene: Scene::default(),
-        scene_path: None,
-        fps: 30.0,
-        frames: None,
-    };
+    let opts = furrow::pipeline::RunOptions::new(Scene::default());
     let out = furrow::pipeline::run(&rig, &opts, &|_, _, _| {}).unwrap();
     let mut redone = 0;
     for f in &out.report.per_frame {
