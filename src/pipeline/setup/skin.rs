@@ -392,7 +392,7 @@ fn shell_over(
     let emb: Vec<(usize, usize, f64)> = vertices
         .iter()
         .enumerate()
-        .flat_map(|(i, &v)| skin.rows[v].iter().map(move |&(n, w)| (i, n, w)))
+        .flat_map(|(i, &v)| skin.embedding.row(v).iter().map(move |&(n, w)| (i, n, w)))
         .collect();
     let edge = refine::mean_edge(&sub);
     let relative = scene.solver.shell_tolerance.unwrap_or(SHELL_TOLERANCE);
