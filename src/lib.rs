@@ -6,7 +6,7 @@
 //! wrinkles form at the critical wavelength.
 //!
 //! Layers, bottom to top ([`LAYERS`]; each module uses only layers below it, and
-//! `tests/layers.rs` checks every `crate::` path in `src/` against this list):
+//! `tests/module_layers.rs` checks every `crate::` path in `src/` against this list):
 //!
 //! | layer | modules | what it is |
 //! | ---: | --- | --- |

@@ -45,13 +45,7 @@ fn sheet_tracked_wrinkles_where_compressed_and_not_where_stretched() {
     )
     .unwrap();
     // Tracking of the blended surface (the muscle-driven default is tested below).
-    let opts = RunOptions {
-        preroll: None,
-        scene: Scene::parse("[muscles]\nsource = \"none\"\n", "t.toml").unwrap(),
-        scene_path: None,
-        fps: 30.0,
-        frames: None,
-    };
+    let opts = RunOptions::new(Scene::parse("[muscles]\nsource = \"none\"\n", "t.toml").unwrap());
     let out = pipeline::run(&rig, &opts, &|_, _, _| {}).unwrap();
     let last = out.frames.len() - 1;
     assert_eq!(out.frames.len(), out.report.per_frame.len());
@@ -252,13 +246,7 @@ fn masked_skin_simulates_only_the_mask_and_the_rest_keeps_the_blend_shapes() {
         "mask.toml",
     )
     .unwrap();
-    let opts = RunOptions {
-        preroll: None,
-        scene,
-        scene_path: None,
-        fps: 30.0,
-        frames: None,
-    };
+    let opts = RunOptions::new(scene);
     let out = pipeline::run(&rig, &opts, &|_, _, _| {}).unwrap();
     let sizes = &out.report.sizes;
     let sim = sizes["simulated_vertices"].as_u64().unwrap();
@@ -444,13 +432,7 @@ fn muscles_fitted_per_frame_drive_the_interior_and_the_skin_wrinkles_by_default(
         &LoadOptions::default(),
     )
     .unwrap();
-    let opts = RunOptions {
-        preroll: None,
-        scene: Scene::default(),
-        scene_path: None,
-        fps: 30.0,
-        frames: None,
-    };
+    let opts = RunOptions::new(Scene::default());
     let out = pipeline::run(&rig, &opts, &|_, _, _| {}).unwrap();
     assert_eq!(
         out.report.sizes["muscles"], 1,

@@ -1,7 +1,8 @@
 //! The embedded shell: known answers of the constrained statics, warm start, the coupling
 //! terms against a dense product, and the interior feeling the skin.
 
-use furrow::coupling::embedded::{two_step, two_step_with, EmbeddedShell, InteriorMode};
+use furrow::coupling::embedded::EmbeddedShell;
+use furrow::coupling::two_step::{two_step, two_step_with, InteriorMode};
 use furrow::fem::{BackwardEuler, Interior, LinearSolver, Material, StepSettings};
 use furrow::lattice::{shape, ElementOrder, Lattice};
 use furrow::math::sparse::dense_from_triplets;
@@ -364,68 +365,4 @@ fn bad_input_is_named() {
     let mut skin = EmbeddedShell::new(mesh, skin_material(), emb, n, 0.003, settings()).unwrap();
     assert!(skin.solve(&[0.0; 6]).is_err());
     assert!(skin.set_pinned(&[100000]).is_err());
-}
-
-/// Cost of the coupling terms at the face rig's size (not a pass/fail test; run with
-/// `cargo test --release --test embedded coupling_terms_cost -- --ignored --nocapture`).
-#[test]
-#[ignore = "a benchmark that prints timings, not a check"]
-fn coupling_terms_cost_on_the_face_rig() {
-    use furrow::lattice::LatticeSettings;
-    let rig = furrow::rig::face::generate();
-    let cells: usize = std::env::var("CELLS")
-        .map(|v| v.parse().unwrap())
-        .unwrap_or(3000);
-    let lat = Lattice::build(
-        &rig.mesh,
-        &LatticeSettings {
-            target_cells: Some(cells),
-            ..Default::default()
-        },
-    )
-    .unwrap();
-    let emb = lat.embedding_triplets();
-    let t = std::time::Instant::now();
-    let skin = EmbeddedShell::new(
-        rig.mesh.clone(),
-        skin_material(),
-        emb,
-        lat.node_count(),
-        0.004,
-        settings(),
-    )
-    .unwrap();
-    let build_s = t.elapsed().as_secs_f64();
-    let mut times = Vec::new();
-    let mut eval_times = Vec::new();
-    let mut assembly_times = Vec::new();
-    let mut len = 0;
-    for _ in 0..4 {
-        let t = std::time::Instant::now();
-        let mut g = vec![0.0; skin.x().len()];
-        let mut h = Vec::new();
-        skin.shell.eval(skin.x(), Some(&mut g), Some(&mut h), true);
-        eval_times.push(t.elapsed().as_secs_f64());
-        let pat = furrow::math::sparse::Pattern::new(g.len(), &h).unwrap();
-        let t = std::time::Instant::now();
-        let _k = pat.assemble(&h).unwrap();
-        assembly_times.push(t.elapsed().as_secs_f64());
-        let t = std::time::Instant::now();
-        let (k, f) = skin.coupling_terms();
-        times.push(t.elapsed().as_secs_f64());
-        len = k.len();
-        assert_eq!(f.len(), 3 * lat.node_count());
-    }
-    println!(
-        "face: {} vertices, {} triangles, {} nodes; EmbeddedShell::new {build_s:.2} s; \
-         coupling_terms {:?} s (first builds the Hessian pattern), of which the projected \
-         shell Hessian and gradient alone take {:?} s and its compressed assembly {:?} s; \
-         {len} triplets",
-        rig.mesh.positions.len(),
-        rig.mesh.triangles.len(),
-        lat.node_count(),
-        times,
-        eval_times,
-        assembly_times
-    );
 }

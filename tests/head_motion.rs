@@ -146,13 +146,7 @@ fn options(dt: f64, tracking: f64) -> RunOptions {
          cell_size = 0.005\ntracking = {tracking}\n[dynamics]\nenabled = true\ndt = {dt}\n\
          [muscles]\nsource = \"none\"\n[export]\nsurface = \"simulated\"\n"
     );
-    RunOptions {
-        preroll: None,
-        scene: Scene::parse(&text, "turn.toml").unwrap(),
-        scene_path: None,
-        fps: 30.0,
-        frames: None,
-    }
+    RunOptions::new(Scene::parse(&text, "turn.toml").unwrap())
 }
 
 /// The flesh's fundamental angular frequency ω (rad/s) as the model has it, for the turn's
@@ -161,11 +155,10 @@ fn options(dt: f64, tracking: f64) -> RunOptions {
 fn model_frequency(rig_bytes: &[u8], accel: f64) -> (f64, f64) {
     let rig = load_bytes(Path::new("turn.glb"), rig_bytes, &LoadOptions::default()).unwrap();
     let opts = options(0.02, 0.0);
-    let mut plan = furrow::pipeline::plan::Plan::new(&rig, &opts).unwrap();
+    let plan = furrow::pipeline::plan::Plan::new(&rig, &opts).unwrap();
     let mut log = furrow::pipeline::setup::Log::default();
     let (model, mut state) =
-        furrow::pipeline::setup::set_up(&rig, &opts.scene, &mut plan, &mut log, &|_, _, _| {})
-            .unwrap();
+        furrow::pipeline::setup::set_up(&rig, &opts.scene, &plan, &mut log, &|_, _, _| {}).unwrap();
     let be = &mut state.interior;
     let q0 = be.q.clone();
     let a: Vec<f64> = (0..q0.len())

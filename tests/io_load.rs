@@ -468,7 +468,7 @@ fn skinned_face_loads_in_its_rest_pose_and_exports_valid() {
     // The export keeps the skin and validates.
     let frames: Vec<_> = r.frame_weights(4.0).iter().map(|w| r.blend(w)).collect();
     let origin: Vec<_> = (0..f.positions.len())
-        .map(furrow::io::export::VertexOrigin::same)
+        .map(furrow::io::origin::VertexOrigin::same)
         .collect();
     let set = furrow::io::export::FrameSet {
         triangles: &f.triangles,

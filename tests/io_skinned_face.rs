@@ -4,7 +4,8 @@
 mod common;
 
 use furrow::io::atomic::Overwrite;
-use furrow::io::export::{self, FrameSet, VertexOrigin};
+use furrow::io::export::{self, FrameSet};
+use furrow::io::origin::VertexOrigin;
 use furrow::io::{load, LoadOptions};
 use nalgebra::Vector3;
 use serde_json::json;

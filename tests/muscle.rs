@@ -1,4 +1,4 @@
-//! Muscles and the activation fit (issues 6 and 20): the active energy's derivatives and
+//! Muscles and the activation fit: the active energy's derivatives and
 //! invariance, the stiffness balance of a contracting block, recovery of known activations,
 //! bounds, unreachable and degenerate targets, generated muscles on the face rig and on 52
 //! ARKit shapes, and the TOML rig file. Generated muscles are actuations (they change the
@@ -21,21 +21,16 @@ use furrow::muscle::samples::{ShapeSamples, SAMPLE_LEVELS};
 use furrow::muscle::{ActiveEnergy, FitSettings, Fitter, Forward, FrameStatus, Muscle};
 use furrow::pipeline::record::Stage;
 use furrow::pipeline::{self, RunOptions};
-use furrow::scene::Scene;
+use furrow::scene::{MuscleSource, Scene, SkinHold};
 use furrow::solver::SolveStatus;
 use nalgebra::{Rotation3, Vector3};
 use std::path::Path;
 
 type V3 = Vector3<f64>;
 
-/// Closed box mesh [0, a.x] × [0, a.y] × [0, a.z], each face split into m × m quads (the unit
-/// cube of `furrow::mesh::cube_mesh` scaled per axis).
+/// Closed box mesh [0, a.x] × [0, a.y] × [0, a.z], each face split into m × m quads.
 fn box_mesh(a: V3, m: usize) -> TriMesh {
-    let mut cube = furrow::mesh::cube_mesh(1.0, m);
-    for p in &mut cube.positions {
-        *p = p.component_mul(&a);
-    }
-    cube
+    furrow::mesh::box_mesh(V3::zeros(), a, m)
 }
 
 /// A lattice over a box of `cells` cells of edge `h` (m).
@@ -936,22 +931,17 @@ fn activations_that_made_a_frame_are_recovered() {
 fn muscle_driven(
     rig: &str,
     frames: &str,
-    skin_hold: Option<&str>,
+    skin_hold: Option<SkinHold>,
 ) -> (furrow::io::load::Rig, pipeline::RunOutput) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(rig);
     let mut loaded = furrow::io::load::load(&path, &Default::default()).unwrap();
     furrow::io::units::apply(&mut loaded, None, None);
     let mut scene = Scene::default();
-    scene.muscles.source = Some("auto".into());
-    scene.muscles.skin_hold = skin_hold.map(str::to_string);
+    scene.muscles.source = Some(MuscleSource::Auto);
+    scene.muscles.skin_hold = skin_hold;
     let count = furrow::pipeline::plan::clip_weights(&loaded, 30.0).0.len();
-    let opts = RunOptions {
-        preroll: None,
-        scene,
-        scene_path: None,
-        fps: 30.0,
-        frames: Some(furrow::pipeline::frames::FrameRange::parse(frames, count).unwrap()),
-    };
+    let opts = RunOptions::new(scene)
+        .frames(furrow::pipeline::frames::FrameRange::parse(frames, count).unwrap());
     let out = pipeline::run(&loaded, &opts, &|_, _, _| {}).unwrap();
     (loaded, out)
 }
@@ -990,9 +980,9 @@ fn assert_each_makes_its_shape(
 /// Run the pipeline's set-up and one frame on a rig of `rigs/` with generated muscles holding
 /// the skin as `hold` says (`muscles.skin_hold`; at each shape, their actuations are fitted
 /// holding its force there) and check every muscle against the goal.
-fn muscles_make_their_shapes(rig: &str, hold: &str) {
+fn muscles_make_their_shapes(rig: &str, hold: SkinHold) {
     let (loaded, out) = muscle_driven(rig, "0:1", Some(hold));
-    let skin_in_fit = hold == "shapes";
+    let skin_in_fit = hold == SkinHold::Shapes;
     assert_each_makes_its_shape(rig, &loaded, &out);
     assert_eq!(out.report.totals.frames_not_converged, 0);
     let record = out.report.stage(Stage::Muscles).unwrap();
@@ -1005,7 +995,7 @@ fn muscles_make_their_shapes(rig: &str, hold: &str) {
     );
     assert_eq!(
         record.why.contains("hold the skin's pull at the state"),
-        hold == "reached",
+        hold == SkinHold::Reached,
         "{}",
         record.why
     );
@@ -1025,7 +1015,7 @@ fn muscles_make_their_shapes(rig: &str, hold: &str) {
 
 #[test]
 fn every_muscle_makes_its_shape_on_the_face_rig() {
-    muscles_make_their_shapes("rigs/face.glb", "reached");
+    muscles_make_their_shapes("rigs/face.glb", SkinHold::Reached);
 }
 
 /// The same with the skin in the loop: each actuation holds the skin's force at its shape
@@ -1034,7 +1024,7 @@ fn every_muscle_makes_its_shape_on_the_face_rig() {
 /// it, as the record says.
 #[test]
 fn every_muscle_makes_its_shape_against_the_skin_on_the_face_rig() {
-    muscles_make_their_shapes("rigs/face.glb", "shapes");
+    muscles_make_their_shapes("rigs/face.glb", SkinHold::Shapes);
 }
 
 /// The capture head run with `scene` (frames 0:1).
@@ -1043,13 +1033,8 @@ fn head_run(scene: Scene) -> (furrow::io::load::Rig, pipeline::RunOutput) {
     let mut loaded = furrow::io::load::load(&path, &Default::default()).unwrap();
     furrow::io::units::apply(&mut loaded, None, None);
     let count = furrow::pipeline::plan::clip_weights(&loaded, 30.0).0.len();
-    let opts = RunOptions {
-        preroll: None,
-        scene,
-        scene_path: None,
-        fps: 30.0,
-        frames: Some(furrow::pipeline::frames::FrameRange::parse("0:1", count).unwrap()),
-    };
+    let opts = RunOptions::new(scene)
+        .frames(furrow::pipeline::frames::FrameRange::parse("0:1", count).unwrap());
     let out = pipeline::run(&loaded, &opts, &|_, _, _| {}).unwrap();
     (loaded, out)
 }

@@ -88,18 +88,3 @@ fn write_previews() {
         img.save(format!("{dir}/{name}.png")).unwrap();
     }
 }
-
-/// Wall time of `generate()` (ignored; a benchmark, not a check):
-/// `cargo test --release --test rig_preview time_generate -- --ignored --nocapture`.
-#[test]
-#[ignore = "a benchmark that prints timings, not a check"]
-fn time_generate() {
-    let mut best = f64::MAX;
-    for _ in 0..5 {
-        let t0 = std::time::Instant::now();
-        let rig = generate();
-        best = best.min(t0.elapsed().as_secs_f64());
-        assert!(!rig.targets.is_empty());
-    }
-    println!("generate(): best of 5 runs {:.1} ms", best * 1e3);
-}

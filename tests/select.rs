@@ -8,7 +8,7 @@ use furrow::io::atomic::Overwrite;
 use furrow::io::export::{self, FrameSet};
 use furrow::pipeline::record::Stage;
 use furrow::pipeline::{self, RunOptions};
-use furrow::scene::Scene;
+use furrow::scene::{Scene, SkinSelection};
 use furrow::studies::locality::compare_selection;
 use furrow::studies::tradeoff::{sheet_rig, SheetRig};
 
@@ -18,13 +18,7 @@ fn compressed() -> Scene {
 }
 
 fn options(scene: Scene) -> RunOptions {
-    RunOptions {
-        preroll: None,
-        scene,
-        scene_path: None,
-        fps: 30.0,
-        frames: None,
-    }
+    RunOptions::new(scene)
 }
 
 /// The sheet compressed on its left half and stretched on its right (10 cm, 15 %).
@@ -108,7 +102,7 @@ fn the_stretched_half_is_left_out_and_equals_the_blend_shapes_bit_for_bit() {
     // 12.86 mm selected, 12.90 mm whole (both about 36 % under the formula's 20.2 mm, which
     // this small, strongly compressed sheet does not reach either way).
     let mut all = compressed();
-    all.skin.simulate = Some("all".into());
+    all.skin.simulate = Some(SkinSelection::All);
     let reference = pipeline::run(&rig, &options(all), &|_, _, _| {}).unwrap();
     let [selected, whole] = [&out, &reference].map(|o| middle_row_wavelength(o, last));
     println!(
@@ -159,7 +153,7 @@ fn selected_wrinkles_match_the_whole_skin_reference() {
 fn simulate_all_turns_the_selection_off_and_a_bad_key_is_refused() {
     let rig = sheet();
     let mut scene = Scene::default();
-    scene.skin.simulate = Some("all".into());
+    scene.skin.simulate = Some(SkinSelection::All);
     let out = pipeline::run(&rig, &options(scene.clone()), &|_, _, _| {}).unwrap();
     let select = out.report.stage(Stage::Select).unwrap();
     assert!(!select.is_ran());
@@ -167,7 +161,10 @@ fn simulate_all_turns_the_selection_off_and_a_bad_key_is_refused() {
         out.report.sizes["simulated_vertices"],
         out.report.sizes["skin_vertices"]
     );
-    scene.skin.simulate = Some("some".into());
-    let err = pipeline::run(&rig, &options(scene), &|_, _, _| {}).unwrap_err();
-    assert!(err.to_string().contains("skin.simulate"), "{err}");
+    let err = Scene::parse("[skin]\nsimulate = \"some\"\n", "s.toml").unwrap_err();
+    let err = format!("{err:#}");
+    assert!(
+        err.contains("s.toml") && err.contains("simulate") && err.contains("compressed"),
+        "{err}"
+    );
 }

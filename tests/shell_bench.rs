@@ -112,16 +112,3 @@ fn bench_suite_writes_csv_and_table() {
     );
     assert!(run(true).status.success());
 }
-
-#[test]
-#[ignore = "a benchmark that prints timings, not a check"]
-fn bench_table() {
-    let sizes: Vec<usize> = std::env::var("FURROW_BENCH_FACES")
-        .ok()
-        .map(|s| s.split(',').filter_map(|t| t.trim().parse().ok()).collect())
-        .unwrap_or_else(|| vec![2_000, 20_000, 80_000]);
-    for faces in sizes {
-        let v = bench_shell(faces).unwrap();
-        println!("{v}");
-    }
-}

@@ -6,20 +6,14 @@
 //! reference's own residual test, the wrinkles agree, and they factorise less.
 
 use furrow::pipeline::{self, RunOptions};
-use furrow::scene::Scene;
+use furrow::scene::{Scene, SkinSolver};
 use furrow::studies::locality::compare_solvers;
 use furrow::studies::tradeoff::{sheet_rig, SheetRig};
 
-fn options(solver: &str) -> RunOptions {
+fn options(solver: SkinSolver) -> RunOptions {
     let mut scene = Scene::default();
-    scene.solver.skin_solver = Some(solver.into());
-    RunOptions {
-        preroll: None,
-        scene,
-        scene_path: None,
-        fps: 30.0,
-        frames: None,
-    }
+    scene.solver.skin_solver = Some(solver);
+    RunOptions::new(scene)
 }
 
 /// The sheet compressed on its left half and stretched on its right (10 cm, 15 %).
@@ -38,11 +32,11 @@ fn sheet() -> furrow::io::load::Rig {
 #[test]
 fn fast_and_global_skin_solves_agree_and_the_fast_ones_factorise_less() {
     let rig = sheet();
-    for solver in ["lagged", "patches"] {
+    for solver in [SkinSolver::Lagged, SkinSolver::Patches] {
         let c = compare_solvers(&rig, &options(solver)).unwrap();
         eprintln!("{}", serde_json::to_string_pretty(&c).unwrap());
         let [global, fast] = [&c.runs[0], &c.runs[1]];
-        assert_eq!(global.solver, "global");
+        assert_eq!(global.solver, SkinSolver::Global);
         assert_eq!(fast.solver, solver);
         assert_eq!(global.frames_not_converged, 0, "{global:?}");
         assert_eq!(fast.frames_not_converged, 0, "{fast:?}");
@@ -62,7 +56,7 @@ fn fast_and_global_skin_solves_agree_and_the_fast_ones_factorise_less() {
         // deep, amplitude 0.6 % off, since the interior's sub-steps carry the skin force by
         // its linear model): for them only the phase-free amplitude is compared.
         assert!(
-            solver == "patches" || c.max_difference_m < 0.01 * c.max_depth_m,
+            solver == SkinSolver::Patches || c.max_difference_m < 0.01 * c.max_depth_m,
             "{solver}: the runs differ by {} m of {} m",
             c.max_difference_m,
             c.max_depth_m
@@ -78,7 +72,7 @@ fn fast_and_global_skin_solves_agree_and_the_fast_ones_factorise_less() {
 #[test]
 fn solved_tightly_the_fast_solver_gives_the_reference_positions() {
     let rig = sheet();
-    let mut opts = options("lagged");
+    let mut opts = options(SkinSolver::Lagged);
     opts.scene.solver.shell_tolerance = Some(1e-12);
     let c = compare_solvers(&rig, &opts).unwrap();
     eprintln!("{}", serde_json::to_string_pretty(&c).unwrap());
@@ -101,7 +95,7 @@ fn solved_tightly_the_fast_solver_gives_the_reference_positions() {
 #[test]
 fn the_fast_solutions_pass_the_global_residual_test() {
     let rig = sheet();
-    for solver in ["lagged", "patches"] {
+    for solver in [SkinSolver::Lagged, SkinSolver::Patches] {
         let out = pipeline::run(&rig, &options(solver), &|_, _, _| {}).unwrap();
         let checked = furrow::studies::locality::check_with_global(&rig, &options(solver)).unwrap();
         assert_eq!(checked.frames, out.frames.len());
@@ -122,7 +116,7 @@ fn held_frames_refactorise_nothing() {
         ..SheetRig::default()
     };
     let rig = sheet_rig(&spec).unwrap();
-    for solver in ["lagged", "patches"] {
+    for solver in [SkinSolver::Lagged, SkinSolver::Patches] {
         let out = pipeline::run(&rig, &options(solver), &|_, _, _| {}).unwrap();
         let frames = &out.report.per_frame;
         let held = &frames[frames.len() - 4..];

@@ -314,13 +314,7 @@ fn thicker_region_wrinkles_at_the_longer_wavelength() {
         "two-regions.toml",
     )
     .unwrap();
-    let opts = RunOptions {
-        preroll: None,
-        scene,
-        scene_path: None,
-        fps: 30.0,
-        frames: None,
-    };
+    let opts = RunOptions::new(scene);
     let out = pipeline::run(&rig, &opts, &|_, _, _| {}).unwrap();
     let m = &out.report.materials;
     println!("materials: {m}");
@@ -613,13 +607,7 @@ fn pipeline_reports_thickness_and_wavelength_ranges() {
         "r.toml",
     )
     .unwrap();
-    let opts = RunOptions {
-        preroll: None,
-        scene,
-        scene_path: None,
-        fps: 30.0,
-        frames: Some(FrameRange::all(1)),
-    };
+    let opts = RunOptions::new(scene).frames(FrameRange::all(1));
     let out = pipeline::run(&rig, &opts, &|_, _, _| {}).unwrap();
     let m = &out.report.materials;
     println!("{m}; λ used {:.2} mm", out.report.wavelength_m * 1e3);

@@ -31,16 +31,10 @@ fn load_scaled(bytes: &[u8]) -> Rig {
 }
 
 fn run(rig: &Rig) -> RunOutput {
-    let opts = RunOptions {
-        preroll: None,
-        scene: Scene::default(),
-        scene_path: None,
-        fps: 30.0,
-        frames: Some(FrameRange {
-            start: FRAMES - 1,
-            end: FRAMES,
-        }),
-    };
+    let opts = RunOptions::new(Scene::default()).frames(FrameRange {
+        start: FRAMES - 1,
+        end: FRAMES,
+    });
     pipeline::run(rig, &opts, &|_, _, _| {}).unwrap()
 }
 

@@ -136,8 +136,8 @@ pub fn animate_one(a: &AnimateArgs, out: &Output) -> anyhow::Result<Animated> {
         preroll: a.preroll,
     };
     let pb = out.progress(count as u64, "simulating");
-    let run = pipeline::run(&rig, &opts, &|stage, done, _total| {
-        if stage == "frames" {
+    let run = pipeline::run(&rig, &opts, &|phase, done, _total| {
+        if phase == pipeline::Phase::Frames {
             pb.set_position(done as u64);
         }
     })?;

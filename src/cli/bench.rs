@@ -28,6 +28,26 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 1000)]
         elements: usize,
     },
+    /// The rasteriser: a wrinkled patch of about N triangles rendered plain and as a scalar
+    /// field, with supersampling 1 and 2 (mean ms of several renders).
+    #[command(after_help = "Example:\n  furrow bench render --triangles 20000 --pixels 512")]
+    Render {
+        /// Approximate triangle count of the patch.
+        #[arg(long, default_value_t = 20_000)]
+        triangles: usize,
+        /// Image side (pixels).
+        #[arg(long, default_value_t = 512)]
+        pixels: u32,
+    },
+    /// The skin–interior coupling terms (Bᵀ K_x B and Bᵀ F_x) on the generated face rig over
+    /// a lattice of about N cells: the embedded shell's set-up, then the shell Hessian, its
+    /// assembly and the coupling terms, four times each (s).
+    #[command(after_help = "Example:\n  furrow bench coupling --cells 3000")]
+    Coupling {
+        /// Approximate lattice cell count over the face's bounding box.
+        #[arg(long, default_value_t = 3000)]
+        cells: usize,
+    },
     /// The benchmark table: shell assembly and warm solve at several face counts (with the
     /// growth exponent), one lattice step, the activation fit per frame and optionally the
     /// whole demo; writes bench_suite.csv and bench_suite.md in DIR (`--out examples/report`
@@ -174,6 +194,23 @@ pub fn run(c: BenchCommand, out: &Output) -> anyhow::Result<()> {
                 "bench lattice",
                 &crate::fem::bench::bench_lattice(elements)?,
             );
+        }
+        BenchCommand::Render { triangles, pixels } => {
+            anyhow::ensure!(
+                (2..=10_000_000).contains(&triangles) && (8..=8192).contains(&pixels),
+                "--triangles must lie in [2, 10,000,000] and --pixels in [8, 8192]"
+            );
+            let v = crate::render::bench::bench_render(triangles, pixels, 10)?;
+            print(out, "bench render", &v);
+        }
+        BenchCommand::Coupling { cells } => {
+            anyhow::ensure!(
+                (1..=crate::lattice::MAX_CELLS).contains(&cells),
+                "--cells must lie in [1, {}], got {cells}",
+                crate::lattice::MAX_CELLS
+            );
+            let v = crate::coupling::bench::bench_coupling(cells, 4)?;
+            print(out, "bench coupling", &v);
         }
         BenchCommand::Suite {
             out: dir,

@@ -4,9 +4,10 @@
 
 use super::Output;
 use crate::io::atomic::{self, Overwrite};
-use crate::io::export::{self, FrameSet, VertexOrigin};
+use crate::io::export::{self, FrameSet};
 use crate::io::layer::{self, LayerOptions, Precision};
 use crate::io::load::Rig;
+use crate::io::origin::VertexOrigin;
 use crate::io::split::FaceMap;
 use crate::pipeline::layer::{self as wl, Clip, LayerInput, LayerReport};
 use anyhow::bail;

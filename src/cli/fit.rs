@@ -117,8 +117,8 @@ pub fn run(a: FitArgs, out: &Output) -> anyhow::Result<()> {
         frames: None,
     };
     let pb = out.progress(4, "setting up");
-    let mut set = pipeline::set_up_muscles(&rig, &opts, &|stage, done, _| {
-        if stage == "setup" {
+    let mut set = pipeline::set_up_muscles(&rig, &opts, &|phase, done, _| {
+        if phase == pipeline::Phase::Setup {
             pb.set_position(done as u64)
         }
     })?;
@@ -169,7 +169,7 @@ fn fit_scene(a: &FitArgs) -> anyhow::Result<Scene> {
         scene.interior.target_cells = None;
     }
     if let Some(m) = &a.muscles {
-        scene.muscles.source = Some(m.display().to_string());
+        scene.muscles.source = Some(crate::scene::MuscleSource::File(m.display().to_string()));
     }
     scene.validate()?;
     Ok(scene)

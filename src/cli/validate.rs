@@ -368,9 +368,8 @@ fn dense_cost(b: Bilayer, cost: &mut String) -> anyhow::Result<CostPoints> {
 /// against the formula) per resolution.
 fn embedded_cost(b: Bilayer, cost: &mut String) -> anyhow::Result<Vec<(usize, CostPoints)>> {
     // The embedded shell with the validation's 8 loading steps, and with 2: its wavelength
-    // does not need the slow ramp (2.25 % against 1.9 % at 4 vertices per λ), the dense strip
-    // gains nothing from fewer steps (measured: 2.0 s at 8 elements per λ with 3 steps against
-    // 2.1 s with 9, same λ), so the 2-step runs are the embedded shell's cheapest fair setting.
+    // does not need the slow ramp and the dense strip gains nothing from fewer steps, so the
+    // 2-step runs are the embedded shell's cheapest fair setting.
     let mut emb_series = Vec::new();
     for (steps, resolutions) in [
         (8usize, &[4.0, 6.0, 8.0, 10.0, 14.0][..]),

@@ -23,9 +23,6 @@ use anyhow::{anyhow, bail};
 use nalgebra::Vector3;
 use std::sync::Mutex;
 
-pub use super::cluster_width::{edge_path_stretch, kernel_zero_wavelength, sigma_for_wavelength};
-pub use super::two_step::{two_step, two_step_with, InteriorMode, TwoStepReport};
-
 /// The skin of an embedded-shell simulation: a thin shell tied to the lattice by
 /// H x = H B q, with its own quasi-static solver kept across frames.
 pub struct EmbeddedShell {

@@ -3,6 +3,7 @@
 //! two-step solve, and the critical wrinkle wavelength that sets the frequency limit of the
 //! constraints.
 
+pub mod bench;
 pub mod cluster_width;
 pub mod clusters;
 pub mod embedded;

@@ -179,7 +179,7 @@ fn bench_step(
         "first_step_s": first_s,
         "first_step_newton_iterations": first.iterations,
         "newton_iterations": rep.iterations,
-        "status": format!("{:?}", rep.status),
+        "status": rep.status.as_str(),
         "assembly_s": rep.assembly_s / iters,
         "solve_s": rep.solve_s / iters,
         "step_s": step_s,

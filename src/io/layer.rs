@@ -22,11 +22,12 @@
 
 use super::carry;
 use super::compact::{CompactDocument, TargetData, Vec3Data};
-use super::export::{self, LocalFrames, VertexOrigin};
+use super::export;
 use super::face_weights::{self, WrinkleKeys};
 use super::glb_write::ARRAY_BUFFER;
 use super::load::Rig;
 use super::mesh::VertexTransform;
+use super::origin::{LocalFrames, VertexOrigin};
 use super::split::{self, FaceMap, SplitFace, SplitPrimitive};
 use anyhow::{bail, Context};
 use nalgebra::Vector3;
@@ -503,7 +504,7 @@ fn carried_attributes(
         .into_iter()
         .flatten()
         .map(|(k, _)| k.clone())
-        .filter(|k| export::carried(k, skinned))
+        .filter(|k| carry::carried(k, skinned))
         .collect();
     let mut sets = Vec::new();
     for name in &names {

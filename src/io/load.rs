@@ -64,7 +64,7 @@ pub struct Rig {
     /// Extensions the file uses.
     pub extensions_used: Vec<String>,
     /// The scale it is simulated at (metres per file unit; set by [`Rig::rescale`]).
-    pub scale: super::units::RigScale,
+    pub scale: super::model::RigScale,
 }
 
 impl Rig {

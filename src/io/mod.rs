@@ -17,6 +17,7 @@ pub mod mesh;
 pub mod meshopt_view;
 pub mod model;
 pub mod motion;
+pub mod origin;
 pub mod parts;
 pub mod scene;
 pub mod split;

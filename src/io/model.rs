@@ -21,3 +21,25 @@ pub struct WeightKeys {
     /// One row of target weights per key.
     pub weights: Vec<Vec<f64>>,
 }
+
+/// The scale a rig is simulated at, and why (in the report as `rig_scale`).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct RigScale {
+    /// Metres per file unit used in the simulation (1: as in the file).
+    pub metres_per_unit: f64,
+    /// Height of the region the face's blend shapes move, in file units (its bounding box's
+    /// largest side; the whole face when the shapes move one vertex or none).
+    pub face_size: f64,
+    /// Why this scale, in words (said on the terminal).
+    pub why: String,
+}
+
+impl Default for RigScale {
+    fn default() -> Self {
+        Self {
+            metres_per_unit: 1.0,
+            face_size: f64::NAN,
+            why: "the file's units are metres (as glTF says)".into(),
+        }
+    }
+}

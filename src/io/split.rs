@@ -11,8 +11,8 @@
 //! Away from seams every side names the same loaded vertices and the refined vertex stays one.
 //! Only ancestors are used, never how the refinement numbers its triangles.
 
-use super::export::VertexOrigin;
 use super::mesh::MeshInstance;
+use super::origin::VertexOrigin;
 use anyhow::bail;
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;

@@ -6,6 +6,7 @@
 
 use super::load::Rig;
 use super::mesh::MeshInstance;
+pub use super::model::RigScale;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
@@ -73,28 +74,6 @@ impl<'de> Deserialize<'de> for ScaleSetting {
             Raw::Number(v) => Self::metres(v, "rig.scale"),
         };
         r.map_err(serde::de::Error::custom)
-    }
-}
-
-/// The scale a rig is simulated at, and why (in the report as `rig_scale`).
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct RigScale {
-    /// Metres per file unit used in the simulation (1: as in the file).
-    pub metres_per_unit: f64,
-    /// Height of the region the face's blend shapes move, in file units (its bounding box's
-    /// largest side; the whole face when the shapes move one vertex or none).
-    pub face_size: f64,
-    /// Why this scale, in words (said on the terminal).
-    pub why: String,
-}
-
-impl Default for RigScale {
-    fn default() -> Self {
-        Self {
-            metres_per_unit: 1.0,
-            face_size: f64::NAN,
-            why: "the file's units are metres (as glTF says)".into(),
-        }
     }
 }
 

@@ -145,6 +145,12 @@ pub fn points_from_flat(x: &[f64]) -> Vec<Vector3<f64>> {
 
 /// Closed box mesh [0, a]³ (a in m) with each face split into m × m quads (outward normals).
 pub fn cube_mesh(a: f64, m: usize) -> TriMesh {
+    box_mesh(Vector3::zeros(), Vector3::repeat(a), m)
+}
+
+/// Closed axis-aligned box [lo, hi] (m) with each face split into m × m quads (outward
+/// normals, counter-clockwise triangles), vertices shared between faces.
+pub fn box_mesh(lo: Vector3<f64>, hi: Vector3<f64>, m: usize) -> TriMesh {
     let mut pos = Vec::new();
     let mut tris = Vec::new();
     let frames: [(usize, f64, Vector3<f64>, Vector3<f64>); 6] = [
@@ -164,7 +170,7 @@ pub fn cube_mesh(a: f64, m: usize) -> TriMesh {
                 u[axis] = side;
                 let k = [0, 1, 2].map(|d| (u[d] * m as f64).round() as i64);
                 *id = *key.entry(k).or_insert_with(|| {
-                    pos.push(u * a);
+                    pos.push(lo + u.component_mul(&(hi - lo)));
                     pos.len() - 1
                 });
             }

@@ -14,7 +14,7 @@
 //!
 //! The skin is left out of this fit unless its force at the shape is given. By default the
 //! pipeline's muscles hold the skin's pull at the state the interior reaches
-//! ([`crate::pipeline::plan::SkinHold::Reached`]), so the interior they drive is the flesh and
+//! ([`crate::scene::SkinHold::Reached`]), so the interior they drive is the flesh and
 //! tracking this fit sees: demo frames 0–23, miss 2.6 % of the motion and wrinkles 6.2 % from
 //! tracking at κ = 1000 per 2λ region. Given ([`Plant::fit`]'s `skin_load`, the pipeline's
 //! `muscles.skin_hold = "shapes"`): the skin at the

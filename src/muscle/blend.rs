@@ -24,7 +24,7 @@
 //!
 //! Muscles without a rest change (made from offsets alone) add their offsets linearly.
 
-use super::model::Muscle;
+use super::definition::Muscle;
 use crate::fem::Interior;
 use rayon::prelude::*;
 

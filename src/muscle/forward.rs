@@ -12,8 +12,8 @@
 //! Newton with a sparse Cholesky on the free DOFs, refactorised when the force residual falls
 //! by less than half in an iteration; backtracking on the energy). The Hessian is assembled
 //! straight into its pattern by the interior's own [`StiffnessMatrix`], as the pipeline's
-//! quasi-static Newton assembles it (generating the face's muscles: 2.5 s against 6.7 s
-//! through sorted triplets, the same fit to the last digit). The linear response is
+//! quasi-static Newton assembles it (faster than sorted triplets, the same fit to the last
+//! digit). The linear response is
 //! ∂q/∂a_m = K⁻¹ f_m with K the Hessian at (q, a) (interior: frozen-rotation stiffness, exact
 //! at rest) and f_m the unit force of muscle m ([`super::model::unit_forces`]): one
 //! factorisation and one solve per muscle.

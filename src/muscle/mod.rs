@@ -54,6 +54,7 @@
 pub mod actuation;
 pub mod bench;
 pub mod blend;
+pub mod definition;
 pub mod fit;
 pub mod forward;
 pub mod generate;

@@ -14,7 +14,7 @@
 
 use super::frames::FrameRange;
 use crate::io::atomic::{self, Overwrite};
-use crate::io::export::VertexOrigin;
+use crate::io::origin::VertexOrigin;
 use crate::io::split::FaceMap;
 use anyhow::{bail, Context};
 use nalgebra::Vector3;

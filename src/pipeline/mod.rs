@@ -35,6 +35,7 @@ pub mod layer;
 pub mod plan;
 pub mod preview;
 pub mod record;
+pub mod report;
 pub mod setup;
 pub mod step;
 pub mod synthetic;
@@ -42,14 +43,15 @@ pub mod synthetic;
 pub use setup::interior::{INTERIOR_TOLERANCE, MUSCLE_TRACKING, TRACKING_STIFFNESS};
 pub use setup::skin::DEGENERATE_QUALITY;
 
-use crate::io::export::VertexOrigin;
 use crate::io::load::Rig;
+use crate::io::origin::VertexOrigin;
 use crate::io::split::FaceMap;
 use crate::scene::Scene;
 use frames::FrameRange;
 use nalgebra::Vector3;
 use plan::Plan;
-use record::{FrameRecord, RunReport, Stage, StagePlan, Totals};
+use record::{FrameRecord, Stage, StagePlan, Totals};
+use report::RunReport;
 use setup::{Log, Model, State};
 use std::time::Instant;
 use step::{Scratch, StepOptions};
@@ -70,6 +72,38 @@ pub struct RunOptions {
     /// rest in that pose, the skin from the embedded surface), so a chunk of a farm starts
     /// near the clip's state without simulating its whole past.
     pub preroll: Option<usize>,
+}
+
+impl RunOptions {
+    /// Every frame of the clip at 30 frames per second under `scene`, the whole history
+    /// simulated, no scene file named.
+    pub fn new(scene: Scene) -> Self {
+        Self {
+            scene,
+            scene_path: None,
+            fps: 30.0,
+            frames: None,
+            preroll: None,
+        }
+    }
+
+    /// Only the frames `range` written.
+    pub fn frames(mut self, range: FrameRange) -> Self {
+        self.frames = Some(range);
+        self
+    }
+
+    /// The clip sampled at `fps` frames per second (Hz).
+    pub fn fps(mut self, fps: f64) -> Self {
+        self.fps = fps;
+        self
+    }
+
+    /// `frames` frames simulated from rest before the first written one.
+    pub fn preroll(mut self, frames: usize) -> Self {
+        self.preroll = Some(frames);
+        self
+    }
 }
 
 /// The result of a run: the exported face frames and the report.
@@ -94,21 +128,30 @@ pub struct RunOutput {
     pub report: RunReport,
 }
 
-/// Progress callback: (stage, done, total).
-pub type Progress<'a> = &'a dyn Fn(&str, usize, usize);
+/// The part of a run a progress report counts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Phase {
+    /// The set-up: its steps done of all.
+    Setup,
+    /// The frames: simulated of all.
+    Frames,
+}
+
+/// Progress callback: (phase, done, total).
+pub type Progress<'a> = &'a dyn Fn(Phase, usize, usize);
 
 /// Run the pipeline on a loaded rig: plan, set up, step every frame, report.
 pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<RunOutput> {
     let wall = Instant::now();
     let scene = &opts.scene;
-    let mut plan = Plan::new(rig, opts)?;
+    let plan = Plan::new(rig, opts)?;
     let mut log = Log::default();
     log.stages.push(plan.load_stage(rig));
-    let (mut model, mut state) = setup::set_up(rig, scene, &mut plan, &mut log, progress)?;
+    let (mut model, mut state) = setup::set_up(rig, scene, &plan, &mut log, progress)?;
     if state.skin.is_some() {
         log.stages.push(shell_stage(&plan, &model));
     }
-    let options = StepOptions::of(scene, &plan);
+    let options = StepOptions::of(scene, &plan, &model.driver);
     let mut scratch = Scratch::new(model.lattice.node_count());
     let mut per_frame = Vec::new();
     let mut out = Frames::default();
@@ -120,7 +163,7 @@ pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<R
     let first = plan.first_simulated();
     let mut at_rest = true;
     for k in first..end {
-        progress("frames", k, end);
+        progress(Phase::Frames, k, end);
         let w = &plan.weights[k];
         if !plan.animated && !model.pose_maps.solves(k) {
             let why = (plan.fps, record::NotSimulated::CompressesNothing);
@@ -149,7 +192,7 @@ pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<R
             out.smooth.push(composed.target);
         }
     }
-    progress("frames", end, end);
+    progress(Phase::Frames, end, end);
     if plan.animated {
         model.outside.jolt = setup::outside::jolt(
             &model.outside,
@@ -219,8 +262,8 @@ pub fn set_up_muscles(
     opts.scene
         .muscles
         .source
-        .get_or_insert_with(|| "auto".into());
-    let mut plan = Plan::new(rig, &opts)?;
+        .get_or_insert(crate::scene::MuscleSource::Auto);
+    let plan = Plan::new(rig, &opts)?;
     if plan.driver == plan::Driver::Tracking {
         anyhow::bail!(
             "{}: no muscles to fit (`muscles.source = \"none\"`, or no blend shape moves the face)",
@@ -229,7 +272,7 @@ pub fn set_up_muscles(
     }
     let mut log = Log::default();
     log.stages.push(plan.load_stage(rig));
-    let (model, state) = setup::set_up(rig, &opts.scene, &mut plan, &mut log, progress)?;
+    let (model, state) = setup::set_up(rig, &opts.scene, &plan, &mut log, progress)?;
     let muscles = state
         .muscles
         .ok_or_else(|| anyhow::anyhow!("{}: the set-up made no muscles", rig.path.display()))?;

@@ -8,7 +8,8 @@ use super::record::{Stage, StagePlan};
 use super::RunOptions;
 use crate::coupling::wavelength::Bilayer;
 use crate::io::load::Rig;
-use crate::scene::{Materials, Scene};
+pub use crate::scene::SkinHold;
+use crate::scene::{Materials, MuscleSource, Scene};
 use anyhow::bail;
 
 /// How the interior is driven towards each frame's blend-shape target.
@@ -19,30 +20,9 @@ pub enum Driver {
     /// Muscle activations fitted per frame (a QP) drive it; `source` is `auto` (generated from
     /// the blend shapes) or a muscle file's path.
     Muscles {
-        /// `auto` or a muscle TOML file.
-        source: String,
+        /// `Auto` or a muscle TOML file (never `None`).
+        source: MuscleSource,
     },
-}
-
-/// How the muscles hold the skin's pull on the lattice (`muscles.skin_hold`).
-///
-/// The blend shapes are the face's equilibria with its skin on, so the muscles that make them
-/// also hold the skin there. The skin's force is not linear in the activations (wrinkling
-/// relieves its compression), so a per-shape hold summed over a frame's shapes mispredicts it
-/// while the state reached carries it exactly.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum SkinHold {
-    /// The muscles hold the skin's pull at the state the interior reaches, every step: an
-    /// active force equal and opposite to it, so the skin rides on the flesh the muscles shape
-    /// and does not load it (the actuations are fitted against the flesh alone, as the
-    /// interior they drive then is).
-    Reached,
-    /// Each generated muscle's actuation holds the skin's force at its own blend shape, a
-    /// constant load in its fit; the skin's actual force loads the interior.
-    AtShapes,
-    /// Nothing holds the skin: its force loads the muscle-driven interior, which the muscles,
-    /// fitted against the flesh alone, do not expect.
-    None,
 }
 
 impl Driver {
@@ -50,13 +30,11 @@ impl Driver {
     /// tracking); by default muscles generated from the blend shapes (`auto`) when the rig's
     /// face has a blend shape that moves it, tracking otherwise (nothing to make muscles of).
     pub fn of(scene: &Scene, rig: &Rig) -> Self {
-        match scene.muscles.source.as_deref() {
-            Some("none") => Self::Tracking,
-            Some(s) => Self::Muscles {
-                source: s.to_string(),
-            },
+        match &scene.muscles.source {
+            Some(MuscleSource::None) => Self::Tracking,
+            Some(s) => Self::Muscles { source: s.clone() },
             None if has_moving_shape(rig) => Self::Muscles {
-                source: "auto".to_string(),
+                source: MuscleSource::Auto,
             },
             None => Self::Tracking,
         }
@@ -69,9 +47,9 @@ impl Driver {
         let Self::Muscles { .. } = self else {
             return None;
         };
-        Some(match scene.muscles.skin_hold.as_deref() {
-            Some("none") => SkinHold::None,
-            Some("shapes") if self.generates_muscles() => SkinHold::AtShapes,
+        Some(match scene.muscles.skin_hold.unwrap_or_default() {
+            SkinHold::None => SkinHold::None,
+            SkinHold::Shapes if self.generates_muscles() => SkinHold::Shapes,
             _ => SkinHold::Reached,
         })
     }
@@ -79,12 +57,17 @@ impl Driver {
     /// Whether generated muscles are fitted with the skin in the loop, each actuation holding
     /// the skin's force at its shape (`muscles.skin_hold = "shapes"`).
     pub fn skin_in_fit(&self, scene: &Scene) -> bool {
-        self.skin_hold(scene) == Some(SkinHold::AtShapes)
+        self.skin_hold(scene) == Some(SkinHold::Shapes)
     }
 
     /// Whether muscles are generated from the blend shapes (`auto`).
     pub fn generates_muscles(&self) -> bool {
-        matches!(self, Self::Muscles { source } if source == "auto")
+        matches!(
+            self,
+            Self::Muscles {
+                source: MuscleSource::Auto
+            }
+        )
     }
 
     /// The driver's name in the report.
@@ -378,20 +361,20 @@ mod tests {
         let (rig, face) = sheet_rig(face_of(bump_sheet(5)));
         let mut scene = Scene::default();
         let auto = Driver::Muscles {
-            source: "auto".into(),
+            source: MuscleSource::Auto,
         };
         assert_eq!(Driver::of(&scene, &rig), auto, "muscles by default");
         assert_eq!(auto.skin_hold(&scene), Some(SkinHold::Reached));
         assert!(!auto.skin_in_fit(&scene));
-        scene.muscles.skin_hold = Some("shapes".into());
+        scene.muscles.skin_hold = Some(SkinHold::Shapes);
         assert!(auto.skin_in_fit(&scene));
-        scene.muscles.skin_hold = Some("none".into());
+        scene.muscles.skin_hold = Some(SkinHold::None);
         assert_eq!(auto.skin_hold(&scene), Some(SkinHold::None));
-        scene.muscles.skin_hold = Some("shapes".into());
-        scene.muscles.source = Some("none".into());
+        scene.muscles.skin_hold = Some(SkinHold::Shapes);
+        scene.muscles.source = Some(MuscleSource::None);
         assert_eq!(Driver::of(&scene, &rig), Driver::Tracking);
         assert!(!Driver::Tracking.skin_in_fit(&scene));
-        scene.muscles.source = Some("m.toml".into());
+        scene.muscles.source = Some(MuscleSource::File("m.toml".into()));
         let file = Driver::of(&scene, &rig);
         assert_eq!(file.name(), "muscle activations");
         assert!(!file.skin_in_fit(&scene), "only generated muscles");

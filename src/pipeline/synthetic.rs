@@ -17,11 +17,13 @@
 //! different skins. For each copy the report gives the predicted λ and the wavelength measured
 //! on the last frame along the middle row (height above the embedded surface).
 
-use crate::coupling::embedded::{sigma_for_wavelength, two_step_with, EmbeddedShell, InteriorMode};
+use crate::coupling::cluster_width::sigma_for_wavelength;
+use crate::coupling::embedded::EmbeddedShell;
 use crate::coupling::embedding::Embedding;
+use crate::coupling::two_step::{two_step_with, InteriorMode};
 use crate::coupling::wavelength::Bilayer;
 use crate::fem::{BackwardEuler, Interior, LinearSolver, StepSettings, GRAVITY};
-use crate::lattice::{shape, ElementOrder, Lattice};
+use crate::lattice::{shape, Lattice};
 use crate::mesh::TriMesh;
 use crate::scene::{Load, Scene, SkinSection};
 use crate::shell::sheet::equilateral_sheet;
@@ -213,10 +215,7 @@ fn copy_lattice(scene: &Scene) -> anyhow::Result<(Lattice, [usize; 3], f64)> {
         (w / cell).round().max(1.0) as usize,
         (d / cell).round().max(1.0) as usize,
     ];
-    let order = match scene.interior.elements.as_deref() {
-        Some("trilinear") => ElementOrder::Trilinear,
-        _ => ElementOrder::Quadratic,
-    };
+    let order = scene.interior.lattice_settings().order;
     let cells = dims[0] * dims[1] * dims[2];
     if cells > 20_000 {
         bail!("the lattice would have {cells} cells; increase `interior.cell_size`");

@@ -7,6 +7,7 @@
 
 #![warn(missing_docs)]
 
+pub mod bench;
 pub mod colormap;
 pub mod contour;
 pub mod font;

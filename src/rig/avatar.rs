@@ -32,7 +32,6 @@ use crate::io::compact::scene::{
     scene_glb, Alpha, Influences, Material, Mesh, Node, Primitive, Scene, Skin, Storage, WeightClip,
 };
 use crate::io::model::{MorphTarget, WeightKeys};
-use crate::mesh::fold::weld_by_position;
 use crate::mesh::TriMesh;
 use nalgebra::Vector3;
 use std::collections::HashMap;
@@ -70,15 +69,6 @@ impl AvatarRig {
     pub fn glb(&self) -> anyhow::Result<Vec<u8>> {
         scene_glb(&self.scene, self.storage)
     }
-}
-
-/// Unit vertex normals of `mesh` computed on it welded by position, so vertices doubled at a
-/// seam get the same normal.
-pub fn welded_normals(mesh: &TriMesh) -> Vec<Vector3<f64>> {
-    let rep = weld_by_position(&mesh.positions, 1e-9);
-    let tris = mesh.triangles.iter().map(|t| t.map(|v| rep[v])).collect();
-    let n = TriMesh::new(mesh.positions.clone(), tris).vertex_normals();
-    rep.iter().map(|&r| n[r]).collect()
 }
 
 /// Position deltas under this length are written as zero, m (a hundredth of a millimetre).

@@ -12,6 +12,7 @@ use super::head::EYE;
 use super::head_shapes::{ARKIT_NAMES, JAW_ANGLE, JAW_FORWARD, JAW_PIVOT_YZ, JAW_SIDE};
 use super::surface::smoothstep;
 use crate::io::compact::scene::Influences;
+use crate::mesh::fold::weld_by_position;
 use crate::mesh::TriMesh;
 use nalgebra::{Rotation3, Vector3};
 use std::f64::consts::{PI, TAU};
@@ -422,7 +423,7 @@ pub fn body(joint_heights: &[f64]) -> (Surface, Vec<Influences>) {
         t.swap(1, 2);
     }
     let mesh = TriMesh::new(pos, tris);
-    let normals = super::avatar::welded_normals(&mesh);
+    let normals = welded_normals(&mesh);
     let infl = mesh
         .positions
         .iter()
@@ -451,4 +452,13 @@ fn chain_influences(heights: &[f64], y: f64) -> Influences {
         }
     }
     Influences::rigid(last as u16)
+}
+
+/// Unit vertex normals of `mesh` computed on it welded by position, so vertices doubled at a
+/// seam get the same normal.
+pub fn welded_normals(mesh: &TriMesh) -> Vec<Vector3<f64>> {
+    let rep = weld_by_position(&mesh.positions, 1e-9);
+    let tris = mesh.triangles.iter().map(|t| t.map(|v| rep[v])).collect();
+    let n = TriMesh::new(mesh.positions.clone(), tris).vertex_normals();
+    rep.iter().map(|&r| n[r]).collect()
 }

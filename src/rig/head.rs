@@ -17,6 +17,7 @@ use crate::mesh::TriMesh;
 use nalgebra::Vector3;
 
 use super::head_animation::performance;
+pub use super::head_shapes::EYE;
 use super::head_shapes::{shape_deltas, Sample, ARKIT_NAMES};
 use super::surface::{bump, smoothstep};
 
@@ -26,8 +27,7 @@ pub const HALF_HEIGHT: f64 = 0.115;
 pub const MOUTH_Y_TARGET: f64 = -0.045;
 /// Half-width of the mouth slit (base lateral coordinate of the corners), m.
 pub const MOUTH_HALF_WIDTH: f64 = 0.024;
-/// Centre of the left eye (x, y), m; the right eye is its mirror image.
-pub const EYE: (f64, f64) = (0.032, 0.022);
+
 /// Number of rings below the crown pole.
 pub const RINGS: usize = 42;
 /// Mean spacing of the columns along a ring, m (denser at the front by [`FRONT_WARP`]).

@@ -14,8 +14,10 @@
 
 use nalgebra::{Rotation3, Vector3};
 
-use super::head::EYE;
 use super::surface::{bump, smoothstep, window};
+
+/// Centre of the left eye (x, y), m; the right eye is its mirror image.
+pub const EYE: (f64, f64) = (0.032, 0.022);
 
 /// The 52 ARKit blend-shape names, in ARKit's order (the order of [`shape_deltas`]).
 pub const ARKIT_NAMES: [&str; 52] = [

@@ -6,12 +6,17 @@
 //! `[load]` section: slabs, cushions, cubes). Unknown keys are errors (a typo must not silently
 //! fall back to a default), and every value is checked with a message naming the key.
 
+pub mod choices;
 pub mod materials;
 pub mod thickness;
 
 use crate::fem::Material;
 use crate::shell::ShellMaterial;
 use anyhow::{bail, Context};
+pub use choices::{
+    ElementKind, ExportSurface, GeometryKind, InteriorTangent, Lids, MembraneLaw, MuscleSource,
+    SkinAtShapes, SkinHold, SkinSelection, SkinSolver, SkinStiffness,
+};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 pub use thickness::{ThicknessRegion, ThicknessTexture};
@@ -115,7 +120,7 @@ pub struct SkinSection {
     /// still win.
     /// - unit: –
     /// - default: `"auto"`
-    pub lids: Option<String>,
+    pub lids: Option<Lids>,
     /// Thickness of the eyelids' skin (eyelid skin, about 0.5 mm, is the body's thinnest,
     /// about half the face's).
     /// - unit: m
@@ -149,7 +154,7 @@ pub struct SkinSection {
     /// as the input) or `"all"`.
     /// - unit: –
     /// - default: `"compressed"`
-    pub simulate: Option<String>,
+    pub simulate: Option<SkinSelection>,
     /// Compression 1 − s_min (s_min the smaller principal stretch against rest) beyond which
     /// a triangle can wrinkle, in [0, 0.5).
     /// - unit: – (strain)
@@ -161,7 +166,7 @@ pub struct SkinSection {
     /// compression; the reference). Both have the same small-strain behaviour.
     /// - unit: –
     /// - default: `"biot"`
-    pub membrane: Option<String>,
+    pub membrane: Option<MembraneLaw>,
 }
 
 /// An axis-aligned box in world space (m).
@@ -223,7 +228,7 @@ pub struct InteriorSection {
     /// for comparison).
     /// - unit: –
     /// - default: `"quadratic"`
-    pub elements: Option<String>,
+    pub elements: Option<ElementKind>,
     /// Tracking stiffness factor κ (≥ 0): each skin vertex is pulled towards its blend-shape
     /// position with stiffness κ E_q A_v / ℓ (A_v its area, ℓ the cell edge); 0 leaves the
     /// flesh to its elasticity, bone and muscles.
@@ -268,8 +273,8 @@ pub struct MuscleSection {
     /// is an error and the second drives anyway.
     /// - unit: –
     /// - default: `"auto"` when a blend shape of the rig moves it, else `"none"`
-    pub source: Option<String>,
-    /// How the muscles hold the skin's pull on the lattice (see [`SKIN_HOLDS`]):
+    pub source: Option<MuscleSource>,
+    /// How the muscles hold the skin's pull on the lattice:
     /// `"reached"`: at the state the interior reaches, every step, so the skin rides on the
     /// flesh the muscles shape and does not load it; `"shapes"`: each generated muscle's
     /// actuation is fitted holding the skin's force at its blend shape (`skin_at_shapes` says
@@ -277,7 +282,7 @@ pub struct MuscleSection {
     /// skin pulls on the muscle-driven interior and nothing holds it.
     /// - unit: –
     /// - default: `"reached"`
-    pub skin_hold: Option<String>,
+    pub skin_hold: Option<SkinHold>,
     /// The older name of `skin_hold = "shapes"` (true) and `"none"` (false): an error that
     /// says so.
     /// - unit: –
@@ -296,17 +301,8 @@ pub struct MuscleSection {
     /// with its clusters on the shape's lattice fit; seconds per shape).
     /// - unit: –
     /// - default: `"tension_field"`
-    pub skin_at_shapes: Option<String>,
+    pub skin_at_shapes: Option<SkinAtShapes>,
 }
-
-/// The values of `muscles.skin_hold`, the default first.
-pub const SKIN_HOLDS: [&str; 3] = ["reached", "shapes", "none"];
-
-/// The values of `muscles.skin_at_shapes`.
-pub const SKIN_AT_SHAPES: [&str; 2] = ["tension_field", "solved"];
-
-/// The values of `solver.skin_solver`.
-pub const SKIN_SOLVERS: [&str; 3] = ["lagged", "patches", "global"];
 
 /// `[solver]`: tolerances.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
@@ -331,7 +327,7 @@ pub struct SolverSection {
     /// convergence; the reference).
     /// - unit: –
     /// - default: `"consistent"`
-    pub interior_tangent: Option<String>,
+    pub interior_tangent: Option<InteriorTangent>,
     /// Load stepping of the skin: a frame whose skin solve does not converge, or ends with
     /// the skin through itself, is redone with its constraint targets moved in 2, then 4, …
     /// up to 2^levels equal steps (at most 6); 0 turns it off.
@@ -342,7 +338,7 @@ pub struct SolverSection {
     /// rest; the force Bᵀ F_x is always current) or `"every_frame"` (the paper).
     /// - unit: –
     /// - default: `"once"`
-    pub skin_stiffness: Option<String>,
+    pub skin_stiffness: Option<SkinStiffness>,
     /// Most interior–skin passes per frame (1 to 10): the staggered coupling (interior with
     /// the skin's force linearised, then the skin on the interior) is repeated from the
     /// frame's start, linearised about the last skin and relaxed by Aitken's Δ² factor, until
@@ -360,7 +356,7 @@ pub struct SolverSection {
     /// solve each direction to the same forcing term and stop at the same residual test.
     /// - unit: –
     /// - default: `"lagged"`
-    pub skin_solver: Option<String>,
+    pub skin_solver: Option<SkinSolver>,
 }
 
 /// `[export]`: what goes into the output files.
@@ -372,7 +368,7 @@ pub struct ExportSection {
     /// the interior's low-frequency motion).
     /// - unit: –
     /// - default: `"wrinkles_on_blend"`
-    pub surface: Option<String>,
+    pub surface: Option<ExportSurface>,
 }
 
 /// `[geometry]` of a synthetic scene (`furrow scene` only).
@@ -382,7 +378,7 @@ pub struct Geometry {
     /// `"slab"`, `"cushion"` or `"cube"`.
     /// - unit: –
     /// - default: required
-    pub kind: String,
+    pub kind: GeometryKind,
     /// Size along x, y, z (z up in the scene; the written glTF is y up).
     /// - unit: m
     /// - default: required
@@ -468,6 +464,19 @@ impl SkinSection {
 }
 
 impl InteriorSection {
+    /// The lattice these settings ask for: cell size or count, element order and flesh depth.
+    pub fn lattice_settings(&self) -> crate::lattice::LatticeSettings {
+        crate::lattice::LatticeSettings {
+            cell_size: self.cell_size,
+            target_cells: self.target_cells,
+            order: match self.elements.unwrap_or_default() {
+                ElementKind::Trilinear => crate::lattice::ElementOrder::Trilinear,
+                ElementKind::Quadratic => crate::lattice::ElementOrder::Quadratic,
+            },
+            depth: self.depth,
+        }
+    }
+
     /// The interior material with overrides applied.
     pub fn material(&self) -> anyhow::Result<Material> {
         let name = self.preset.as_deref().unwrap_or("flesh");
@@ -555,11 +564,6 @@ impl Scene {
         if let Some(t) = &s.thickness_texture {
             t.validate()?;
         }
-        if let Some(l) = s.lids.as_deref() {
-            if !matches!(l, "auto" | "off") {
-                bail!("`skin.lids` = {l:?}: use \"auto\" (thin skin where the blink shapes move it) or \"off\"");
-            }
-        }
         if let Some(h) = s.lid_thickness {
             if !(h.is_finite() && h > 0.0) {
                 bail!("`skin.lid_thickness` must be a positive number of metres, got {h}");
@@ -573,16 +577,6 @@ impl Scene {
         if let Some(v) = s.vertices_per_wavelength {
             if !(v.is_finite() && (2.0..=64.0).contains(&v)) {
                 bail!("`skin.vertices_per_wavelength` must lie in [2, 64], got {v}");
-            }
-        }
-        if let Some(m) = s.simulate.as_deref() {
-            if !matches!(m, "compressed" | "all") {
-                bail!("`skin.simulate` = \"{m}\": use \"compressed\" (the skin some frame compresses) or \"all\"");
-            }
-        }
-        if let Some(m) = s.membrane.as_deref() {
-            if !matches!(m, "biot" | "stvk") {
-                bail!("`skin.membrane` = \"{m}\": use \"biot\" (the default) or \"stvk\"");
             }
         }
         if let Some(t) = s.compression_threshold {
@@ -609,11 +603,6 @@ impl Scene {
                 );
             }
         }
-        if let Some(e) = &i.elements {
-            if e != "quadratic" && e != "trilinear" {
-                bail!("`interior.elements` must be \"quadratic\" or \"trilinear\", got \"{e}\"");
-            }
-        }
         Ok(())
     }
 
@@ -628,38 +617,14 @@ impl Scene {
             }
         }
         positive("solver.shell_tolerance", self.solver.shell_tolerance)?;
-        if let Some(m) = &self.solver.skin_stiffness {
-            if m != "once" && m != "every_frame" {
-                bail!("`solver.skin_stiffness` must be \"once\" or \"every_frame\", got \"{m}\"");
-            }
-        }
         if let Some(n) = self.solver.coupling_iterations {
             if !(1..=10).contains(&n) {
                 bail!("`solver.coupling_iterations` must be 1 to 10, got {n}");
             }
         }
-        if let Some(m) = &self.solver.skin_solver {
-            if !SKIN_SOLVERS.contains(&m.as_str()) {
-                bail!(
-                    "`solver.skin_solver` must be \"lagged\", \"patches\" or \"global\", got \"{m}\""
-                );
-            }
-        }
-        if let Some(m) = &self.export.surface {
-            if m != "wrinkles_on_blend" && m != "simulated" {
-                bail!(
-                    "`export.surface` must be \"wrinkles_on_blend\" or \"simulated\", got \"{m}\""
-                );
-            }
-        }
         if let Some(k) = self.interior.tracking {
             if !(k.is_finite() && (0.0..=1e6).contains(&k)) {
                 bail!("`interior.tracking` must be a factor in [0, 1e6], got {k}");
-            }
-        }
-        if let Some(m) = &self.muscles.source {
-            if m.is_empty() {
-                bail!("`muscles.source` is empty: use \"auto\", \"none\" or a file path");
             }
         }
         if let Some(old) = self.muscles.skin_in_fit {
@@ -671,27 +636,6 @@ impl Scene {
         if let Some(n) = self.muscles.gauss_newton {
             if n > 50 {
                 bail!("`muscles.gauss_newton` must be at most 50 re-linearisations per frame, got {n}");
-            }
-        }
-        if let Some(h) = &self.muscles.skin_hold {
-            if !SKIN_HOLDS.contains(&h.as_str()) {
-                bail!(
-                    "`muscles.skin_hold` must be \"reached\", \"shapes\" or \"none\", got \"{h}\""
-                );
-            }
-        }
-        if let Some(m) = &self.muscles.skin_at_shapes {
-            if !SKIN_AT_SHAPES.contains(&m.as_str()) {
-                bail!(
-                    "`muscles.skin_at_shapes` must be \"tension_field\" or \"solved\", got \"{m}\""
-                );
-            }
-        }
-        if let Some(t) = &self.solver.interior_tangent {
-            if t != "consistent" && t != "frozen" {
-                bail!(
-                    "`solver.interior_tangent` must be \"consistent\" or \"frozen\", got \"{t}\""
-                );
             }
         }
         if let Some(l) = self.solver.skin_continuation {
@@ -711,12 +655,6 @@ impl Scene {
         if let Some(g) = &self.geometry {
             if thickness::varies(&self.skin) || g.skins.iter().any(thickness::varies) {
                 bail!("`skin.regions`, `skin.thickness_attribute` and `skin.thickness_texture` apply to rigs; a synthetic scene gives each copy its own `[[geometry.skins]]` thickness");
-            }
-            if !["slab", "cushion", "cube"].contains(&g.kind.as_str()) {
-                bail!(
-                    "`geometry.kind` must be slab, cushion or cube, got \"{}\"",
-                    g.kind
-                );
             }
             for (k, v) in g.size.iter().enumerate() {
                 positive(&format!("geometry.size[{k}]"), Some(*v))?;
@@ -816,7 +754,7 @@ mod tests {
         assert!(e.contains("geometry"), "{e}");
         let e = err("[muscles]\nskin_at_shapes = \"exact\"\n");
         assert!(
-            e.contains("muscles.skin_at_shapes") && e.contains("exact"),
+            e.contains("skin_at_shapes") && e.contains("exact") && e.contains("tension_field"),
             "{e}"
         );
         let e = err("[muscles]\nskin_in_fit = false\n");
@@ -828,10 +766,10 @@ mod tests {
         );
         let e = err("[muscles]\nskin_hold = \"always\"\n");
         assert!(
-            e.contains("muscles.skin_hold") && e.contains("always"),
+            e.contains("skin_hold") && e.contains("always") && e.contains("reached"),
             "{e}"
         );
         let ok = Scene::parse("[muscles]\nskin_at_shapes = \"solved\"\n", "t").unwrap();
-        assert_eq!(ok.muscles.skin_at_shapes.as_deref(), Some("solved"));
+        assert_eq!(ok.muscles.skin_at_shapes, Some(SkinAtShapes::Solved));
     }
 }

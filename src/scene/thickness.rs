@@ -341,7 +341,7 @@ pub fn lid_triangles(face: &crate::io::mesh::MeshInstance) -> (Vec<bool>, Vec<St
 /// attribute or texture gives the thickness, and the face has blink shapes; `uniform` is the
 /// skin's thickness (m).
 pub fn rig_lids(rig: &Rig, skin: &SkinSection, uniform: f64) -> Option<(f64, Vec<bool>)> {
-    let on = skin.lids.as_deref().unwrap_or("auto") == "auto";
+    let on = skin.lids.unwrap_or_default() == super::Lids::Auto;
     if !on || skin.thickness_attribute.is_some() || skin.thickness_texture.is_some() {
         return None;
     }

@@ -13,12 +13,16 @@
 //!
 //! The graph is ordered at the level of *groups* (a skin vertex's three dofs, a cluster's
 //! three coordinate rows) weighted by their size: a third of the nodes to bisect, and a
-//! group's indices stay together in the order, as they do in the factor's supernodes.
+//! group's indices stay together in the order, as they do in the factor's supernodes
+//! (`nd_permutation` builds that graph from a KKT matrix and expands the groups' order into
+//! a permutation of its indices).
 //!
 //! METIS is deterministic for a given graph (each call seeds its random choices with a fixed
 //! seed) and serial, so the order does not depend on the thread count. Its random generator
 //! is one global state, so calls are serialised by a lock (two at once would interleave
 //! their random choices).
+
+use faer::sparse::SparseColMat;
 
 /// Serialises the calls into METIS (its random generator is global state).
 static METIS: std::sync::Mutex<()> = std::sync::Mutex::new(());
@@ -73,6 +77,70 @@ pub fn nested_dissection(neighbours: &[Vec<usize>], weight: &[usize]) -> Vec<usi
         return (0..n).collect();
     }
     perm.iter().map(|&p| p as usize).collect()
+}
+
+/// Nested-dissection permutation (forward: new → old index, inverse) of the KKT matrix `a`
+/// whose first `n_free` rows are free dofs (`free_of` maps dofs to them; dof `d` belongs to
+/// vertex `d / 3`) and whose last rows are constraints. The graph METIS orders has one node
+/// per vertex with a free dof and one per set of constraint rows that couple the same
+/// vertices (a cluster's three coordinate rows), weighted by their index counts.
+pub(crate) fn nd_permutation(
+    a: &SparseColMat<usize, f64>,
+    free_of: &[usize],
+    n_free: usize,
+) -> (Vec<usize>, Vec<usize>) {
+    let n = a.nrows();
+    let mut vertex_of_free = vec![0usize; n_free];
+    for (d, &f) in free_of.iter().enumerate() {
+        if f != usize::MAX {
+            vertex_of_free[f] = d / 3;
+        }
+    }
+    let (cp, ri) = (a.col_ptr(), a.row_idx());
+    let mut node_of = vec![usize::MAX; n];
+    let mut members: Vec<Vec<usize>> = Vec::new();
+    let mut node_of_vertex = vec![usize::MAX; free_of.len().div_ceil(3)];
+    for f in 0..n_free {
+        let v = vertex_of_free[f];
+        if node_of_vertex[v] == usize::MAX {
+            node_of_vertex[v] = members.len();
+            members.push(Vec::new());
+        }
+        node_of[f] = node_of_vertex[v];
+        members[node_of_vertex[v]].push(f);
+    }
+    let mut node_of_rows: std::collections::HashMap<Vec<usize>, usize> = Default::default();
+    for row in n_free..n {
+        let mut verts: Vec<usize> = ri[cp[row]..cp[row + 1]]
+            .iter()
+            .filter(|&&i| i < n_free)
+            .map(|&i| vertex_of_free[i])
+            .collect();
+        verts.sort_unstable();
+        verts.dedup();
+        let node = *node_of_rows.entry(verts).or_insert_with(|| {
+            members.push(Vec::new());
+            members.len() - 1
+        });
+        node_of[row] = node;
+        members[node].push(row);
+    }
+    let mut neighbours = vec![Vec::new(); members.len()];
+    for col in 0..n {
+        let nc = node_of[col];
+        neighbours[nc].extend(ri[cp[col]..cp[col + 1]].iter().map(|&r| node_of[r]));
+    }
+    let weight: Vec<usize> = members.iter().map(Vec::len).collect();
+    let order = nested_dissection(&neighbours, &weight);
+    let fwd: Vec<usize> = order
+        .iter()
+        .flat_map(|&nd| members[nd].iter().copied())
+        .collect();
+    let mut inv = vec![0usize; n];
+    for (i, &o) in fwd.iter().enumerate() {
+        inv[o] = i;
+    }
+    (fwd, inv)
 }
 
 #[cfg(test)]

@@ -10,6 +10,7 @@
 use super::tradeoff::{amplitude_error, amplitude_map, region_size};
 use crate::io::load::Rig;
 use crate::pipeline::{self, RunOptions, RunOutput};
+use crate::scene::{SkinSelection, SkinSolver};
 use serde::Serialize;
 
 /// One run of the comparison.
@@ -42,14 +43,18 @@ pub struct SelectionComparison {
     pub region_m: f64,
 }
 
-fn run_with(rig: &Rig, opts: &RunOptions, simulate: &str) -> anyhow::Result<(SkinRun, RunOutput)> {
+fn run_with(
+    rig: &Rig,
+    opts: &RunOptions,
+    simulate: SkinSelection,
+) -> anyhow::Result<(SkinRun, RunOutput)> {
     let mut o = opts.clone();
-    o.scene.skin.simulate = Some(simulate.to_string());
+    o.scene.skin.simulate = Some(simulate);
     let out = pipeline::run(rig, &o, &|_, _, _| {})?;
     let r = &out.report;
     let count = |k: &str| r.sizes[k].as_u64().unwrap_or(0) as usize;
     let run = SkinRun {
-        simulate: simulate.into(),
+        simulate: simulate.to_string(),
         simulated_vertices: count("simulated_vertices"),
         skin_vertices: count("skin_vertices"),
         shell_ms: r.totals.shell_ms,
@@ -61,8 +66,8 @@ fn run_with(rig: &Rig, opts: &RunOptions, simulate: &str) -> anyhow::Result<(Ski
 
 /// Run `opts` on `rig` with the whole skin simulated and with the selected skin.
 pub fn compare_selection(rig: &Rig, opts: &RunOptions) -> anyhow::Result<SelectionComparison> {
-    let (reference, full) = run_with(rig, opts, "all")?;
-    let (selected, local) = run_with(rig, opts, "compressed")?;
+    let (reference, full) = run_with(rig, opts, SkinSelection::All)?;
+    let (selected, local) = run_with(rig, opts, SkinSelection::Compressed)?;
     let region = region_size(&full);
     let error = amplitude_error(
         &amplitude_map(&local, region),
@@ -80,7 +85,7 @@ pub fn compare_selection(rig: &Rig, opts: &RunOptions) -> anyhow::Result<Selecti
 #[derive(Debug, Clone, Serialize)]
 pub struct SolverRun {
     /// `global` (the reference), `lagged` or `patches`.
-    pub solver: String,
+    pub solver: SkinSolver,
     /// Milliseconds in the skin's solves over the frames.
     pub shell_ms: f64,
     /// Skin Newton iterations over the frames.
@@ -120,10 +125,10 @@ pub struct SolverComparison {
 fn run_solver(
     rig: &Rig,
     opts: &RunOptions,
-    solver: &str,
+    solver: SkinSolver,
 ) -> anyhow::Result<(SolverRun, RunOutput)> {
     let mut o = opts.clone();
-    o.scene.solver.skin_solver = Some(solver.to_string());
+    o.scene.solver.skin_solver = Some(solver);
     let out = pipeline::run(rig, &o, &|_, _, _| {})?;
     let t = &out.report.totals;
     let solves = out
@@ -134,7 +139,7 @@ fn run_solver(
         .map(|s| s.linear_solves)
         .sum();
     let run = SolverRun {
-        solver: solver.into(),
+        solver,
         shell_ms: t.shell_ms,
         iterations: t.skin_iterations,
         factorizations: t.skin_factorizations,
@@ -149,12 +154,12 @@ fn run_solver(
 /// Run `opts` on `rig` with the global skin solver (the reference) and with the solver the
 /// scene names (`lagged`, the default, when it names none or the reference itself).
 pub fn compare_solvers(rig: &Rig, opts: &RunOptions) -> anyhow::Result<SolverComparison> {
-    let candidate = match opts.scene.solver.skin_solver.as_deref() {
-        Some(s) if s != "global" => s.to_string(),
-        _ => "lagged".to_string(),
+    let candidate = match opts.scene.solver.skin_solver.unwrap_or_default() {
+        SkinSolver::Global => SkinSolver::Lagged,
+        s => s,
     };
-    let (reference, global) = run_solver(rig, opts, "global")?;
-    let (local_run, local) = run_solver(rig, opts, &candidate)?;
+    let (reference, global) = run_solver(rig, opts, SkinSolver::Global)?;
+    let (local_run, local) = run_solver(rig, opts, candidate)?;
     let region = region_size(&global);
     let error = amplitude_error(
         &amplitude_map(&local, region),
@@ -207,11 +212,11 @@ struct Stepper {
 impl Stepper {
     /// Plan and set up `opts` on `rig`.
     fn new(rig: &Rig, opts: &RunOptions) -> anyhow::Result<Self> {
-        let mut plan = pipeline::plan::Plan::new(rig, opts)?;
+        let plan = pipeline::plan::Plan::new(rig, opts)?;
         let mut log = pipeline::setup::Log::default();
         let (model, state) =
-            pipeline::setup::set_up(rig, &opts.scene, &mut plan, &mut log, &|_, _, _| {})?;
-        let options = pipeline::step::StepOptions::of(&opts.scene, &plan);
+            pipeline::setup::set_up(rig, &opts.scene, &plan, &mut log, &|_, _, _| {})?;
+        let options = pipeline::step::StepOptions::of(&opts.scene, &plan, &model.driver);
         let scratch = pipeline::step::Scratch::new(model.lattice.node_count());
         Ok(Self {
             plan,

@@ -8,6 +8,7 @@ use super::tradeoff::{amplitude_error, amplitude_map, region_size, AmplitudeMap}
 use crate::io::load::Rig;
 use crate::pipeline::record::Stage;
 use crate::pipeline::{self, RunOptions, RunOutput};
+use crate::scene::MuscleSource;
 use serde::Serialize;
 
 /// One run of the comparison.
@@ -57,11 +58,11 @@ pub struct DriverComparison {
 fn run_with(
     rig: &Rig,
     opts: &RunOptions,
-    source: &str,
+    source: MuscleSource,
     tracking: Option<f64>,
 ) -> anyhow::Result<(DriverRun, RunOutput)> {
     let mut o = opts.clone();
-    o.scene.muscles.source = Some(source.to_string());
+    o.scene.muscles.source = Some(source.clone());
     if tracking.is_some() {
         o.scene.interior.tracking = tracking;
     }
@@ -82,7 +83,7 @@ fn run_with(
         .filter(|s| s.is_ran())
         .map_or(0.0, |s| s.ms);
     let run = DriverRun {
-        driver: if source == "none" {
+        driver: if source == MuscleSource::None {
             "tracking"
         } else {
             "muscles"
@@ -118,12 +119,13 @@ pub fn compare_drivers(
 ) -> anyhow::Result<DriverComparison> {
     // The muscles' lattice may be chosen for them (`pipeline::setup::cell`): the reference
     // tracks on that same lattice, so the two differ by their driver alone.
-    let (muscles, driven) = run_with(rig, opts, "auto", None)?;
+    let (muscles, driven) = run_with(rig, opts, MuscleSource::Auto, None)?;
     let mut same_lattice = opts.clone();
     if same_lattice.scene.interior.target_cells.is_none() {
         same_lattice.scene.interior.cell_size = driven.report.sizes["lattice_cell_m"].as_f64();
     }
-    let (tracking, reference) = run_with(rig, &same_lattice, "none", reference_tracking)?;
+    let (tracking, reference) =
+        run_with(rig, &same_lattice, MuscleSource::None, reference_tracking)?;
     let region = region_size(&reference);
     let (a_ref, a_run) = (
         amplitude_map(&reference, region),

@@ -148,7 +148,7 @@ pub fn cases(quick: bool, n: usize, size: f64, seconds: f64) -> Vec<Case> {
     set.push("baseline", "defaults".into(), base, set.scene.clone(), 30.0);
     // The defaults drive the interior by muscles; the tracking driver once at the baseline.
     let mut tracked = set.scene.clone();
-    tracked.muscles.source = Some("none".into());
+    tracked.muscles.source = Some(crate::scene::MuscleSource::None);
     set.push(
         "driver",
         "tracking (muscles.source = none)".into(),
@@ -368,13 +368,7 @@ pub fn run_case(c: &Case) -> StabilityRow {
     let result = c.rig.build().and_then(|rig| {
         pipeline::run(
             &rig,
-            &RunOptions {
-                preroll: None,
-                scene: c.scene.clone(),
-                scene_path: None,
-                fps: c.fps,
-                frames: None,
-            },
+            &RunOptions::new(c.scene.clone()).fps(c.fps),
             &|_, _, _| {},
         )
     });

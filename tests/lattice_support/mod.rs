@@ -6,54 +6,10 @@ use furrow::fem::{Interior, Material};
 use furrow::lattice::{ElementOrder, Lattice, LatticeSettings};
 use furrow::mesh::TriMesh;
 use nalgebra::{Matrix3, Vector3};
-use std::collections::HashMap;
 
 type V = Vector3<f64>;
 
-/// Closed axis-aligned box [lo, hi], each face split into m × m quads (outward normals,
-/// counter-clockwise triangles), vertices welded.
-pub fn box_mesh(lo: V, hi: V, m: usize) -> TriMesh {
-    let faces: [(usize, f64, V, V); 6] = [
-        (0, 1.0, V::y(), V::z()),
-        (0, 0.0, V::z(), V::y()),
-        (1, 1.0, V::z(), V::x()),
-        (1, 0.0, V::x(), V::z()),
-        (2, 1.0, V::x(), V::y()),
-        (2, 0.0, V::y(), V::x()),
-    ];
-    let mut pos: Vec<V> = Vec::new();
-    let mut key: HashMap<[i64; 3], usize> = HashMap::new();
-    let mut tris = Vec::new();
-    let ext = hi - lo;
-    let mut vid = |p: V, pos: &mut Vec<V>| -> usize {
-        let k = [0, 1, 2].map(|d| ((p[d] - lo[d]) / ext[d] * 1e6).round() as i64);
-        *key.entry(k).or_insert_with(|| {
-            pos.push(p);
-            pos.len() - 1
-        })
-    };
-    for (axis, side, t1, t2) in faces {
-        let corner = |u: f64, v: f64| -> V {
-            let mut unit = t1 * u + t2 * v;
-            unit[axis] = side;
-            lo + unit.component_mul(&ext)
-        };
-        let mut idx = vec![vec![0usize; m + 1]; m + 1];
-        for (i, row) in idx.iter_mut().enumerate() {
-            for (j, id) in row.iter_mut().enumerate() {
-                *id = vid(corner(i as f64 / m as f64, j as f64 / m as f64), &mut pos);
-            }
-        }
-        for i in 0..m {
-            for j in 0..m {
-                let (a, b, c, d) = (idx[i][j], idx[i + 1][j], idx[i + 1][j + 1], idx[i][j + 1]);
-                tris.push([a, b, c]);
-                tris.push([a, c, d]);
-            }
-        }
-    }
-    TriMesh::new(pos, tris)
-}
+pub use furrow::mesh::box_mesh;
 
 /// Two meshes in one.
 pub fn merge(a: &TriMesh, b: &TriMesh) -> TriMesh {

@@ -120,7 +120,7 @@ impl CompactDocument {
     /// A JOINTS accessor (u16 VEC4) of joint indices `j` (4 per vertex), its view compressed
     /// as 8-byte elements; returns the accessor.
     pub fn push_joints(&mut self, j: &[f64]) -> usize {
-        let a = crate::io::export::push_joints(&mut self.doc, j);
+        let a = crate::io::carry::push_joints(&mut self.doc, j);
         self.codecs.push(Codec::Attributes { stride: 8 });
         a
     }

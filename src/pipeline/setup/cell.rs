@@ -23,6 +23,7 @@ use crate::muscle::generate::{fit_node_displacements, GenerateSettings};
 use crate::muscle::jaw::JawBone;
 use crate::muscle::samples::{ShapeSamples, SAMPLE_LEVELS};
 use crate::scene::InteriorSection;
+use anyhow::Context;
 
 /// Ratio of one candidate cell size to the last (dimensionless).
 pub const CELL_STEP: f64 = 0.975;
@@ -109,7 +110,8 @@ pub fn choose_lattice(
             target_cells: None,
             ..interior.clone()
         };
-        super::lattice::build_lattice(skin, &sized, path).map(|(lattice, _)| lattice)
+        Lattice::build(skin, &sized.lattice_settings())
+            .with_context(|| format!("{path}: building the lattice"))
     };
     let frames = moving_frames(frames, targets.len());
     let miss = |l: &Lattice| clip_projection_miss(l, &material, skin, targets, &frames);

@@ -56,9 +56,9 @@ pub fn stepper(lattice: &Lattice, scene: &Scene, plan: &Plan) -> anyhow::Result<
             lumped_mass: false,
             gravity,
             linear_solver: LinearSolver::Auto,
-            tangent: match scene.solver.interior_tangent.as_deref() {
-                Some("frozen") => crate::fem::Tangent::Frozen,
-                _ => crate::fem::Tangent::Consistent,
+            tangent: match scene.solver.interior_tangent.unwrap_or_default() {
+                crate::scene::InteriorTangent::Frozen => crate::fem::Tangent::Frozen,
+                crate::scene::InteriorTangent::Consistent => crate::fem::Tangent::Consistent,
             },
         },
     )?;
@@ -98,7 +98,7 @@ pub fn tracking(
 }
 
 /// The `interior` stage's record: backward Euler and its sub-steps, or quasi-static and why.
-pub fn record(plan: &Plan, stepper: &BackwardEuler) -> StagePlan {
+pub fn record(plan: &Plan, driver: &Driver, stepper: &BackwardEuler) -> StagePlan {
     let why = if plan.dynamics() {
         let head = match &plan.head_motion {
             Some(m) => {
@@ -116,7 +116,7 @@ pub fn record(plan: &Plan, stepper: &BackwardEuler) -> StagePlan {
             "backward Euler, {} step(s) of {:.4} s per frame, driven by {}{head}",
             plan.substeps,
             stepper.settings.dt,
-            plan.driver.name()
+            driver.name()
         )
     } else {
         format!(
@@ -126,7 +126,7 @@ pub fn record(plan: &Plan, stepper: &BackwardEuler) -> StagePlan {
             } else {
                 "the rig has no animation: no dynamics"
             },
-            plan.driver.name()
+            driver.name()
         )
     };
     StagePlan::ran(Stage::Interior, why, 0.0)
@@ -193,7 +193,7 @@ mod tests {
         assert_eq!(get(27, 27), 5.0);
         assert_eq!(get(21, 27), 0.0);
         let muscles = Driver::Muscles {
-            source: "auto".into(),
+            source: crate::scene::MuscleSource::Auto,
         };
         let weak = tracking(
             &m,

@@ -1,21 +1,12 @@
 //! The `lattice` stage: the coarse volumetric lattice of the interior, built over the welded
 //! (unrefined) skin from the scene's `[interior]` settings.
 
-use crate::lattice::{ElementOrder, Lattice, LatticeSettings};
+use crate::lattice::Lattice;
 use crate::mesh::TriMesh;
 use crate::pipeline::record::{Stage, StagePlan};
 use crate::scene::InteriorSection;
 use anyhow::Context;
 use std::time::Instant;
-
-/// The lattice's element order from `interior.elements` (quadratic B-splines unless
-/// `"trilinear"`).
-pub fn element_order(interior: &InteriorSection) -> ElementOrder {
-    match interior.elements.as_deref() {
-        Some("trilinear") => ElementOrder::Trilinear,
-        _ => ElementOrder::Quadratic,
-    }
-}
 
 /// The `lattice` stage: the lattice embedding `skin` (m), with its record; `path` names the
 /// rig in errors.
@@ -25,16 +16,8 @@ pub fn build_lattice(
     path: &str,
 ) -> anyhow::Result<(Lattice, StagePlan)> {
     let t = Instant::now();
-    let lattice = Lattice::build(
-        skin,
-        &LatticeSettings {
-            cell_size: interior.cell_size,
-            target_cells: interior.target_cells,
-            order: element_order(interior),
-            depth: interior.depth,
-        },
-    )
-    .with_context(|| format!("{path}: building the lattice"))?;
+    let lattice = Lattice::build(skin, &interior.lattice_settings())
+        .with_context(|| format!("{path}: building the lattice"))?;
     let record = record(&lattice, "", t);
     Ok((lattice, record))
 }
@@ -85,7 +68,9 @@ pub fn lattice_for_run(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::lattice::ElementOrder;
     use crate::pipeline::setup::test_support::bump_sheet;
+    use crate::scene::ElementKind;
 
     #[test]
     fn builds_a_lattice_under_a_small_sheet_and_records_it() {
@@ -103,9 +88,9 @@ mod tests {
             .why
             .contains(&format!("{} elements", lattice.elements.len())));
         let trilinear = InteriorSection {
-            elements: Some("trilinear".into()),
+            elements: Some(ElementKind::Trilinear),
             ..interior
         };
-        assert_eq!(element_order(&trilinear), ElementOrder::Trilinear);
+        assert_eq!(trilinear.lattice_settings().order, ElementOrder::Trilinear);
     }
 }

@@ -19,18 +19,19 @@ pub mod select;
 pub mod skin;
 pub mod weld;
 
-use super::plan::{Driver, Plan, SkinHold};
+use super::plan::{Driver, Plan};
 use super::record::StagePlan;
 use super::Progress;
 use crate::coupling::embedded::EmbeddedShell;
 use crate::coupling::embedding::Embedding;
 use crate::fem::BackwardEuler;
-use crate::io::export::VertexOrigin;
 use crate::io::load::Rig;
+use crate::io::origin::VertexOrigin;
 use crate::io::split::{FaceMap, LoadedCorners};
 use crate::lattice::Lattice;
 use crate::mesh::TriMesh;
 use crate::scene::Scene;
+use crate::scene::SkinHold;
 use interior::Tracking;
 use muscles::MuscleDrive;
 
@@ -69,6 +70,9 @@ pub struct Model {
     pub skin_stiffness: skin::Stiffness,
     /// The head's motion the interior feels as inertial forces, when the rig's face node moves.
     pub head_motion: Option<crate::pipeline::plan::HeadMotion>,
+    /// What drives the interior: the plan's driver, or tracking when default muscles cannot
+    /// drive the rig.
+    pub driver: Driver,
     /// Where each pose leaves the skin's model (that skin follows the blend shape there).
     pub outside: outside::OutOfModel,
     /// How a pose's region reaches the simulated skin's pins.
@@ -130,25 +134,25 @@ pub struct Log {
 /// Build the model and the initial state, recording each stage in `log`. Muscles by default
 /// (`muscles.source` not given) that cannot be made for the rig (no bone behind the face, no
 /// shape a muscle can make) or that cannot make its shapes
-/// ([`muscles::MUSCLE_SHAPE_LIMIT`]) leave the interior to tracking: `plan.driver` becomes
-/// [`Driver::Tracking`] and a warning says why.
+/// ([`muscles::MUSCLE_SHAPE_LIMIT`]) leave the interior to tracking: the model's driver is
+/// [`Driver::Tracking`] and a warning says why. The plan is not changed.
 pub fn set_up(
     rig: &Rig,
     scene: &Scene,
-    plan: &mut Plan,
+    plan: &Plan,
     log: &mut Log,
     progress: Progress,
 ) -> anyhow::Result<(Model, State)> {
     let face = rig.face();
     let path = rig.path.display().to_string();
-    progress("setup", 0, 4);
+    progress(super::Phase::Setup, 0, 4);
     let (welded, record) = weld::weld_face(face, &path)?;
     log.stages.push(record);
     let (outside, record) = outside::find(rig, plan, &welded);
     log.stages.push(record);
     let (lattice, record) = lattice::lattice_for_run(face, &welded, &scene.interior, plan, &path)?;
     log.stages.push(record);
-    progress("setup", 1, 4);
+    progress(super::Phase::Setup, 1, 4);
     let (selection, record) = select::select_skin(rig, scene, plan, &welded, &outside);
     log.stages.push(record);
     let region = simulated_region(selection.as_ref(), skin::within_mask(&welded.mesh, scene));
@@ -162,7 +166,7 @@ pub fn set_up(
     };
     let (refined, record) = refine::refine_skin(&input, &scene.skin, &path)?;
     log.stages.push(record);
-    progress("setup", 2, 4);
+    progress(super::Phase::Setup, 2, 4);
     let nodes = lattice.node_count();
     let input = skin::ShellInput {
         refined: &refined,
@@ -175,7 +179,7 @@ pub fn set_up(
         .as_ref()
         .is_none_or(|sel| sel.simulated.contains(&true));
     let (mut simulated, left_out) = simulated_skin(&input, region.as_deref(), compressed, log)?;
-    progress("setup", 3, 4);
+    progress(super::Phase::Setup, 3, 4);
     let stepper = interior::stepper(&lattice, scene, plan)?;
     let young = scene.interior.material()?.young;
     let track = |driver: &Driver| {
@@ -184,12 +188,13 @@ pub fn set_up(
         interior::tracking(&welded.mesh, &refined.embedding, kappa, young, cell)
     };
     let mut tracking = track(&plan.driver);
-    progress("setup", 4, 4);
+    progress(super::Phase::Setup, 4, 4);
     let skin_stiffness = simulated
         .as_ref()
         .map(|s| s.shell.coupling_terms().0)
         .unwrap_or_default();
-    let driven = match plan.driver.clone() {
+    let mut driver = plan.driver.clone();
+    let driven = match driver.clone() {
         Driver::Tracking => Ok(None),
         Driver::Muscles { source } => muscles::build_muscles(
             face,
@@ -217,8 +222,8 @@ pub fn set_up(
         Ok(None) => (None, muscles::skipped(scene)),
         // Muscles by default, not asked for: a rig they cannot drive is tracked instead.
         Err(e) if scene.muscles.source.is_none() => {
-            plan.driver = Driver::Tracking;
-            tracking = track(&plan.driver);
+            driver = Driver::Tracking;
+            tracking = track(&driver);
             log.warnings.push(format!(
                 "{path}: muscles cannot drive this rig ({e:#}); the interior tracks the blended \
                  surface instead (`[muscles] source = \"none\"` says so and skips the attempt)"
@@ -227,7 +232,7 @@ pub fn set_up(
         }
         Err(e) => return Err(e),
     };
-    log.stages.push(interior::record(plan, &stepper));
+    log.stages.push(interior::record(plan, &driver, &stepper));
     log.stages.extend(records);
     let pose_maps = pose_maps(simulated.as_ref(), &refined, selection);
     let (skin, sim_vertices, sigma) = match simulated {
@@ -250,6 +255,7 @@ pub fn set_up(
         left_out,
         skin_stiffness,
         head_motion: plan.head_motion.clone(),
+        driver,
         outside,
         pose_maps,
     };
@@ -485,25 +491,19 @@ pub(crate) mod test_support {
         use super::*;
         let mut scene = Scene::default();
         scene.interior.cell_size = Some(0.01);
-        scene.skin.simulate = Some("all".into());
+        scene.skin.simulate = Some(crate::scene::SkinSelection::All);
         scene.muscles.source = Some(match &driver {
             Driver::Muscles { source } => source.clone(),
-            Driver::Tracking => "none".into(),
+            Driver::Tracking => crate::scene::MuscleSource::None,
         });
         tweak(&mut scene);
-        let opts = crate::pipeline::RunOptions {
-            preroll: None,
-            scene: scene.clone(),
-            scene_path: None,
-            fps: 30.0,
-            frames: None,
-        };
+        let opts = crate::pipeline::RunOptions::new(scene.clone());
         let mut plan = Plan::new(rig, &opts).unwrap();
         plan.skin.lambda = 0.01;
         plan.skin.lambda_max = 0.01;
         plan.substeps = substeps;
         let mut log = Log::default();
-        let (model, state) = set_up(rig, &scene, &mut plan, &mut log, &|_, _, _| {}).unwrap();
+        let (model, state) = set_up(rig, &scene, &plan, &mut log, &|_, _, _| {}).unwrap();
         (model, state, log)
     }
 }

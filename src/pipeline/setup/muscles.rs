@@ -12,9 +12,8 @@ use crate::muscle::generate::BlendShapes;
 use crate::muscle::jaw::{Hinge, JawBone};
 use crate::muscle::samples::{ShapeSamples, SAMPLE_LEVELS};
 use crate::muscle::{Coupling, FitSettings, Fitter, GenerateSettings, Generated, MuscleError};
-use crate::pipeline::plan::SkinHold;
 use crate::pipeline::record::{Stage, StagePlan};
-use crate::scene::Scene;
+use crate::scene::{MuscleSource, Scene, SkinHold};
 use crate::solver::SolveStatus;
 use anyhow::{bail, Context};
 use std::path::Path;
@@ -172,7 +171,7 @@ pub fn build_muscles(
     scene: &Scene,
     lattice: &Lattice,
     welded: &Welded,
-    source: &str,
+    source: &MuscleSource,
     beside: Beside,
 ) -> anyhow::Result<(MuscleDrive, [StagePlan; 2])> {
     let Beside {
@@ -189,15 +188,15 @@ pub fn build_muscles(
     let mut calibration = None;
     let mut made_by = Vec::new();
     let (mut bone, mut jaw_hinge) = (None, None);
-    let (muscles, origin) = if source == "auto" {
+    let (muscles, origin) = if *source == MuscleSource::Auto {
         let targets = welded_targets(face, &welded.loaded_of);
         let samples = ShapeSamples::subdivided(lattice, &welded.mesh, SAMPLE_LEVELS)
             .with_context(|| format!("{path}: the muscles' shape samples"))?;
         let jaw = JawBone::find(lattice, &welded.mesh.positions, &targets);
         let interior = Interior::new(lattice, &material)?;
-        let way = match scene.muscles.skin_at_shapes.as_deref() {
-            Some("solved") => SkinWay::Solved,
-            _ => SkinWay::TensionField { wavelength },
+        let way = match scene.muscles.skin_at_shapes.unwrap_or_default() {
+            crate::scene::SkinAtShapes::Solved => SkinWay::Solved,
+            crate::scene::SkinAtShapes::TensionField => SkinWay::TensionField { wavelength },
         };
         let mut at_shapes = skin.map(|shell| SkinAtShapes::new(shell, lattice.rest_flat(), way));
         let mut force = at_shapes.as_mut().map(|a| move |u: &[f64]| a.force(u));
@@ -225,7 +224,7 @@ pub fn build_muscles(
         (g.muscles, "generated from the blend shapes".to_string())
     } else {
         (
-            crate::muscle::rigfile::load(Path::new(source), lattice, &welded.mesh)?,
+            crate::muscle::rigfile::load(Path::new(source.as_str()), lattice, &welded.mesh)?,
             format!("from {source}"),
         )
     };
@@ -289,7 +288,7 @@ fn hold_summary(hold: SkinHold) -> &'static str {
             "; they hold the skin's pull at the state the interior reaches, so the skin rides on the flesh they shape and does not load it"
         }
         // The fit's own summary says how.
-        SkinHold::AtShapes => "",
+        SkinHold::Shapes => "",
         SkinHold::None => "; nothing holds the skin's pull on the flesh they drive",
     }
 }
@@ -493,6 +492,7 @@ mod tests {
     use super::*;
     use crate::math::vector::norm;
     use crate::pipeline::plan::{Driver, Plan};
+    use crate::pipeline::record::StageStatus;
     use crate::pipeline::setup::{set_up, Log};
 
     /// The tension-field force at a shape is the solved skin's (the reference) within 15 %
@@ -506,23 +506,11 @@ mod tests {
         let mut rig = crate::io::load::load(&path, &Default::default()).unwrap();
         crate::io::units::apply(&mut rig, None, None);
         let mut scene = Scene::default();
-        scene.muscles.source = Some("none".into());
-        let opts = crate::pipeline::RunOptions {
-            preroll: None,
-            scene,
-            scene_path: None,
-            fps: 30.0,
-            frames: None,
-        };
-        let mut plan = Plan::new(&rig, &opts).unwrap();
-        let (model, mut state) = set_up(
-            &rig,
-            &opts.scene,
-            &mut plan,
-            &mut Log::default(),
-            &|_, _, _| {},
-        )
-        .unwrap();
+        scene.muscles.source = Some(MuscleSource::None);
+        let opts = crate::pipeline::RunOptions::new(scene);
+        let plan = Plan::new(&rig, &opts).unwrap();
+        let (model, mut state) =
+            set_up(&rig, &opts.scene, &plan, &mut Log::default(), &|_, _, _| {}).unwrap();
         let targets = welded_targets(rig.face(), &model.welded_loaded);
         let interior =
             Interior::new(&model.lattice, &opts.scene.interior.material().unwrap()).unwrap();
@@ -583,23 +571,18 @@ mod tests {
         let (rig, _) = sheet_rig(face_of(cube));
         let mut scene = Scene::default();
         scene.interior.cell_size = Some(0.01);
-        let opts = |scene: &Scene| crate::pipeline::RunOptions {
-            preroll: None,
-            scene: scene.clone(),
-            scene_path: None,
-            fps: 30.0,
-            frames: None,
-        };
-        let mut plan = Plan::new(&rig, &opts(&scene)).unwrap();
+        let opts = |scene: &Scene| crate::pipeline::RunOptions::new(scene.clone());
+        let plan = Plan::new(&rig, &opts(&scene)).unwrap();
         assert_eq!(
             plan.driver,
             Driver::Muscles {
-                source: "auto".into()
+                source: MuscleSource::Auto
             }
         );
         let mut log = Log::default();
-        let (model, state) = set_up(&rig, &scene, &mut plan, &mut log, &|_, _, _| {}).unwrap();
-        assert_eq!(plan.driver, Driver::Tracking);
+        let (model, state) = set_up(&rig, &scene, &plan, &mut log, &|_, _, _| {}).unwrap();
+        assert_eq!(model.driver, Driver::Tracking);
+        assert!(plan.driver != model.driver, "the plan is not changed");
         assert!(state.muscles.is_none());
         assert!(
             log.warnings.iter().any(|w| w.contains("no bone")),
@@ -611,18 +594,16 @@ mod tests {
             .iter()
             .find(|s| s.stage == Stage::Muscles)
             .unwrap();
-        assert!(
-            !record.is_ran() && record.why.contains("no bone"),
-            "{record:?}"
-        );
+        assert_eq!(record.status, StageStatus::Tracked, "{record:?}");
+        assert!(record.why.contains("no bone"), "{record:?}");
         // The tracking is the tracking driver's (κ = 10), not the weak one beside muscles.
-        scene.muscles.source = Some("none".into());
-        let mut plan = Plan::new(&rig, &opts(&scene)).unwrap();
-        let tracked = set_up(&rig, &scene, &mut plan, &mut Log::default(), &|_, _, _| {});
+        scene.muscles.source = Some(MuscleSource::None);
+        let plan = Plan::new(&rig, &opts(&scene)).unwrap();
+        let tracked = set_up(&rig, &scene, &plan, &mut Log::default(), &|_, _, _| {});
         assert_eq!(model.tracking.k, tracked.unwrap().0.tracking.k);
-        scene.muscles.source = Some("auto".into());
-        let mut plan = Plan::new(&rig, &opts(&scene)).unwrap();
-        let e = set_up(&rig, &scene, &mut plan, &mut Log::default(), &|_, _, _| {})
+        scene.muscles.source = Some(MuscleSource::Auto);
+        let plan = Plan::new(&rig, &opts(&scene)).unwrap();
+        let e = set_up(&rig, &scene, &plan, &mut Log::default(), &|_, _, _| {})
             .err()
             .expect("muscles asked for on a rig without bone");
         assert!(format!("{e:#}").contains("no bone"), "{e:#}");

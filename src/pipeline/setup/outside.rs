@@ -548,7 +548,7 @@ impl<'a> Judge<'a> {
         if !core.contains(&true) {
             return None;
         }
-        let region = super::select::grow(self.mesh, &core, margin);
+        let region = grow(self.mesh, &core, margin);
         let triangles: Vec<usize> = (0..n).filter(|&t| region[t]).collect();
         let area: f64 = triangles.iter().map(|&t| self.areas[t]).sum();
         let r = PoseRegion {
@@ -663,6 +663,31 @@ fn temporal_fade(
                 .collect();
             (k, below)
         })
+        .collect()
+}
+
+/// The triangles of `mesh` with a vertex within `margin` (m) of a vertex of a `seed` triangle
+/// (straight-line distance over the rest shape): the seeds grown by the margin.
+pub fn grow(mesh: &TriMesh, seed: &[bool], margin: f64) -> Vec<bool> {
+    let mut seeded = vec![false; mesh.positions.len()];
+    for (t, tri) in mesh.triangles.iter().enumerate() {
+        if seed[t] {
+            for &v in tri {
+                seeded[v] = true;
+            }
+        }
+    }
+    let seeds = (0..mesh.positions.len()).filter(|&v| seeded[v]);
+    let grid = PointGrid::new(margin, seeds.map(|v| (v, mesh.positions[v])));
+    let near = |p: &Vector3<f64>| {
+        grid.near(p)
+            .any(|s| (mesh.positions[s] - p).norm() <= margin)
+    };
+    let reached: Vec<bool> = mesh.positions.iter().map(near).collect();
+    mesh.triangles
+        .iter()
+        .enumerate()
+        .map(|(t, tri)| seed[t] || tri.iter().any(|&v| reached[v]))
         .collect()
 }
 

@@ -8,8 +8,8 @@
 use super::weld::Welded;
 use crate::coupling::embedding::Embedding;
 use crate::coupling::refine::{self, Ancestor, RefineReport, RefineSettings};
-use crate::io::export::VertexOrigin;
 use crate::io::mesh::MeshInstance;
+use crate::io::origin::VertexOrigin;
 use crate::lattice::Lattice;
 use crate::mesh::TriMesh;
 use crate::pipeline::plan::SkinScale;

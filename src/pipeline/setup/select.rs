@@ -10,10 +10,9 @@
 //! the constraints do not depend on the selection. `skin.simulate = "all"` turns it off. The measure uses every frame whatever `--frames` says, so chunks, `merge`
 //! and reruns share one topology.
 
-use super::outside::OutOfModel;
+use super::outside::{grow, OutOfModel};
 use super::weld::Welded;
 use crate::io::load::Rig;
-use crate::mesh::grid::PointGrid;
 use crate::mesh::TriMesh;
 use crate::pipeline::plan::Plan;
 use crate::pipeline::record::{Stage, StagePlan};
@@ -90,31 +89,6 @@ pub fn largest_compression<P: AsRef<[Vector3<f64>]>>(
     (worst, per_pose)
 }
 
-/// The triangles of `mesh` with a vertex within `margin` (m) of a vertex of a `seed` triangle
-/// (straight-line distance over the rest shape): the seeds grown by the margin.
-pub fn grow(mesh: &TriMesh, seed: &[bool], margin: f64) -> Vec<bool> {
-    let mut seeded = vec![false; mesh.positions.len()];
-    for (t, tri) in mesh.triangles.iter().enumerate() {
-        if seed[t] {
-            for &v in tri {
-                seeded[v] = true;
-            }
-        }
-    }
-    let seeds = (0..mesh.positions.len()).filter(|&v| seeded[v]);
-    let grid = PointGrid::new(margin, seeds.map(|v| (v, mesh.positions[v])));
-    let near = |p: &Vector3<f64>| {
-        grid.near(p)
-            .any(|s| (mesh.positions[s] - p).norm() <= margin)
-    };
-    let reached: Vec<bool> = mesh.positions.iter().map(near).collect();
-    mesh.triangles
-        .iter()
-        .enumerate()
-        .map(|(t, tri)| seed[t] || tri.iter().any(|&v| reached[v]))
-        .collect()
-}
-
 /// Which welded triangles the skin simulates, and why.
 #[derive(Debug, Clone)]
 pub struct Selection {
@@ -183,7 +157,7 @@ pub fn select_skin(
     welded: &Welded,
     outside: &OutOfModel,
 ) -> (Option<Selection>, StagePlan) {
-    if scene.skin.simulate.as_deref() == Some("all") {
+    if scene.skin.simulate == Some(crate::scene::SkinSelection::All) {
         let why = "skin.simulate = all: the whole skin is simulated";
         return (None, StagePlan::skipped(Stage::Select, why));
     }

@@ -3,13 +3,14 @@
 //! them with its constraint clusters of width σ (the `clusters` stage).
 
 use super::refine::RefinedSkin;
+use crate::coupling::cluster_width::sigma_for_wavelength;
 use crate::coupling::clusters::Clusters;
-use crate::coupling::embedded::{sigma_for_wavelength, EmbeddedShell};
+use crate::coupling::embedded::EmbeddedShell;
 use crate::coupling::refine;
 use crate::mesh::grid::PointGrid;
 use crate::mesh::TriMesh;
 use crate::pipeline::record::{Stage, StagePlan};
-use crate::scene::Scene;
+use crate::scene::{Scene, SkinSolver};
 use crate::solver::patch::PatchSettings;
 use crate::solver::statics::{HessianMode, LinearAlgebra, StaticSettings};
 use anyhow::{anyhow, Context};
@@ -358,10 +359,10 @@ fn linear_settings(scene: &Scene, lambda: f64) -> (Option<PatchSettings>, Linear
         max_share: 0.5,
         max_solves: 20,
     };
-    match scene.solver.skin_solver.as_deref() {
-        Some("global") => (None, LinearAlgebra::REFERENCE),
-        Some("patches") => (Some(patches), LinearAlgebra::FAST),
-        _ => (None, LinearAlgebra::FAST),
+    match scene.solver.skin_solver.unwrap_or_default() {
+        SkinSolver::Global => (None, LinearAlgebra::REFERENCE),
+        SkinSolver::Patches => (Some(patches), LinearAlgebra::FAST),
+        SkinSolver::Lagged => (None, LinearAlgebra::FAST),
     }
 }
 
@@ -422,7 +423,7 @@ fn shell_over(
         }
     };
     let mut shell = shell.with_context(|| format!("{path}: setting up the skin"))?;
-    if scene.skin.membrane.as_deref() == Some("stvk") {
+    if scene.skin.membrane == Some(crate::scene::MembraneLaw::Stvk) {
         shell.shell.membrane.law = crate::shell::membrane::MembraneLaw::StVenantKirchhoff;
     }
     shell.set_continuation_levels(

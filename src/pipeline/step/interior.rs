@@ -27,7 +27,7 @@ pub struct InteriorSchedule {
     /// Most interior–skin passes per frame (≥ 1; `solver.coupling_iterations`).
     pub coupling_iterations: usize,
     /// The muscles hold the skin's pull at the state the interior reaches
-    /// ([`crate::pipeline::plan::SkinHold::Reached`]): while they drive, the skin does not
+    /// ([`crate::scene::SkinHold::Reached`]): while they drive, the skin does not
     /// load the interior.
     pub skin_held: bool,
     /// Each frame's skin starts its solve on the embedded surface B q rather than where the

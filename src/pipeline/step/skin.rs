@@ -66,7 +66,7 @@ fn pins_about(
         seed[a] = true;
         seed[b] = true;
     }
-    let grown = crate::pipeline::setup::select::grow(rest, &seed, margin);
+    let grown = crate::pipeline::setup::outside::grow(rest, &seed, margin);
     let mut pins = pinned.to_vec();
     for (t, tri) in rest.triangles.iter().enumerate() {
         if grown[t] {

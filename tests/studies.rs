@@ -1,8 +1,8 @@
 //! `furrow report tradeoff` and `furrow report stability` on a reduced set: small sheet rigs,
-//! few frames. Run with `cargo test --release --test reports`.
+//! few frames. Run with `cargo test --release --test studies`.
 
 use furrow::pipeline::record::StageRecord;
-use furrow::scene::Scene;
+use furrow::scene::{MuscleSource, Scene};
 use furrow::solver::SolveStatus;
 use furrow::studies::stability::{self, run_all, CaseOutcome};
 use furrow::studies::tradeoff::{self, sheet_rig, SheetRig};
@@ -104,16 +104,16 @@ fn stability_cases_end_with_a_named_status_and_finite_outputs() {
 /// moves the tracking's target, and the muscles' activations, half as far.
 #[test]
 fn an_interior_step_that_needs_sub_stepping_gets_it_and_converges() {
-    for driver in ["none", "auto"] {
+    for driver in [MuscleSource::None, MuscleSource::Auto] {
         halved_steps_converge(driver);
     }
 }
 
 /// [`an_interior_step_that_needs_sub_stepping_gets_it_and_converges`] with `muscles.source`
 /// `driver`.
-fn halved_steps_converge(driver: &str) {
+fn halved_steps_converge(driver: MuscleSource) {
     let mut scene = Scene::default();
-    scene.muscles.source = Some(driver.into());
+    scene.muscles.source = Some(driver.clone());
     scene.solver.interior_iterations = Some(2);
     let case = stability::Case {
         name: "halving".into(),
@@ -154,13 +154,7 @@ fn a_muscle_driven_frame_that_does_not_converge_is_redone_by_tracking() {
         ..SheetRig::default()
     })
     .unwrap();
-    let opts = furrow::pipeline::RunOptions {
-        preroll: None,
-        scene: Scene::default(),
-        scene_path: None,
-        fps: 30.0,
-        frames: None,
-    };
+    let opts = furrow::pipeline::RunOptions::new(Scene::default());
     let out = furrow::pipeline::run(&rig, &opts, &|_, _, _| {}).unwrap();
     let mut redone = 0;
     for f in &out.report.per_frame {

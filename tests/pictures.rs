@@ -1,6 +1,6 @@
 //! Charts and preview images: files exist, decode, have the right size and are not blank; the
 //! rasteriser covers, shades and hides what geometry says it should.
-//! `REPORT_OUT=/tmp/report cargo test --test report` keeps the images for a person to look at.
+//! `REPORT_OUT=/tmp/report cargo test --test pictures` keeps the images for a person to look at.
 
 use furrow::mesh::TriMesh;
 use furrow::render::colormap::{diverging, symmetric_range};
@@ -500,40 +500,6 @@ fn large_mesh_renders_at_512() {
     eprintln!("20k patch: coverage {frac:.4}, expected {:.4}", 0.92 * 0.92);
     assert!((frac - 0.92 * 0.92).abs() < 0.02, "coverage {frac}");
     write_png(&dir.join("patch_20k.png"), &img).unwrap();
-}
-
-/// Timing of the 20k-triangle render (not a test of speed; prints the numbers):
-/// `cargo test --release --test report -- --ignored --nocapture bench_render`
-#[test]
-#[ignore = "a benchmark that prints timings, not a check"]
-fn bench_render_20k_triangles_512() {
-    let mesh = patch(101, 0.0005);
-    let view = View::default();
-    let depth: Vec<f64> = mesh.positions.iter().map(|p| p.z).collect();
-    for (name, ss) in [("supersample 1", 1), ("supersample 2 (default)", 2)] {
-        let v = View {
-            supersample: ss,
-            ..view.clone()
-        };
-        let t = std::time::Instant::now();
-        let reps = 10;
-        for _ in 0..reps {
-            std::hint::black_box(render(&mesh, &v, (512, 512)));
-        }
-        let plain = t.elapsed().as_secs_f64() / reps as f64;
-        let t = std::time::Instant::now();
-        for _ in 0..reps {
-            std::hint::black_box(
-                render_scalar(&mesh, &depth, (0.0, 0.05), &v, (512, 512)).unwrap(),
-            );
-        }
-        let scalar = t.elapsed().as_secs_f64() / reps as f64;
-        println!(
-            "20 000 triangles, 512×512, {name}: render {:.1} ms, render_scalar {:.1} ms",
-            plain * 1e3,
-            scalar * 1e3
-        );
-    }
 }
 
 /// UV sphere of radius `r` m centred at the origin (`n` segments around, `n/2` rings).

@@ -169,13 +169,7 @@ fn seam_rig(animated: bool) -> Vec<u8> {
 /// The rig at `path`, loaded, and its pipeline run (every frame, default scene).
 fn run(path: &Path) -> (Rig, RunOutput) {
     let rig = load_bytes(path, &std::fs::read(path).unwrap(), &LoadOptions::default()).unwrap();
-    let opts = RunOptions {
-        preroll: None,
-        scene: Scene::default(),
-        scene_path: None,
-        fps: 30.0,
-        frames: None,
-    };
+    let opts = RunOptions::new(Scene::default());
     let out = pipeline::run(&rig, &opts, &|_, _, _| {}).unwrap();
     (rig, out)
 }
@@ -603,13 +597,8 @@ fn the_layer_reproduces_the_sequence_export_on_the_demo_clip() {
     )
     .unwrap();
     let count = pipeline::plan::clip_weights(&rig, 30.0).0.len();
-    let opts = RunOptions {
-        preroll: None,
-        scene: Scene::default(),
-        scene_path: None,
-        fps: 30.0,
-        frames: Some(pipeline::frames::FrameRange { start: 0, end: 12 }),
-    };
+    let opts = RunOptions::new(Scene::default())
+        .frames(pipeline::frames::FrameRange { start: 0, end: 12 });
     let out = pipeline::run(&rig, &opts, &|_, _, _| {}).unwrap();
     let seq = dir.path().join("seq.glb");
     let set = furrow::io::export::FrameSet {
