@@ -1,7 +1,8 @@
 //! The embedded shell: known answers of the constrained statics, warm start, the coupling
 //! terms against a dense product, and the interior feeling the skin.
 
-use furrow::coupling::embedded::{two_step, two_step_with, EmbeddedShell, InteriorMode};
+use furrow::coupling::embedded::EmbeddedShell;
+use furrow::coupling::two_step::{two_step, two_step_with, InteriorMode};
 use furrow::fem::{BackwardEuler, Interior, LinearSolver, Material, StepSettings};
 use furrow::lattice::{shape, ElementOrder, Lattice};
 use furrow::math::sparse::dense_from_triplets;

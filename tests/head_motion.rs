@@ -170,12 +170,10 @@ fn model_frequency(rig_bytes: &[u8], accel: f64) -> (f64, f64) {
     let mu = be.mass_times(&u);
     let dot = |x: &[f64], y: &[f64]| x.iter().zip(y).map(|(a, b)| a * b).sum::<f64>();
     let omega = (dot(&u, &f) / dot(&u, &mu)).sqrt();
-    let mid: Vec<f64> = model
-        .rows
-        .iter()
+    let mid: Vec<f64> = (0..model.embedding.point_count())
         .zip(&model.skin_mesh.positions)
         .filter(|(_, p)| p.x.abs() < 0.012 && p.y.abs() < 0.012)
-        .map(|(row, _)| row.iter().map(|&(n, w)| w * u[3 * n]).sum::<f64>())
+        .map(|(v, _)| model.embedding.point(v, &u).x)
         .collect();
     (omega, mid.iter().sum::<f64>() / mid.len() as f64)
 }

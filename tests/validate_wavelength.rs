@@ -66,8 +66,8 @@ fn wavelength_follows_the_cluster_width() {
 /// constraints are blind, so σ = s λ / z.
 #[test]
 fn constraints_are_blind_at_the_kernel_zero() {
+    use furrow::coupling::cluster_width::{edge_path_stretch, kernel_zero_wavelength};
     use furrow::coupling::clusters::Clusters;
-    use furrow::coupling::embedded::{edge_path_stretch, kernel_zero_wavelength};
     use furrow::shell::sheet::equilateral_sheet;
     let a = 1e-3;
     let (nx, ny) = (120, 130);

@@ -27,10 +27,11 @@
 //! at the smooth shape, instead overshot (85 % miss): the muscles fought compressions the
 //! skin relieves by wrinkling.
 
-use super::forward::{embed_flat, Coupling, Forward};
+use super::forward::{Coupling, Forward};
 use super::jaw::JawBone;
 use super::model::{Muscle, DEFAULT_MAX_CONTRACTION};
 use super::MuscleError;
+use crate::coupling::embedding::Embedding;
 use crate::fem::Interior;
 use crate::lattice::Lattice;
 use crate::math::sparse::triplets_mul_add;
@@ -75,7 +76,8 @@ pub struct Plant<'a> {
     passive: Forward,
     /// K_int at rest (triplets over node dofs, N/m).
     k_int: Vec<(usize, usize, f64)>,
-    embed: Vec<(usize, usize, f64)>,
+    /// The embedding B of the lattice's surface vertices.
+    embed: Embedding,
 }
 
 /// One shape's fitted actuation and how well it makes the shape.
@@ -130,7 +132,7 @@ impl<'a> Plant<'a> {
             coupling: coupling.cloned().unwrap_or_default(),
             passive,
             k_int,
-            embed: lattice.embedding_triplets(),
+            embed: Embedding::of_lattice(lattice),
         })
     }
 
@@ -146,7 +148,7 @@ impl<'a> Plant<'a> {
 
     /// Surface displacement B y (flat, 3 per vertex, m) of node displacements `y`.
     fn surface(&self, y: &[f64]) -> Vec<f64> {
-        embed_flat(&self.embed, y, self.lattice.vertex_points.len())
+        self.embed.positions_flat(y)
     }
 
     /// Fit the actuation that makes node displacements `u` (the shape's lattice fit, flat, m)
@@ -167,8 +169,7 @@ impl<'a> Plant<'a> {
         bone: Option<&JawBone>,
     ) -> Result<FittedActuation, MuscleError> {
         let rest = self.lattice.rest_flat();
-        let nodes = self.lattice.node_count();
-        let tracking_load = self.coupling.tracking_load(&self.embed, delta, nodes);
+        let tracking_load = self.coupling.tracking_load(&self.embed, delta);
         let mut load = tracking_load.clone();
         if let Some(s) = skin_load {
             load.iter_mut().zip(s).for_each(|(a, b)| *a += b);

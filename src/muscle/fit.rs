@@ -19,11 +19,12 @@
 //! (dimensionless `size_weight`, `time_weight`), so they do not depend on the mesh size or
 //! units. A frame whose QP fails keeps the last good activations and says so.
 
-use super::forward::{embed_flat, Coupling, Forward, ForwardReport};
+use super::forward::{Coupling, Forward, ForwardReport};
 use super::jaw::JawBone;
 use super::model::Muscle;
 use super::qp::{solve_qp, QpProblem, QpSolution};
 use super::MuscleError;
+use crate::coupling::embedding::Embedding;
 use crate::fem::{Interior, Material};
 use crate::lattice::Lattice;
 use crate::solver::SolveStatus;
@@ -143,7 +144,8 @@ pub struct Fitter {
     pub lambda_time: f64,
     /// Time spent computing the rest Jacobian (s).
     pub jacobian_s: f64,
-    embed: Vec<(usize, usize, f64)>,
+    /// The embedding B of the lattice's surface vertices.
+    embed: Embedding,
     vertices: usize,
     rest_surface: Vec<f64>,
     /// Rest J, column-major (3V × m), m per unit activation.
@@ -202,7 +204,7 @@ impl Fitter {
                 responses.len()
             )));
         }
-        let embed = lattice.embedding_triplets();
+        let embed = Embedding::of_lattice(lattice);
         let vertices = lattice.vertex_points.len();
         let mut f = Self {
             forward,
@@ -269,7 +271,7 @@ impl Fitter {
 
     /// Embedded surface B q (flat, 3V, m).
     fn surface(&self, q: &[f64]) -> Vec<f64> {
-        embed_flat(&self.embed, q, self.vertices)
+        self.embed.positions_flat(q)
     }
 
     /// B applied to each node-space column, concatenated column-major (3V × m).
@@ -341,7 +343,7 @@ impl Fitter {
         if c.tracking.is_empty() {
             return None;
         }
-        Some(c.tracking_load(&self.embed, d, self.forward.interior.nodes))
+        Some(c.tracking_load(&self.embed, d))
     }
 
     /// Surface (m) of the nonlinear equilibrium at activations `a` (solved from rest).

@@ -21,6 +21,7 @@
 use super::blend::ActuationBlend;
 use super::model::{full_forces, unit_forces, ActiveEnergy, Muscle};
 use super::MuscleError;
+use crate::coupling::embedding::Embedding;
 use crate::fem::dynamics::StiffnessMatrix;
 use crate::fem::Interior;
 use crate::math::sparse::{triplets_mul_add, SpdSolver};
@@ -44,37 +45,15 @@ pub struct Coupling {
 
 impl Coupling {
     /// The tracking's load Bᵀ k d (N, flat over node dofs) for surface displacements `d`
-    /// (flat, 3 per vertex, m) through the `embed` triplets (vertex, node, weight).
-    pub fn tracking_load(
-        &self,
-        embed: &[(usize, usize, f64)],
-        d: &[f64],
-        nodes: usize,
-    ) -> Vec<f64> {
-        let mut f = vec![0.0; 3 * nodes];
+    /// (flat, 3 per vertex, m) of the vertices `embed` places in the lattice.
+    pub fn tracking_load(&self, embed: &Embedding, d: &[f64]) -> Vec<f64> {
+        let mut f = vec![0.0; 3 * embed.node_count()];
         if self.tracking.is_empty() {
             return f;
         }
-        for &(v, n, w) in embed {
-            for i in 0..3 {
-                f[3 * n + i] += w * self.tracking[v] * d[3 * v + i];
-            }
-        }
+        embed.spread_scaled(&self.tracking, d, &mut f);
         f
     }
-}
-
-/// B y: the surface displacement (flat, 3 per vertex, m) of `vertices` embedded vertices for
-/// node displacements or positions `y` (flat, m), through the `embed` triplets (vertex, node,
-/// weight).
-pub fn embed_flat(embed: &[(usize, usize, f64)], y: &[f64], vertices: usize) -> Vec<f64> {
-    let mut x = vec![0.0; 3 * vertices];
-    for &(v, n, w) in embed {
-        for i in 0..3 {
-            x[3 * v + i] += w * y[3 * n + i];
-        }
-    }
-    x
 }
 
 /// Muscles need bone: a lattice without bone (pinned) nodes would be moved rigidly by them.

@@ -185,7 +185,7 @@ pub fn fit_node_displacements(
     let pat = Pattern::new(n3, &trip)?;
     let mut solver = SpdSolver::new();
     solver.factorize(&pat.assemble(&trip)?)?;
-    let embed = samples.embedding_triplets(lattice);
+    let embed = samples.embedding(lattice);
     // (α K + BᵀB) y over all dofs: what bone displacements y put on the free rows.
     let system_times = |y: &[f64]| {
         let mut out = vec![0.0; 3 * nn];
@@ -205,15 +205,12 @@ pub fn fit_node_displacements(
             let turned = bone
                 .filter(|b| b.shape == ti)
                 .map(|b| b.displacement(1.0, nn));
+            // Bᵀ Δ over all node dofs, then its free rows.
+            let mut pulled = vec![0.0; 3 * nn];
+            embed.spread(&samples.displacement(&t.positions), &mut pulled);
             let mut rhs = vec![0.0; n3];
-            let at_samples = samples.displacement(&t.positions);
-            for &(v, n, w) in &embed {
-                let f = free[n];
-                if f != usize::MAX {
-                    for i in 0..3 {
-                        rhs[3 * f + i] += w * at_samples[3 * v + i];
-                    }
-                }
+            for (n, &f) in free.iter().enumerate().filter(|(_, &f)| f != usize::MAX) {
+                rhs[3 * f..3 * f + 3].copy_from_slice(&pulled[3 * n..3 * n + 3]);
             }
             if let Some(up) = &turned {
                 let pull = system_times(up);

@@ -9,6 +9,7 @@
 //! subdivided vertex's displacement is its subdivision row over the rig's vertices (S Δ,
 //! the same operator the refined skin's targets go through).
 
+use crate::coupling::embedding::Embedding;
 use crate::coupling::refine::embed_refined;
 use crate::lattice::{Lattice, MaterialPoint};
 use crate::mesh::redgreen::{self, Smoothing};
@@ -78,8 +79,9 @@ impl ShapeSamples {
             .collect()
     }
 
-    /// Embedding triplets (sample, node, weight) of the samples in `lattice`.
-    pub fn embedding_triplets(&self, lattice: &Lattice) -> Vec<(usize, usize, f64)> {
-        crate::coupling::refine::embedding_triplets(lattice, &self.points)
+    /// The embedding B of the samples in `lattice`.
+    pub fn embedding(&self, lattice: &Lattice) -> Embedding {
+        let triplets = crate::coupling::refine::embedding_triplets(lattice, &self.points);
+        Embedding::from_triplets(&triplets, self.points.len(), lattice.node_count())
     }
 }

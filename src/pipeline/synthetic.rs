@@ -17,7 +17,10 @@
 //! different skins. For each copy the report gives the predicted λ and the wavelength measured
 //! on the last frame along the middle row (height above the embedded surface).
 
-use crate::coupling::embedded::{sigma_for_wavelength, two_step_with, EmbeddedShell, InteriorMode};
+use crate::coupling::cluster_width::sigma_for_wavelength;
+use crate::coupling::embedded::EmbeddedShell;
+use crate::coupling::embedding::Embedding;
+use crate::coupling::two_step::{two_step_with, InteriorMode};
 use crate::coupling::wavelength::Bilayer;
 use crate::fem::{BackwardEuler, Interior, LinearSolver, StepSettings, GRAVITY};
 use crate::lattice::{shape, Lattice};
@@ -135,7 +138,7 @@ pub fn run_scene(scene: &Scene, progress: &dyn Fn(usize, usize)) -> anyhow::Resu
 type CopyResult = (TriMesh, Vec<Vec<Vector3<f64>>>, CopyReport);
 
 /// Embedding triplets (skin vertex, node, weight).
-type Embedding = Vec<(usize, usize, f64)>;
+type Triplets = Vec<(usize, usize, f64)>;
 
 /// One copy's box: the interior's lattice, pins and stepper, and the skin on its top face.
 struct CopyModel {
@@ -151,8 +154,8 @@ struct CopyModel {
     rest: Vec<f64>,
     /// Pinned nodes (glued to the ground, or held at the compressed ends).
     pinned: Vec<bool>,
-    /// Embedding rows of each skin vertex: (node, weight).
-    rows: Vec<Vec<(usize, f64)>>,
+    /// The embedding B of the skin vertices in the lattice.
+    embedding: Embedding,
     /// Skin vertices under the weight.
     loaded: Vec<usize>,
 }
@@ -226,7 +229,7 @@ fn copy_lattice(scene: &Scene) -> anyhow::Result<(Lattice, [usize; 3], f64)> {
 
 /// The copy's geometry: lattice, pins, and the equilateral skin sheet on its top face
 /// embedded in it. Returns the model, the lattice and the embedding triplets.
-fn copy_model(scene: &Scene, copy: usize) -> anyhow::Result<(CopyModel, Embedding, Lattice)> {
+fn copy_model(scene: &Scene, copy: usize) -> anyhow::Result<(CopyModel, Triplets, Lattice)> {
     let g = scene.geometry.as_ref().expect("checked");
     let load = scene.load.as_ref().expect("checked");
     let (lattice, dims, cell) = copy_lattice(scene)?;
@@ -276,10 +279,8 @@ fn copy_model(scene: &Scene, copy: usize) -> anyhow::Result<(CopyModel, Embeddin
     if load.weight.is_some() && loaded.is_empty() {
         bail!("copy {copy}: no skin vertex under the weight; refine `geometry.skin_edge`");
     }
-    let mut rows: Vec<Vec<(usize, f64)>> = vec![Vec::new(); skin_mesh.positions.len()];
-    for &(v, n, wgt) in &embedding {
-        rows[v].push((n, wgt));
-    }
+    let points = skin_mesh.positions.len();
+    let rows = Embedding::from_triplets(&embedding, points, lattice.node_count());
     let model = CopyModel {
         skin_mesh,
         middle_row: sheet.rows[ny / 2].clone(),
@@ -287,7 +288,7 @@ fn copy_model(scene: &Scene, copy: usize) -> anyhow::Result<(CopyModel, Embeddin
         extent: [lx, ly, lz],
         rest: lattice.rest_flat(),
         pinned,
-        rows,
+        embedding: rows,
         loaded,
     };
     Ok((model, embedding, lattice))
@@ -374,10 +375,9 @@ fn apply_load(load: &Load, model: &CopyModel, be: &mut BackwardEuler, f: usize) 
     let mut f_ext = vec![0.0; be.q.len()];
     if let Some(m) = load.weight {
         let per = m * GRAVITY * s / model.loaded.len() as f64;
+        let weight = Vector3::new(0.0, 0.0, -per);
         for &v in &model.loaded {
-            for &(n, wgt) in &model.rows[v] {
-                f_ext[3 * n + 2] -= per * wgt;
-            }
+            model.embedding.spread_point(v, &weight, &mut f_ext);
         }
     }
     if f == 0 && compression > 0.0 {

@@ -25,10 +25,10 @@
 //! cell size, σ), so every (E_x/E_q, h) point costs the same and holds the same number of
 //! wavelengths: λ stays well below the slab size by construction.
 
+use crate::coupling::cluster_width::sigma_for_wavelength;
 use crate::coupling::clusters::ClusterStats;
-use crate::coupling::embedded::{
-    sigma_for_wavelength, two_step_with, EmbeddedShell, InteriorMode, TwoStepReport,
-};
+use crate::coupling::embedded::EmbeddedShell;
+use crate::coupling::two_step::{two_step_with, InteriorMode, TwoStepReport};
 use crate::coupling::wavelength::Bilayer;
 use crate::fem::{BackwardEuler, Interior, LinearSolver, Material, StepSettings};
 use crate::lattice::{shape, Element, ElementKind, ElementOrder, Lattice, MaterialPoint};
@@ -63,7 +63,7 @@ pub struct SlabSettings {
     /// Prescribed compressive strain ε along x (dimensionless, > 0).
     pub compression: f64,
     /// Cluster width σ as a multiple of the derived width
-    /// [`crate::coupling::embedded::sigma_for_wavelength`] (≈ λ/2; 1 is the default).
+    /// [`crate::coupling::cluster_width::sigma_for_wavelength`] (≈ λ/2; 1 is the default).
     pub sigma_factor: f64,
     /// Loading steps: the strain grows geometrically from `onset` × ε_b to `compression`
     /// over this many steps, one two-step solve (shell statics, interior quasi-statics) each.

@@ -4,7 +4,7 @@
 //!
 //! What this checks, and what it does not: in the embedded-shell method the interior's
 //! stiffness reaches the skin's wrinkle wavelength only through the cluster width σ, which
-//! is computed from the formula's λ ([`crate::coupling::embedded::sigma_for_wavelength`]).
+//! is computed from the formula's λ ([`crate::coupling::cluster_width::sigma_for_wavelength`]).
 //! The sweep therefore checks that the frequency-limited constraints make the skin wrinkle at
 //! the λ they were built for, across skin thickness-to-wavelength ratios h/λ from 1/20
 //! (E_x/E_q = 10²) to 1/94 (10⁴); the slab is scaled with λ, so every point has the same

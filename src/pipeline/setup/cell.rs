@@ -19,7 +19,6 @@
 use crate::io::model::MorphTarget;
 use crate::lattice::Lattice;
 use crate::mesh::TriMesh;
-use crate::muscle::forward::embed_flat;
 use crate::muscle::generate::{fit_node_displacements, GenerateSettings};
 use crate::muscle::jaw::JawBone;
 use crate::muscle::samples::{ShapeSamples, SAMPLE_LEVELS};
@@ -221,14 +220,15 @@ fn clip_projection_miss(
         jaw.as_ref().map(|j| &j.0),
     )?;
     let nv = samples.len();
-    let embed = samples.embedding_triplets(lattice);
+    let embed = samples.embedding(lattice);
     // Each shape's miss r_m = B u_m − Δ_m and displacement Δ_m (flat per sample, m).
     let shapes: Vec<(Vec<f64>, Vec<f64>)> = u
         .iter()
         .zip(targets)
         .map(|(um, t)| {
             let delta = samples.displacement(&t.positions);
-            let r = embed_flat(&embed, um, nv)
+            let r = embed
+                .positions_flat(um)
                 .iter()
                 .zip(&delta)
                 .map(|(b, d)| b - d)

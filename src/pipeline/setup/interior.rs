@@ -2,13 +2,13 @@
 //! the tracking energy ½ Σ_v k_v ‖t_v − (B q)_v‖² that pulls each welded skin vertex towards
 //! its blend-shape target (k_v = κ E_q A_v / ℓ: A_v the vertex area, ℓ the cell size).
 
+use crate::coupling::embedding::Embedding;
 use crate::fem::{BackwardEuler, Interior, LinearSolver, StepSettings, GRAVITY};
 use crate::lattice::Lattice;
 use crate::mesh::TriMesh;
 use crate::pipeline::plan::{Driver, Plan, DEFAULT_DT};
 use crate::pipeline::record::{Stage, StagePlan};
 use crate::scene::Scene;
-use std::collections::BTreeMap;
 
 /// Tracking stiffness factor κ (dimensionless): each skin vertex is pulled towards its
 /// blend-shape position with stiffness κ E_q A_v / ℓ, ten times what the interior's own cell
@@ -77,12 +77,12 @@ pub fn tracking_factor(scene: &Scene, driver: &Driver) -> f64 {
     })
 }
 
-/// The tracking energy of the welded skin `welded` (m) whose vertices have embedding `rows`,
-/// with factor `kappa` ([`tracking_factor`]), for an interior of Young's modulus `young` (Pa)
-/// and cell size `cell` (m).
+/// The tracking energy of the welded skin `welded` (m) whose vertices are the first points of
+/// `embedding`, with factor `kappa` ([`tracking_factor`]), for an interior of Young's modulus
+/// `young` (Pa) and cell size `cell` (m).
 pub fn tracking(
     welded: &TriMesh,
-    rows: &[Vec<(usize, f64)>],
+    embedding: &Embedding,
     kappa: f64,
     young: f64,
     cell: f64,
@@ -93,19 +93,7 @@ pub fn tracking(
         .collect();
     // Bᵀ k B summed per node pair once (the same on every step): 27² pairs per vertex would
     // otherwise be re-assembled every step.
-    let mut pairs: BTreeMap<(usize, usize), f64> = BTreeMap::new();
-    for (v, &kv) in k.iter().enumerate() {
-        let row = &rows[v];
-        for &(a, wa) in row {
-            for &(b, wb) in row {
-                *pairs.entry((a, b)).or_insert(0.0) += kv * wa * wb;
-            }
-        }
-    }
-    let stiffness = pairs
-        .into_iter()
-        .flat_map(|((a, b), k)| (0..3).map(move |d| (3 * a + d, 3 * b + d, k)))
-        .collect();
+    let stiffness = embedding.scalar_stiffness(&k);
     Tracking { k, stiffness }
 }
 
@@ -186,6 +174,7 @@ mod tests {
         );
         // Vertices 0 and 1 share node 7; vertex 2 sits on node 9.
         let rows = vec![vec![(7, 0.5), (8, 0.5)], vec![(7, 1.0)], vec![(9, 1.0)]];
+        let rows = Embedding::from_rows(rows, 10);
         let kappa = tracking_factor(&Scene::default(), &Driver::Tracking);
         let t = tracking(&m, &rows, kappa, 2.0, 4.0);
         // k_v = κ E A / ℓ = 10 · 2 · 1 / 4 = 5 N/m.

@@ -23,6 +23,7 @@ use super::plan::{Driver, Plan};
 use super::record::StagePlan;
 use super::Progress;
 use crate::coupling::embedded::EmbeddedShell;
+use crate::coupling::embedding::Embedding;
 use crate::fem::BackwardEuler;
 use crate::io::load::Rig;
 use crate::io::origin::VertexOrigin;
@@ -50,8 +51,8 @@ pub struct Model {
     pub welded_count: usize,
     /// The interior's lattice.
     pub lattice: Lattice,
-    /// Embedding rows of every export vertex: (node, weight), x = Σ w q_node.
-    pub rows: Vec<Vec<(usize, f64)>>,
+    /// The embedding B of every export vertex in the lattice (x = B q).
+    pub embedding: Embedding,
     /// Export vertex of each shell vertex (empty when no skin is simulated).
     pub sim_vertices: Vec<usize>,
     /// Cluster width σ (m); NaN when no skin is simulated.
@@ -183,7 +184,8 @@ pub fn set_up(
     let young = scene.interior.material()?.young;
     let track = |driver: &Driver| {
         let kappa = interior::tracking_factor(scene, driver);
-        interior::tracking(&welded.mesh, &refined.rows, kappa, young, lattice.cell_size)
+        let cell = lattice.cell_size;
+        interior::tracking(&welded.mesh, &refined.embedding, kappa, young, cell)
     };
     let mut tracking = track(&plan.driver);
     progress(super::Phase::Setup, 4, 4);
@@ -246,7 +248,7 @@ pub fn set_up(
         welded_loaded: welded.loaded_of,
         welded_count: welded.mesh.positions.len(),
         lattice,
-        rows: refined.rows,
+        embedding: refined.embedding,
         sim_vertices,
         sigma,
         tracking,

@@ -6,6 +6,7 @@
 //! face (barycentric in its ancestor's loaded triangle).
 
 use super::weld::Welded;
+use crate::coupling::embedding::Embedding;
 use crate::coupling::refine::{self, Ancestor, RefineReport, RefineSettings};
 use crate::io::mesh::MeshInstance;
 use crate::io::origin::VertexOrigin;
@@ -27,8 +28,8 @@ pub struct RefinedSkin {
     pub target_of: Vec<Vec<(usize, f64)>>,
     /// For each refined vertex, its barycentric place in a loaded triangle (for the export).
     pub origin: Vec<VertexOrigin>,
-    /// Embedding rows of each refined vertex in the lattice: (node, weight), x = Σ w q_node.
-    pub rows: Vec<Vec<(usize, f64)>>,
+    /// The embedding B of the refined vertices in the lattice (x = B q).
+    pub embedding: Embedding,
     /// Skin thickness per refined triangle (m), when the scene varies it.
     pub thickness: Option<Vec<f64>>,
     /// For each refined triangle, the welded triangle it lies in and its corners'
@@ -104,10 +105,8 @@ pub fn refine_skin(
         None => None,
     };
     let points = refine::embed_refined(input.lattice, &input.welded.mesh, &refined.subdivision)?;
-    let mut rows: Vec<Vec<(usize, f64)>> = vec![Vec::new(); points.len()];
-    for (v, n, w) in refine::embedding_triplets(input.lattice, &points) {
-        rows[v].push((n, w));
-    }
+    let triplets = refine::embedding_triplets(input.lattice, &points);
+    let embedding = Embedding::from_triplets(&triplets, points.len(), input.lattice.node_count());
     let origin = export_origins(
         &refined.subdivision.mesh,
         &refined.subdivision.ancestor,
@@ -119,7 +118,7 @@ pub fn refine_skin(
         mesh: refined.subdivision.mesh,
         target_of: refined.subdivision.weights,
         origin,
-        rows,
+        embedding,
         thickness,
     };
     Ok((skin, record))
@@ -259,9 +258,9 @@ mod tests {
         let (skin, record) = refine_skin(&input, &SkinSection::default(), "sheet.glb").unwrap();
         assert!(record.is_ran(), "{}", record.why);
         assert!(skin.mesh.positions.len() > welded.mesh.positions.len());
-        assert_eq!(skin.rows.len(), skin.mesh.positions.len());
-        for (v, row) in skin.rows.iter().enumerate() {
-            let w: f64 = row.iter().map(|r| r.1).sum();
+        assert_eq!(skin.embedding.point_count(), skin.mesh.positions.len());
+        for v in 0..skin.embedding.point_count() {
+            let w: f64 = skin.embedding.row(v).iter().map(|r| r.1).sum();
             assert!((w - 1.0).abs() < 1e-9, "vertex {v}: weights sum to {w}");
         }
         // Welded vertices are their own targets; every origin's weights sum to one.

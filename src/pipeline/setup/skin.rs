@@ -3,8 +3,9 @@
 //! them with its constraint clusters of width σ (the `clusters` stage).
 
 use super::refine::RefinedSkin;
+use crate::coupling::cluster_width::sigma_for_wavelength;
 use crate::coupling::clusters::Clusters;
-use crate::coupling::embedded::{sigma_for_wavelength, EmbeddedShell};
+use crate::coupling::embedded::EmbeddedShell;
 use crate::coupling::refine;
 use crate::mesh::grid::PointGrid;
 use crate::mesh::TriMesh;
@@ -392,7 +393,7 @@ fn shell_over(
     let emb: Vec<(usize, usize, f64)> = vertices
         .iter()
         .enumerate()
-        .flat_map(|(i, &v)| skin.rows[v].iter().map(move |&(n, w)| (i, n, w)))
+        .flat_map(|(i, &v)| skin.embedding.row(v).iter().map(move |&(n, w)| (i, n, w)))
         .collect();
     let edge = refine::mean_edge(&sub);
     let relative = scene.solver.shell_tolerance.unwrap_or(SHELL_TOLERANCE);

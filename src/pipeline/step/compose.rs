@@ -3,6 +3,7 @@
 //! the wrinkles (what the constraints leave free) to the artist's shape; with
 //! `export.surface = "simulated"` it is x itself (B q where no skin is simulated).
 
+use crate::coupling::embedding::Embedding;
 use anyhow::bail;
 use nalgebra::Vector3;
 
@@ -22,8 +23,8 @@ pub struct Composed {
 /// How the export vertices follow the lattice, the target and the skin.
 #[derive(Debug, Clone, Copy)]
 pub struct SurfaceMaps<'a> {
-    /// Embedding rows of every export vertex: (node, weight).
-    pub rows: &'a [Vec<(usize, f64)>],
+    /// The embedding B of every export vertex in the lattice.
+    pub embedding: &'a Embedding,
     /// For each export vertex, (welded vertex, weight) pairs whose blend is its target.
     pub target_of: &'a [Vec<(usize, f64)>],
     /// Export vertex of each shell vertex.
@@ -45,7 +46,7 @@ pub fn compose(
     simulated_surface: bool,
     k: usize,
 ) -> anyhow::Result<Composed> {
-    let embedded = embed_rows(maps.rows, q);
+    let embedded = maps.embedding.positions(q);
     let target = carry(maps.target_of, welded_target);
     let shape_miss = rms_distance(&embedded, &target);
     let mut out = if simulated_surface {
@@ -96,17 +97,6 @@ pub fn carry(target_of: &[Vec<(usize, f64)>], welded: &[Vector3<f64>]) -> Vec<Ve
         .collect()
 }
 
-/// x = B q per export vertex (m), from embedding rows and node positions `q` (flat, m).
-pub fn embed_rows(rows: &[Vec<(usize, f64)>], q: &[f64]) -> Vec<Vector3<f64>> {
-    rows.iter()
-        .map(|r| {
-            r.iter()
-                .map(|&(n, w)| Vector3::new(q[3 * n], q[3 * n + 1], q[3 * n + 2]) * w)
-                .sum()
-        })
-        .collect()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -115,10 +105,10 @@ mod tests {
     fn the_wrinkle_is_added_to_the_target_or_the_skin_is_taken_as_is() {
         // Two export vertices (the welded vertex 0, and a midpoint of welded 0 and 1) on one
         // node; only the second is simulated.
-        let rows = vec![vec![(0, 1.0)], vec![(0, 1.0)]];
+        let rows = Embedding::from_rows(vec![vec![(0, 1.0)], vec![(0, 1.0)]], 1);
         let target_of = vec![vec![(0, 1.0)], vec![(0, 0.5), (1, 0.5)]];
         let maps = SurfaceMaps {
-            rows: &rows,
+            embedding: &rows,
             target_of: &target_of,
             sim_vertices: &[1],
         };

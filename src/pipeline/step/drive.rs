@@ -3,6 +3,7 @@
 //! model); with muscles, first the activations fitted to the target (the `fit` stage, a QP),
 //! then their active energy linearised at the interior's state.
 
+use crate::coupling::embedding::Embedding;
 use crate::fem::BackwardEuler;
 use crate::pipeline::record::{StageRecord, Tracked, TrackedBecause};
 use crate::pipeline::setup::interior::Tracking;
@@ -75,27 +76,19 @@ pub fn actuate(
     Ok(())
 }
 
-/// The tracking energy's force Bᵀ k (t − B q) at node positions `q` (flat over node dofs, N);
-/// welded vertex v has embedding `rows[v]` and target `target[v]` (m).
+/// The tracking energy's force Bᵀ k (t − B q) at node positions `q` (m) as node forces (flat
+/// over node dofs, N); welded vertex v is point v of `embedding` and has target `target[v]`
+/// (m).
 pub fn tracking_force(
     tracking: &Tracking,
-    rows: &[Vec<(usize, f64)>],
+    embedding: &Embedding,
     q: &[f64],
     target: &[Vector3<f64>],
 ) -> Vec<f64> {
     let mut force = vec![0.0; q.len()];
     for (v, &k) in tracking.k.iter().enumerate() {
-        let row = &rows[v];
-        let mut bq = Vector3::zeros();
-        for &(n, w) in row {
-            bq += Vector3::new(q[3 * n], q[3 * n + 1], q[3 * n + 2]) * w;
-        }
-        let f = (target[v] - bq) * k;
-        for &(n, w) in row {
-            for a in 0..3 {
-                force[3 * n + a] += w * f[a];
-            }
-        }
+        let f = (target[v] - embedding.point(v, q)) * k;
+        embedding.spread_point(v, &f, &mut force);
     }
     force
 }
@@ -132,7 +125,7 @@ mod tests {
             k: vec![3.0],
             stiffness: Vec::new(),
         };
-        let rows = vec![vec![(0, 0.5), (1, 0.5)]];
+        let rows = Embedding::from_rows(vec![vec![(0, 0.5), (1, 0.5)]], 2);
         let q = vec![0.0; 6];
         let f = tracking_force(&tracking, &rows, &q, &[Vector3::new(2.0, 0.0, 0.0)]);
         // k (t − Bq) = 6 N, split by the weights.

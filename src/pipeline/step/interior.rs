@@ -7,6 +7,7 @@
 use super::drive;
 use super::Scratch;
 use crate::coupling::embedded::EmbeddedShell;
+use crate::coupling::embedding::Embedding;
 use crate::fem::{ExtraTerms, SolveReport, SolveStatus};
 use crate::pipeline::record::StageRecord;
 use crate::pipeline::setup::{Model, State};
@@ -272,7 +273,7 @@ fn solve_once(
             .map(|(a, b)| a + (b - a) * at)
             .collect()
     };
-    let mut force = drive::tracking_force(&model.tracking, &model.rows, &be.q, &target);
+    let mut force = drive::tracking_force(&model.tracking, &model.embedding, &be.q, &target);
     if let Some(m) = state.muscles.as_ref() {
         let a = activations.as_deref().unwrap_or_default();
         drive::add_muscle_terms(m, a, be, &mut load.stiffness, load.base_len, &mut force);
@@ -405,13 +406,12 @@ fn coupling_terms(
         return None;
     }
     let nd = scratch.zero_force.len();
-    let force = skin.map(|s| skin_force(s, &model.sim_vertices, &model.rows, nd));
+    let force = skin.map(|s| skin_force(s, &model.sim_vertices, &model.embedding, nd));
     match (&model.left_out, force) {
         (Some((left, _)), force) => {
             let mut f = force.unwrap_or_else(|| vec![0.0; nd]);
-            let riding = left.shell.embedded_positions(q);
-            let x: Vec<f64> = riding.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
-            let g = elastic_force(&left.shell, &x, &left.vertices, &model.rows, nd);
+            let x = left.shell.embedded_flat(q);
+            let g = elastic_force(&left.shell, &x, &left.vertices, &model.embedding, nd);
             for (a, b) in f.iter_mut().zip(&g) {
                 *a += b;
             }
@@ -422,15 +422,17 @@ fn coupling_terms(
 }
 
 /// Bᵀ F_x: the skin's elastic force F_x = −∇E_x at its current state, carried to the nodes
-/// (flat over `nd` node dofs, N); shell vertex i is export vertex `verts[i]`.
+/// (flat over `nd` node dofs, N); shell vertex i is export vertex `verts[i]` of `embedding`.
 pub fn skin_force(
     skin: &EmbeddedShell,
     verts: &[usize],
-    rows: &[Vec<(usize, f64)>],
+    embedding: &Embedding,
     nd: usize,
 ) -> Vec<f64> {
     // The last skin solve's own gradient at x: no second pass over the skin.
-    carry_to_nodes(&skin.elastic_gradient(), verts, rows, nd)
+    let mut force = vec![0.0; nd];
+    embedding.spread_gradient_at(verts, &skin.elastic_gradient(), &mut force);
+    force
 }
 
 /// Bᵀ F_x of the skin at positions `x` (flat, m), as [`skin_force`].
@@ -438,31 +440,14 @@ fn elastic_force(
     skin: &EmbeddedShell,
     x: &[f64],
     verts: &[usize],
-    rows: &[Vec<(usize, f64)>],
+    embedding: &Embedding,
     nd: usize,
 ) -> Vec<f64> {
     use crate::math::Energy;
     let mut grad = vec![0.0; x.len()];
     skin.shell.eval(x, Some(&mut grad), None, false);
-    carry_to_nodes(&grad, verts, rows, nd)
-}
-
-/// −Bᵀ g over `nd` node dofs (N) of a skin gradient `g` (flat, N); shell vertex i is export
-/// vertex `verts[i]`.
-fn carry_to_nodes(
-    grad: &[f64],
-    verts: &[usize],
-    rows: &[Vec<(usize, f64)>],
-    nd: usize,
-) -> Vec<f64> {
     let mut force = vec![0.0; nd];
-    for (i, &v) in verts.iter().enumerate() {
-        for &(n, w) in &rows[v] {
-            for a in 0..3 {
-                force[3 * n + a] -= w * grad[3 * i + a];
-            }
-        }
-    }
+    embedding.spread_gradient_at(verts, &grad, &mut force);
     force
 }
 

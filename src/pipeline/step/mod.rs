@@ -120,7 +120,7 @@ impl Model {
     /// How the export vertices follow the lattice, the target and the skin.
     pub fn surface_maps(&self) -> SurfaceMaps<'_> {
         SurfaceMaps {
-            rows: &self.rows,
+            embedding: &self.embedding,
             target_of: &self.target_of,
             sim_vertices: &self.sim_vertices,
         }
@@ -262,8 +262,8 @@ mod tests {
     /// The embedded surface's rise at the sheet's middle vertex (m).
     fn middle_rise(model: &Model, state: &State) -> f64 {
         let mid = model.welded_count / 2;
-        let rest = compose::embed_rows(&model.rows, &model.lattice.rest_flat());
-        let now = compose::embed_rows(&model.rows, &state.interior.q);
+        let rest = model.embedding.positions(&model.lattice.rest_flat());
+        let now = model.embedding.positions(&state.interior.q);
         now[mid].z - rest[mid].z
     }
 
