@@ -411,29 +411,9 @@ fn scalar_field_reaches_both_ends_of_the_colour_map() {
     assert!(render_scalar(&mesh, &values, (1.0, 1.0), &view, (100, 100)).is_err());
 }
 
-/// A height-field patch of `n × n` vertices over [−0.1, 0.1]² m (2 (n − 1)² triangles): a dome
-/// with optional wrinkles of wavelength 8 mm and amplitude `amp` m along x.
+/// The benchmark's wrinkled dome patch (`furrow bench render`): 2 (n − 1)² triangles.
 fn patch(n: usize, amp: f64) -> TriMesh {
-    let mut pos = Vec::with_capacity(n * n);
-    for j in 0..n {
-        for i in 0..n {
-            let x = -0.1 + 0.2 * i as f64 / (n - 1) as f64;
-            let y = -0.1 + 0.2 * j as f64 / (n - 1) as f64;
-            let dome = 0.05 * (1.0 - (x * x + y * y) / 0.03);
-            let wr =
-                amp * (2.0 * std::f64::consts::PI * x / 0.008).sin() * (-(y * y) / 0.002).exp();
-            pos.push(Vector3::new(x, y, dome + wr));
-        }
-    }
-    let mut tris = Vec::with_capacity(2 * (n - 1) * (n - 1));
-    for j in 0..n - 1 {
-        for i in 0..n - 1 {
-            let a = j * n + i;
-            tris.push([a, a + 1, a + n + 1]);
-            tris.push([a, a + n + 1, a + n]);
-        }
-    }
-    TriMesh::new(pos, tris)
+    furrow::render::bench::wrinkled_patch(n, amp)
 }
 
 #[test]

@@ -694,9 +694,14 @@ fn the_lids_are_the_skin_the_blinks_move_and_are_thinner() {
     let face_rig =
         furrow::io::load::load(std::path::Path::new("rigs/face.glb"), &Default::default()).unwrap();
     assert!(!lid_triangles(face_rig.face()).0.contains(&true));
-    for bad in ["lids = \"on\"", "lid_thickness = -1.0"] {
+    // A bad choice is refused at the key's line with the allowed values; a bad number names
+    // the key.
+    for (bad, says) in [
+        ("lids = \"on\"", ["lids = \"on\"", "`auto`"]),
+        ("lid_thickness = -1.0", ["skin.lid_thickness", "metres"]),
+    ] {
         let e = furrow::scene::Scene::parse(&format!("[skin]\n{bad}\n"), "t.toml").unwrap_err();
         let msg = format!("{e:#}");
-        assert!(msg.contains("skin.lid"), "{msg}");
+        assert!(says.iter().all(|s| msg.contains(s)), "{msg}");
     }
 }
