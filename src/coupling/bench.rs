@@ -55,3 +55,16 @@ pub fn bench_coupling(cells: usize, reps: usize) -> anyhow::Result<serde_json::V
         "assembly_s": assembly_s, "coupling_terms_s": coupling_s, "triplets": triplets,
     }))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The benchmark runs on a coarse lattice and its coupling terms are not empty.
+    #[test]
+    fn bench_coupling_runs_on_a_coarse_lattice() {
+        let v = bench_coupling(100, 1).unwrap();
+        assert!(v["triplets"].as_u64().unwrap() > 0);
+        assert!(v["coupling_terms_s"][0].as_f64().unwrap().is_finite());
+    }
+}
