@@ -17,9 +17,6 @@ macro_rules! choice {
         }
 
         impl $name {
-            /// Every value, the default first.
-            pub const ALL: &'static [$name] = &[$name::$first, $($name::$variant,)*];
-
             /// The value as written in a scene file.
             pub fn as_str(&self) -> &'static str {
                 match self {
@@ -240,7 +237,7 @@ mod tests {
         assert_eq!(h.hold, SkinHold::Shapes);
         assert_eq!(h.source, MuscleSource::File("m.toml".into()));
         assert_eq!(SkinHold::Shapes.to_string(), "shapes");
-        assert_eq!(SkinSolver::ALL[0], SkinSolver::Lagged);
+        assert_eq!(SkinSolver::default(), SkinSolver::Lagged);
         assert_eq!(SkinHold::default(), SkinHold::Reached);
         let e = toml::from_str::<Holder>("hold = \"always\"\nsource = \"auto\"")
             .err()

@@ -194,7 +194,7 @@ pub fn set_up(
         .map(|s| s.shell.coupling_terms().0)
         .unwrap_or_default();
     let mut driver = plan.driver.clone();
-    let driven = match driver.clone() {
+    let driven = match &plan.driver {
         Driver::Tracking => Ok(None),
         Driver::Muscles { source } => muscles::build_muscles(
             face,
@@ -202,7 +202,7 @@ pub fn set_up(
             scene,
             &lattice,
             &welded,
-            &source,
+            source,
             muscles::Beside {
                 coupling: muscle_coupling(&tracking),
                 // The skin's force at each shape joins the actuation fit when the driver

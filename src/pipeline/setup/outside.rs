@@ -602,14 +602,7 @@ fn triangle_normal(mesh: &TriMesh, p: &[Vector3<f64>], t: usize) -> Option<Vecto
 /// the region's vertices, rising linearly with the straight-line rest distance to 1 at
 /// `margin` (m) from them.
 fn spatial_fade(mesh: &TriMesh, region: &[bool], margin: f64) -> Vec<f64> {
-    let mut on = vec![false; mesh.positions.len()];
-    for (t, tri) in mesh.triangles.iter().enumerate() {
-        if region[t] {
-            tri.iter().for_each(|&v| on[v] = true);
-        }
-    }
-    let seeds = (0..on.len()).filter(|&v| on[v]);
-    let grid = PointGrid::new(margin, seeds.map(|v| (v, mesh.positions[v])));
+    let (on, grid) = region_vertices(mesh, region, margin);
     mesh.positions
         .iter()
         .enumerate()
@@ -666,19 +659,24 @@ fn temporal_fade(
         .collect()
 }
 
+/// The vertices of the triangles of `mesh` flagged in `region`, and a grid of them with cells
+/// of `margin` (m) for finding those near a point.
+fn region_vertices(mesh: &TriMesh, region: &[bool], margin: f64) -> (Vec<bool>, PointGrid) {
+    let mut on = vec![false; mesh.positions.len()];
+    for (t, tri) in mesh.triangles.iter().enumerate() {
+        if region[t] {
+            tri.iter().for_each(|&v| on[v] = true);
+        }
+    }
+    let seeds = (0..on.len()).filter(|&v| on[v]);
+    let grid = PointGrid::new(margin, seeds.map(|v| (v, mesh.positions[v])));
+    (on, grid)
+}
+
 /// The triangles of `mesh` with a vertex within `margin` (m) of a vertex of a `seed` triangle
 /// (straight-line distance over the rest shape): the seeds grown by the margin.
 pub fn grow(mesh: &TriMesh, seed: &[bool], margin: f64) -> Vec<bool> {
-    let mut seeded = vec![false; mesh.positions.len()];
-    for (t, tri) in mesh.triangles.iter().enumerate() {
-        if seed[t] {
-            for &v in tri {
-                seeded[v] = true;
-            }
-        }
-    }
-    let seeds = (0..mesh.positions.len()).filter(|&v| seeded[v]);
-    let grid = PointGrid::new(margin, seeds.map(|v| (v, mesh.positions[v])));
+    let (_, grid) = region_vertices(mesh, seed, margin);
     let near = |p: &Vector3<f64>| {
         grid.near(p)
             .any(|s| (mesh.positions[s] - p).norm() <= margin)
