@@ -21,9 +21,18 @@ fn rig_path(name: &str) -> PathBuf {
 /// Run `furrow animate RIG -o DIR/out.glb --report DIR/report.json EXTRA…` bare (no scene);
 /// returns the output's path and the report.
 fn animate(rig: &Path, dir: &Path, extra: &[&str]) -> (PathBuf, Value) {
+    animate_on(rig, dir, extra, None)
+}
+
+/// [`animate`] on `threads` threads of the pool (`RAYON_NUM_THREADS`) when given.
+fn animate_on(rig: &Path, dir: &Path, extra: &[&str], threads: Option<usize>) -> (PathBuf, Value) {
     let out = dir.join("out.glb");
     let report = dir.join("report.json");
-    let o = Command::new(env!("CARGO_BIN_EXE_furrow"))
+    let mut command = Command::new(env!("CARGO_BIN_EXE_furrow"));
+    if let Some(t) = threads {
+        command.env("RAYON_NUM_THREADS", t.to_string());
+    }
+    let o = command
         .arg("animate")
         .arg(rig)
         .arg("-o")
@@ -168,14 +177,21 @@ fn a_face_of_several_primitives_keeps_its_eyes_lashes_and_mouth() {
 /// A still avatar (a skinned body, a head with ARKit shapes and visemes, eyes and teeth as
 /// meshes of their own carrying the same targets): its folding shapes solve, each shape that
 /// compresses skin gets a corrective and one that does not is said, and Blender imports the
-/// rig's shape keys with the correctives.
+/// rig's shape keys with the correctives. Its shapes solved by two workers side by side
+/// give the file one worker writes, byte for byte.
 #[test]
 fn a_still_avatar_gets_a_corrective_per_wrinkling_shape() {
     let dir = tempfile::tempdir().unwrap();
     let rig = rig_path("avatar.glb");
     // eyeBlinkLeft … eyeWideLeft: a blink that closes the lids, and shapes that barely move.
-    let (out, report) = animate(&rig, dir.path(), &["--frames", "0:7"]);
+    let (out, report) = animate_on(&rig, dir.path(), &["--frames", "0:7"], Some(2));
     check_file(&out);
+    let one = tempfile::tempdir().unwrap();
+    let (alone, _) = animate_on(&rig, one.path(), &["--frames", "0:7"], Some(1));
+    assert!(
+        std::fs::read(&out).unwrap() == std::fs::read(&alone).unwrap(),
+        "two workers and one write different files"
+    );
     let frames = report["per_frame"].as_array().unwrap();
     assert_eq!(frames.len(), 7);
     let solved = frames.iter().filter(|f| f["shell"].is_object()).count();

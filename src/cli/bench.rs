@@ -133,6 +133,44 @@ pub enum BenchCommand {
         #[arg(long, default_value = "out/preroll")]
         out: std::path::PathBuf,
     },
+    /// Correctives: a still rig's shapes and a clip's frames run back to back under the
+    /// defaults, set-up included; the time per solved shape over the time per frame (the
+    /// goal: at most 3). Writes correctives.json in DIR.
+    #[command(
+        after_help = "Example:\n  furrow bench correctives --rig rigs/avatar.glb --clip rigs/face.glb --out examples/report/correctives"
+    )]
+    Correctives {
+        /// The still rig (no animation).
+        #[arg(long, default_value = "rigs/avatar.glb")]
+        rig: std::path::PathBuf,
+        /// The animated rig whose frames the shapes are compared with (the demo's).
+        #[arg(long, default_value = "rigs/face.glb")]
+        clip: std::path::PathBuf,
+        /// Frames per second at which the clip is sampled.
+        #[arg(long, default_value_t = 30.0)]
+        fps: f64,
+        /// Output folder (correctives.json).
+        #[arg(long, default_value = "out/correctives")]
+        out: std::path::PathBuf,
+    },
+    /// The farm's cost model (`furrow chunks`) against a run: each simulated frame's time in
+    /// a run's report (`furrow animate RIG --report R.json`) fitted as a + b × the fraction of
+    /// the skin it compresses; b / a beside the model's constant. Writes chunk_cost.json in
+    /// DIR.
+    #[command(
+        after_help = "Example:\n  furrow animate rigs/head.glb -o head.glb --report head.json\n  furrow bench chunk-cost --rig rigs/head.glb --report head.json --out examples/report/chunk_cost/head"
+    )]
+    ChunkCost {
+        /// The animated rig the run was of.
+        #[arg(long)]
+        rig: std::path::PathBuf,
+        /// The run's report (REPORT.json of `furrow animate --report`).
+        #[arg(long)]
+        report: std::path::PathBuf,
+        /// Output folder (chunk_cost.json).
+        #[arg(long, default_value = "out/chunk_cost")]
+        out: std::path::PathBuf,
+    },
     /// Activation fit: 52 muscles on a face lattice of about N cells, a 335-frame clip.
     #[command(after_help = "Example:\n  furrow bench fit\n  furrow bench fit --cells 2000 --json")]
     Fit {
@@ -240,6 +278,17 @@ pub fn run(c: BenchCommand, out: &Output) -> anyhow::Result<()> {
             fps,
             out: dir,
         } => preroll(&rig, &starts, window, fps, &dir, out)?,
+        BenchCommand::Correctives {
+            rig,
+            clip,
+            fps,
+            out: dir,
+        } => correctives(&rig, &clip, fps, &dir, out)?,
+        BenchCommand::ChunkCost {
+            rig,
+            report,
+            out: dir,
+        } => chunk_cost(&rig, &report, &dir, out)?,
         BenchCommand::Fit { cells, gn_frames } => {
             anyhow::ensure!(
                 (1..=1_000_000).contains(&cells),
@@ -346,6 +395,71 @@ fn preroll(
         .iter()
         .for_each(|f| out.say(format!("  wrote {}", f.display())));
     Ok(())
+}
+
+/// `furrow bench correctives`: a still rig's shapes against a clip's frames.
+fn correctives(
+    rig: &std::path::Path,
+    clip: &std::path::Path,
+    fps: f64,
+    dir: &std::path::Path,
+    out: &Output,
+) -> anyhow::Result<()> {
+    let (still, animated) = (load_rig(rig)?, load_rig(clip)?);
+    let cost = crate::studies::correctives::measure(&still, &animated, fps)?;
+    let v = serde_json::to_value(&cost)?;
+    write_result(out, "bench correctives", &v, &dir.join("correctives.json"))
+}
+
+/// A rig loaded with the default options, its units decided as `animate` decides them.
+fn load_rig(path: &std::path::Path) -> anyhow::Result<crate::io::load::Rig> {
+    let mut loaded = crate::io::load::load(path, &crate::io::LoadOptions::default())?;
+    crate::io::units::apply(&mut loaded, None, None);
+    Ok(loaded)
+}
+
+/// Print a benchmark's result `v` under `title` and write it to `file` as JSON (replacing
+/// an earlier one).
+fn write_result(
+    out: &Output,
+    title: &str,
+    v: &serde_json::Value,
+    file: &std::path::Path,
+) -> anyhow::Result<()> {
+    let text = serde_json::to_string_pretty(v)?;
+    crate::io::atomic::write(file, text.as_bytes(), crate::io::atomic::Overwrite::Replace)?;
+    print(out, title, v);
+    out.say(format!("  wrote {}", file.display()));
+    Ok(())
+}
+
+/// `furrow bench chunk-cost`: the farm's cost model against a run's frame times.
+fn chunk_cost(
+    rig: &std::path::Path,
+    report: &std::path::Path,
+    dir: &std::path::Path,
+    out: &Output,
+) -> anyhow::Result<()> {
+    use crate::studies::chunk_cost;
+    let text = std::fs::read(report)
+        .map_err(|e| anyhow::anyhow!("{}: cannot read the report: {e}", report.display()))?;
+    let run: serde_json::Value = serde_json::from_slice(&text)
+        .map_err(|e| anyhow::anyhow!("{}: not a run's report: {e}", report.display()))?;
+    let times =
+        chunk_cost::frame_times(&run).map_err(|e| anyhow::anyhow!("{}: {e}", report.display()))?;
+    let fps = run["fps"].as_f64().unwrap_or(30.0);
+    let loaded = load_rig(rig)?;
+    let scene = crate::scene::Scene::default();
+    let threshold = 0.5 * crate::pipeline::setup::select::onset_strain(&scene.materials()?);
+    let fractions = crate::pipeline::farm::compressed_fractions(&loaded, fps, threshold);
+    let fit = chunk_cost::fit(&times, &fractions).ok_or_else(|| {
+        anyhow::anyhow!(
+            "{}: too few frames, or frames that all compress the same, to fit",
+            report.display()
+        )
+    })?;
+    let v = serde_json::to_value(&fit)?;
+    write_result(out, "bench chunk-cost", &v, &dir.join("chunk_cost.json"))
 }
 
 /// `furrow bench select`: the selected skin against the whole skin on a rig.

@@ -38,6 +38,10 @@ pub struct EmbeddedShell {
     problem: StaticProblem,
     /// Pinned skin vertices (they follow B q exactly).
     pinned_vertices: Vec<usize>,
+    /// The part of the shell that moves while the pinned vertices are held
+    /// ([`Shell::part`]), which the statics solve in place of the whole when the pins hold
+    /// more than [`PART_BELOW`] of its elements still.
+    part: Option<Shell>,
     /// Pattern of the shell Hessian triplets (built at the first `coupling_terms`).
     hessian_pattern: Mutex<Option<Pattern>>,
     /// Most halvings of the load change when a solve fails (0 = none).
@@ -52,6 +56,12 @@ pub struct EmbeddedShell {
 /// triangle's thickness (dimensionless): a skin about to buckle stays far below it and a
 /// buckled one far above it.
 pub const FLAT_DETAIL: f64 = 0.1;
+
+/// The share of the shell's elements (triangles and hinges) below which the statics solve
+/// only the part that moves ([`Shell::part`]): a still rig's shape pins most of the face
+/// and a part saves most of the assembly and the new layout's analysis, while a clip's few
+/// pins leave the whole shell to solve, with its layout kept from frame to frame.
+pub const PART_BELOW: f64 = 0.75;
 
 /// The constraints H x = 0 of `clusters` on the skin's dofs: three rows per cluster (x, y, z
 /// of its weighted mean position); the right-hand side H B q is filled per frame.
@@ -153,6 +163,7 @@ impl EmbeddedShell {
             solver,
             problem,
             pinned_vertices: Vec::new(),
+            part: None,
             continuation_levels: 0,
             hessian_pattern: Mutex::new(None),
             last_flat: false,
@@ -196,6 +207,7 @@ impl EmbeddedShell {
         self.clusters = clusters;
         self.shell = shell;
         self.solver.forget_gradient();
+        self.update_part();
         Ok(())
     }
 
@@ -240,6 +252,28 @@ impl EmbeddedShell {
         Ok(())
     }
 
+    /// A second skin in the same state (positions, pins, thickness, clusters, settings)
+    /// with a solver that has solved nothing yet: from rest, it solves as this one does
+    /// after [`Self::reset_to_rest`], to the same bits. A still rig's shapes are solved on
+    /// such copies side by side.
+    pub fn duplicate(&self) -> anyhow::Result<Self> {
+        let solver = StaticSolver::new(self.solver.settings).map_err(|e| anyhow!("{e}"))?;
+        Ok(Self {
+            shell: self.shell.clone(),
+            clusters: self.clusters.clone(),
+            embedding: self.embedding.clone(),
+            x: self.x.clone(),
+            solver,
+            problem: self.problem.clone(),
+            pinned_vertices: self.pinned_vertices.clone(),
+            part: self.part.clone(),
+            continuation_levels: self.continuation_levels,
+            hessian_pattern: Mutex::new(None),
+            last_flat: self.last_flat,
+            last_bq: self.last_bq.clone(),
+        })
+    }
+
     /// Put the skin back at its rest shape and its solver back to a new one's history (the
     /// sparsity analysis is kept): the next solve is the first from rest.
     pub fn reset_to_rest(&mut self) {
@@ -268,7 +302,30 @@ impl EmbeddedShell {
             .flat_map(|&v| [3 * v, 3 * v + 1, 3 * v + 2])
             .collect();
         self.pinned_vertices = p;
+        self.update_part();
         Ok(())
+    }
+
+    /// Take the part of the shell the pins leave moving as the statics' energy when it has
+    /// fewer than [`PART_BELOW`] of the shell's elements, else the whole shell. The solver
+    /// forgets its Hessian layout whenever the energy it solves changes.
+    fn update_part(&mut self) {
+        let had_part = self.part.is_some();
+        self.part = None;
+        if !self.pinned_vertices.is_empty() {
+            let mut held = vec![false; self.vertex_count()];
+            for &v in &self.pinned_vertices {
+                held[v] = true;
+            }
+            let part = self.shell.part(&held);
+            let elements = |s: &Shell| s.membrane.elements.len() + s.bending.hinges.len();
+            if (elements(&part) as f64) < PART_BELOW * elements(&self.shell) as f64 {
+                self.part = Some(part);
+            }
+        }
+        if had_part || self.part.is_some() {
+            self.solver.forget_layout();
+        }
     }
 
     /// The pinned skin vertices (sorted), which follow B q.
@@ -355,7 +412,7 @@ impl EmbeddedShell {
         let backup = self.x.clone();
         let mut rep = match &from {
             Some((rhs_from, pinned_from)) => self.solver.solve_in_increments(
-                &self.shell,
+                self.part.as_ref().unwrap_or(&self.shell),
                 &self.problem,
                 &mut self.x,
                 rhs_from,
@@ -363,7 +420,11 @@ impl EmbeddedShell {
                 self.continuation_levels,
                 accept,
             )?,
-            None => self.solver.solve(&self.shell, &self.problem, &mut self.x)?,
+            None => self.solver.solve(
+                self.part.as_ref().unwrap_or(&self.shell),
+                &self.problem,
+                &mut self.x,
+            )?,
         };
         if self.x.iter().any(|v| !v.is_finite()) {
             self.x = backup;

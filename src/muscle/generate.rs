@@ -198,8 +198,9 @@ pub fn fit_node_displacements(
         }
         out
     };
+    // One solve per shape, the shapes side by side (each its own right-hand side).
     Ok(targets
-        .iter()
+        .par_iter()
         .enumerate()
         .map(|(ti, t)| {
             let turned = bone

@@ -21,13 +21,26 @@ pub const DEFAULT_PREROLL: usize = 9;
 
 /// The cost of a frame whose whole skin is compressed, relative to a frame that compresses
 /// none (whose cost is 1): a frame costs 1 + `COMPRESSED_FRAME_COST` × (its compressed
-/// fraction of the skin's area).
-pub const COMPRESSED_FRAME_COST: f64 = 20.0;
+/// fraction of the skin's area). Measured frame times hardly follow the compressed fraction
+/// (R² 0.02 on the demo's clip, 0.002 on the head's 150 first frames: their slow frames are
+/// where the skin changes buckled branch), and replaying those runs' frames split into 8
+/// chunks with a pre-roll of 9 puts the longest chunk shortest at a constant of about 1
+/// (`furrow bench chunk-cost`, `examples/report/chunk_cost/`).
+pub const COMPRESSED_FRAME_COST: f64 = 1.0;
 
 /// Each frame's expected cost (a frame compressing no skin costs 1) for a clip of `rig`
-/// sampled at `fps` (Hz): from the fraction of the skin's area its blend shapes compress by
-/// more than `threshold` (1 − the smaller principal stretch; the select stage's threshold).
+/// sampled at `fps` (Hz): 1 + [`COMPRESSED_FRAME_COST`] × its [`compressed_fractions`].
 pub fn frame_costs(rig: &Rig, fps: f64, threshold: f64) -> Vec<f64> {
+    compressed_fractions(rig, fps, threshold)
+        .iter()
+        .map(|f| 1.0 + COMPRESSED_FRAME_COST * f)
+        .collect()
+}
+
+/// The fraction (0–1) of the skin's area each frame of `rig`'s clip, sampled at `fps` (Hz),
+/// compresses by more than `threshold` (1 − the smaller principal stretch; the select
+/// stage's threshold).
+pub fn compressed_fractions(rig: &Rig, fps: f64, threshold: f64) -> Vec<f64> {
     let face = rig.face();
     let rest = TriMesh::new(face.positions.clone(), face.triangles.clone());
     let areas: Vec<f64> = (0..rest.triangles.len())
@@ -39,10 +52,7 @@ pub fn frame_costs(rig: &Rig, fps: f64, threshold: f64) -> Vec<f64> {
     let (_, per_pose) = largest_compression(&rest, poses, threshold);
     per_pose
         .iter()
-        .map(|beyond| {
-            let compressed: f64 = beyond.iter().map(|&t| areas[t]).sum();
-            1.0 + COMPRESSED_FRAME_COST * compressed / total
-        })
+        .map(|beyond| beyond.iter().map(|&t| areas[t]).sum::<f64>() / total)
         .collect()
 }
 

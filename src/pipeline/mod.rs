@@ -37,6 +37,7 @@ pub mod preview;
 pub mod record;
 pub mod report;
 pub mod setup;
+pub mod shapes;
 pub mod step;
 pub mod synthetic;
 
@@ -157,37 +158,51 @@ pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<R
     let mut out = Frames::default();
     let mut totals = Totals::default();
     let end = plan.range.end;
-    // A clip's history leads to its first written frame; a still rig's shapes are each
-    // solved alone, from rest (the state put back at rest for each), and only those that
-    // compress some skin.
-    let first = plan.first_simulated();
-    let mut at_rest = true;
-    for k in first..end {
-        progress(Phase::Frames, k, end);
-        let w = &plan.weights[k];
-        if !plan.animated && !model.pose_maps.solves(k) {
-            let why = (plan.fps, record::NotSimulated::CompressesNothing);
-            let (record, composed) = step::unsimulated_frame(rig, w, k, &model, why)?;
+    if plan.animated {
+        // A clip's history leads to its first written frame.
+        for k in plan.first_simulated()..end {
+            progress(Phase::Frames, k, end);
+            let frame_options = if k == plan.first_simulated() && k > 0 {
+                options.settled()
+            } else {
+                options
+            };
+            let w = &plan.weights[k];
+            let (record, composed) =
+                step::step_frame(rig, w, k, &model, &mut state, &mut scratch, frame_options)?;
+            totals.add(&record);
             per_frame.push(record);
-            out.wrinkled.push(composed.wrinkled);
-            out.smooth.push(composed.target);
-            continue;
+            if k >= plan.range.start {
+                out.wrinkled.push(composed.wrinkled);
+                out.smooth.push(composed.target);
+            }
         }
-        if !plan.animated && !at_rest {
-            state.reset_to_rest(&model);
-            scratch = Scratch::new(model.lattice.node_count());
+    } else {
+        // A still rig's shapes are each solved alone, from rest, and only those that
+        // compress some skin; side by side when the state can be copied.
+        let to_solve = (plan.range.start..end)
+            .filter(|&k| model.pose_maps.solves(k))
+            .count();
+        let mut extra = Vec::new();
+        for _ in 1..shapes::worker_count(to_solve) {
+            match state.at_rest_copy(&model, scene, &plan)? {
+                Some(copy) => extra.push(copy),
+                None => break,
+            }
         }
-        at_rest = false;
-        let frame_options = if plan.animated && k == first && k > 0 {
-            options.settled()
-        } else {
-            options
-        };
-        let (record, composed) =
-            step::step_frame(rig, w, k, &model, &mut state, &mut scratch, frame_options)?;
-        totals.add(&record);
-        per_frame.push(record);
-        if k >= plan.range.start {
+        let solved = shapes::solve_shapes(
+            rig,
+            (&model, &plan.weights, plan.fps),
+            plan.range.start..plan.range.end,
+            (&mut state, extra),
+            options,
+            progress,
+        )?;
+        for (record, composed) in solved {
+            if record.not_simulated.is_none() {
+                totals.add(&record);
+            }
+            per_frame.push(record);
             out.wrinkled.push(composed.wrinkled);
             out.smooth.push(composed.target);
         }
@@ -203,7 +218,7 @@ pub fn run(rig: &Rig, opts: &RunOptions, progress: Progress) -> anyhow::Result<R
     }
     totals.frames_written = out.wrinkled.len();
     totals.wall_s = wall.elapsed().as_secs_f64();
-    let written = plan.range.start - first;
+    let written = plan.range.start - plan.first_simulated();
     let outcome = Outcome {
         log,
         per_frame: per_frame.split_off(written),

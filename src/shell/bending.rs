@@ -347,6 +347,16 @@ impl BendingEnergy {
         })
     }
 
+    /// The hinges of which `keep` (given a hinge's four vertices) says yes: the bending of
+    /// that part of the skin, over the same dofs.
+    pub fn part(&self, keep: impl Fn(&[usize]) -> bool) -> Self {
+        Self {
+            hinges: self.hinges.iter().filter(|h| keep(&h.v)).copied().collect(),
+            colouring: std::sync::OnceLock::new(),
+            ..*self
+        }
+    }
+
     /// Number of Hessian triplets emitted per evaluation.
     pub fn triplet_count(&self) -> usize {
         144 * self.hinges.len()

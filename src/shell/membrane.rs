@@ -352,6 +352,24 @@ impl MembraneEnergy {
         })
     }
 
+    /// The elements of which `keep` (given an element's vertices) says yes, with their
+    /// stiffness and law: the membrane of that part of the skin, over the same dofs.
+    pub fn part(&self, keep: impl Fn(&[usize]) -> bool) -> Self {
+        let (elements, element_lame) = self
+            .elements
+            .iter()
+            .zip(&self.element_lame)
+            .filter(|(el, _)| keep(&el.v))
+            .map(|(el, lame)| (*el, *lame))
+            .unzip();
+        Self {
+            elements,
+            element_lame,
+            colouring: std::sync::OnceLock::new(),
+            ..*self
+        }
+    }
+
     /// Number of Hessian triplets emitted per evaluation.
     pub fn triplet_count(&self) -> usize {
         81 * self.elements.len()

@@ -122,6 +122,31 @@ impl State {
     }
 }
 
+impl State {
+    /// Another state at rest for a still rig's shapes, solved beside this one: its own
+    /// interior stepper and a copy of the skin ([`EmbeddedShell::duplicate`]). `None` when
+    /// muscles drive (their fitter is not copied; the shapes are then solved one by one).
+    pub fn at_rest_copy(
+        &self,
+        model: &Model,
+        scene: &Scene,
+        plan: &Plan,
+    ) -> anyhow::Result<Option<State>> {
+        if self.muscles.is_some() {
+            return Ok(None);
+        }
+        let skin = self.skin.as_ref().map(|s| s.duplicate()).transpose()?;
+        let mut copy = State {
+            interior: interior::stepper(&model.lattice, scene, plan)?,
+            skin,
+            muscles: None,
+            last_target: None,
+        };
+        copy.reset_to_rest(model);
+        Ok(Some(copy))
+    }
+}
+
 /// The run's log: each stage's record in the order they were planned, and the warnings.
 #[derive(Debug, Default)]
 pub struct Log {

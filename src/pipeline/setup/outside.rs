@@ -240,6 +240,14 @@ impl PoseMaps {
 }
 
 impl PoseMaps {
+    /// The share of the welded triangles `pose` can wrinkle (0–1; 1 for a clip's frame):
+    /// what its skin solve costs, roughly.
+    pub fn active_share(&self, pose: usize) -> f64 {
+        self.active.get(pose).map_or(1.0, |a| {
+            a.iter().filter(|&&t| t).count() as f64 / a.len().max(1) as f64
+        })
+    }
+
     /// Whether `pose` needs a skin solve: a still rig's shape that compresses no skin in the
     /// model does not.
     pub fn solves(&self, pose: usize) -> bool {

@@ -253,6 +253,17 @@ impl StaticSolver {
         }
     }
 
+    /// Forget the Hessian layout of the energy last solved, and its gradient: the next
+    /// solve takes its layout from its energy's first Hessian. For an energy whose elements
+    /// changed in place, which its address and dof count alone do not show.
+    pub fn forget_layout(&mut self) {
+        self.trip.clear();
+        self.trip_current = false;
+        self.trip_owner = None;
+        self.trip_len = 0;
+        self.last_gradient = None;
+    }
+
     /// Drop the last solve's gradient (the energy changed: material, thickness, rest state).
     pub fn forget_gradient(&mut self) {
         self.last_gradient = None;
