@@ -81,3 +81,17 @@ pub fn measure(still: &Rig, clip: &Rig, fps: f64) -> anyhow::Result<CorrectivesC
         threads: rayon::current_num_threads(),
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An animated rig given as the still one is refused before anything runs, naming it.
+    #[test]
+    fn an_animated_rig_is_not_taken_for_a_still_one() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("rigs/face.glb");
+        let rig = crate::io::load::load(&path, &crate::io::LoadOptions::default()).unwrap();
+        let e = measure(&rig, &rig, 30.0).unwrap_err().to_string();
+        assert!(e.contains("face.glb") && e.contains("animated"), "{e}");
+    }
+}
