@@ -344,8 +344,7 @@ fn bench_rig(
         allow_outside_paths: paths.allow_outside_paths,
         ..Default::default()
     };
-    let mut loaded = crate::io::load::load(rig, &load)?;
-    crate::io::units::apply(&mut loaded, None, None);
+    let loaded = load_rig(rig, &load)?;
     let count = crate::pipeline::plan::clip_weights(&loaded, fps).0.len();
     let opts = crate::pipeline::RunOptions {
         preroll: None,
@@ -405,15 +404,19 @@ fn correctives(
     dir: &std::path::Path,
     out: &Output,
 ) -> anyhow::Result<()> {
-    let (still, animated) = (load_rig(rig)?, load_rig(clip)?);
+    let load = crate::io::LoadOptions::default();
+    let (still, animated) = (load_rig(rig, &load)?, load_rig(clip, &load)?);
     let cost = crate::studies::correctives::measure(&still, &animated, fps)?;
     let v = serde_json::to_value(&cost)?;
     write_result(out, "bench correctives", &v, &dir.join("correctives.json"))
 }
 
-/// A rig loaded with the default options, its units decided as `animate` decides them.
-fn load_rig(path: &std::path::Path) -> anyhow::Result<crate::io::load::Rig> {
-    let mut loaded = crate::io::load::load(path, &crate::io::LoadOptions::default())?;
+/// A rig loaded with `load`, its units decided as `animate` decides them.
+fn load_rig(
+    path: &std::path::Path,
+    load: &crate::io::LoadOptions,
+) -> anyhow::Result<crate::io::load::Rig> {
+    let mut loaded = crate::io::load::load(path, load)?;
     crate::io::units::apply(&mut loaded, None, None);
     Ok(loaded)
 }
@@ -448,9 +451,9 @@ fn chunk_cost(
     let times =
         chunk_cost::frame_times(&run).map_err(|e| anyhow::anyhow!("{}: {e}", report.display()))?;
     let fps = run["fps"].as_f64().unwrap_or(30.0);
-    let loaded = load_rig(rig)?;
-    let scene = crate::scene::Scene::default();
-    let threshold = 0.5 * crate::pipeline::setup::select::onset_strain(&scene.materials()?);
+    let loaded = load_rig(rig, &crate::io::LoadOptions::default())?;
+    let materials = crate::scene::Scene::default().materials()?;
+    let threshold = crate::pipeline::setup::select::default_threshold(&materials);
     let fractions = crate::pipeline::farm::compressed_fractions(&loaded, fps, threshold);
     let fit = chunk_cost::fit(&times, &fractions).ok_or_else(|| {
         anyhow::anyhow!(

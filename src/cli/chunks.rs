@@ -4,7 +4,7 @@ use super::Output;
 use crate::io as fio;
 use crate::pipeline::farm::{self, DEFAULT_PREROLL};
 use crate::pipeline::frames::FrameRange;
-use crate::pipeline::setup::select::onset_strain;
+use crate::pipeline::setup::select::default_threshold;
 use crate::scene::Scene;
 use std::path::PathBuf;
 
@@ -64,7 +64,7 @@ pub fn run(a: ChunksArgs, out: &Output) -> anyhow::Result<()> {
             a.rig.display()
         );
     }
-    let threshold = 0.5 * onset_strain(&scene.materials()?);
+    let threshold = default_threshold(&scene.materials()?);
     let costs = farm::frame_costs(&rig, a.fps, threshold);
     let within = match &a.frames {
         Some(t) => FrameRange::parse(t, costs.len())?,

@@ -291,15 +291,7 @@ mod tests {
                 p.push(Vector3::new(i as f64 * a, j as f64 * a, 0.0));
             }
         }
-        let mut t = Vec::new();
-        for j in 0..n - 1 {
-            for i in 0..n - 1 {
-                let v = j * n + i;
-                t.push([v, v + 1, v + n + 1]);
-                t.push([v, v + n + 1, v + n]);
-            }
-        }
-        TriMesh::new(p, t)
+        TriMesh::new(p, crate::mesh::grid_triangles(n, n))
     }
 
     #[test]

@@ -317,10 +317,9 @@ impl EmbeddedShell {
             for &v in &self.pinned_vertices {
                 held[v] = true;
             }
-            let part = self.shell.part(&held);
-            let elements = |s: &Shell| s.membrane.elements.len() + s.bending.hinges.len();
-            if (elements(&part) as f64) < PART_BELOW * elements(&self.shell) as f64 {
-                self.part = Some(part);
+            let (moving, all) = self.shell.moving_elements(&held);
+            if (moving as f64) < PART_BELOW * all as f64 {
+                self.part = Some(self.shell.part(&held));
             }
         }
         if had_part || self.part.is_some() {

@@ -560,15 +560,7 @@ mod tests {
         let p = (0..n * n)
             .map(|i| at + Vector3::new((i % n) as f64 * h, (i / n) as f64 * h, 0.0))
             .collect();
-        let mut t = Vec::new();
-        for j in 0..n - 1 {
-            for i in 0..n - 1 {
-                let a = j * n + i;
-                t.push([a, a + 1, a + n + 1]);
-                t.push([a, a + n + 1, a + n]);
-            }
-        }
-        TriMesh::new(p, t)
+        TriMesh::new(p, crate::mesh::grid_triangles(n, n))
     }
 
     fn cube(a: f64, at: Vector3<f64>) -> TriMesh {

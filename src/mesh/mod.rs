@@ -143,6 +143,20 @@ pub fn points_from_flat(x: &[f64]) -> Vec<Vector3<f64>> {
         .collect()
 }
 
+/// The triangles of a row-major grid of `nx` × `ny` vertices (vertex j nx + i at column i,
+/// row j): two per cell, wound counter-clockwise seen from +z when rows run along +y.
+pub fn grid_triangles(nx: usize, ny: usize) -> Vec<[usize; 3]> {
+    let mut t = Vec::with_capacity(2 * nx.saturating_sub(1) * ny.saturating_sub(1));
+    for j in 0..ny.saturating_sub(1) {
+        for i in 0..nx.saturating_sub(1) {
+            let a = j * nx + i;
+            t.push([a, a + 1, a + nx + 1]);
+            t.push([a, a + nx + 1, a + nx]);
+        }
+    }
+    t
+}
+
 /// Closed box mesh [0, a]³ (a in m) with each face split into m × m quads (outward normals).
 pub fn cube_mesh(a: f64, m: usize) -> TriMesh {
     box_mesh(Vector3::zeros(), Vector3::repeat(a), m)

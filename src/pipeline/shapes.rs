@@ -28,10 +28,14 @@ pub fn solve_shapes(
 ) -> anyhow::Result<Vec<Solved>> {
     let results: Mutex<Vec<Option<Solved>>> = Mutex::new(shapes.clone().map(|_| None).collect());
     // The largest shapes first, so that no worker is left with a large one at the end.
+    let share: Vec<f64> = shapes
+        .clone()
+        .map(|k| model.pose_maps.active_share(k))
+        .collect();
     let mut order: Vec<usize> = shapes.clone().collect();
     order.sort_by(|&a, &b| {
-        let share = |k| model.pose_maps.active_share(k);
-        share(b).total_cmp(&share(a)).then(a.cmp(&b))
+        let of = |k: usize| share[k - shapes.start];
+        of(b).total_cmp(&of(a)).then(a.cmp(&b))
     });
     let (next, done) = (AtomicUsize::new(0), AtomicUsize::new(0));
     let first_error: Mutex<Option<anyhow::Error>> = Mutex::new(None);

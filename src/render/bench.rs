@@ -20,15 +20,7 @@ pub fn wrinkled_patch(n: usize, amp: f64) -> TriMesh {
             pos.push(Vector3::new(x, y, dome + wr));
         }
     }
-    let mut tris = Vec::with_capacity(2 * (n - 1) * (n - 1));
-    for j in 0..n - 1 {
-        for i in 0..n - 1 {
-            let a = j * n + i;
-            tris.push([a, a + 1, a + n + 1]);
-            tris.push([a, a + n + 1, a + n]);
-        }
-    }
-    TriMesh::new(pos, tris)
+    TriMesh::new(pos, crate::mesh::grid_triangles(n, n))
 }
 
 /// Mean wall time (ms) of rendering a patch of about `triangles` triangles at `size` × `size`

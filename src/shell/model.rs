@@ -75,7 +75,7 @@ impl Shell {
     /// and Hessian are the whole shell's: a solve with those vertices pinned needs only the
     /// part (a still rig's shape moves a fraction of the face).
     pub fn part(&self, held: &[bool]) -> Shell {
-        let moves = |v: &[usize]| v.iter().any(|&i| !held[i]);
+        let moves = |v: &[usize]| moves(held, v);
         Shell {
             rest: self.rest.clone(),
             material: self.material,
@@ -86,10 +86,24 @@ impl Shell {
         }
     }
 
+    /// The triangles and hinges [`Shell::part`] keeps for `held`, counted without building
+    /// the part, and all of them: (moving, all).
+    pub fn moving_elements(&self, held: &[bool]) -> (usize, usize) {
+        let triangles = self.membrane.elements.iter().filter(|e| moves(held, &e.v));
+        let hinges = self.bending.hinges.iter().filter(|h| moves(held, &h.v));
+        let all = self.membrane.elements.len() + self.bending.hinges.len();
+        (triangles.count() + hinges.count(), all)
+    }
+
     /// Number of Hessian triplets one evaluation emits (fixed order: membrane, then bending).
     pub fn triplet_count(&self) -> usize {
         self.membrane.triplet_count() + self.bending.triplet_count()
     }
+}
+
+/// Whether an element of vertices `v` has a vertex `held` does not hold.
+fn moves(held: &[bool], v: &[usize]) -> bool {
+    v.iter().any(|&i| !held[i])
 }
 
 impl Energy for Shell {
@@ -196,6 +210,9 @@ mod tests {
         let part = shell.part(&held);
         assert!(part.membrane.elements.len() < shell.membrane.elements.len());
         assert!(part.bending.hinges.len() < shell.bending.hinges.len());
+        let all = shell.membrane.elements.len() + shell.bending.hinges.len();
+        let kept = part.membrane.elements.len() + part.bending.hinges.len();
+        assert_eq!(shell.moving_elements(&held), (kept, all));
         let mut rng = Lcg::new(5);
         let deform = |rng: &mut Lcg, free_only: bool, x: &[f64]| -> Vec<f64> {
             x.iter()

@@ -229,15 +229,7 @@ mod tests {
                 positions.push(Vector3::new(x + 0.3, y - 0.1, 0.004 * (40.0 * x).sin()));
             }
         }
-        let mut triangles = Vec::new();
-        for j in 0..ny - 1 {
-            for i in 0..nx - 1 {
-                let a = j * nx + i;
-                triangles.push([a, a + 1, a + nx + 1]);
-                triangles.push([a, a + nx + 1, a + nx]);
-            }
-        }
-        let mesh = TriMesh::new(positions, triangles);
+        let mesh = TriMesh::new(positions, crate::mesh::grid_triangles(nx, ny));
         let n = mesh.vertex_count();
         let dense: Vec<Vector3<f64>> = mesh
             .positions

@@ -412,15 +412,7 @@ pub(crate) mod test_support {
                 p.push(Vector3::new(x, y, 0.004 * (-(x * x + y * y) / 2e-4).exp()));
             }
         }
-        let mut t = Vec::new();
-        for j in 0..n - 1 {
-            for i in 0..n - 1 {
-                let a = j * n + i;
-                t.push([a, a + 1, a + n + 1]);
-                t.push([a, a + n + 1, a + n]);
-            }
-        }
-        TriMesh::new(p, t)
+        TriMesh::new(p, crate::mesh::grid_triangles(n, n))
     }
 
     /// A loaded face of `mesh` with one morph target that lifts the middle by up to 2 mm.

@@ -31,6 +31,13 @@ pub fn onset_strain(materials: &Materials) -> f64 {
     0.25 * (3.0 * interior / skin).powf(2.0 / 3.0)
 }
 
+/// The compression (1 − the smaller principal stretch) past which skin counts as compressed
+/// when the scene gives no `skin.compression_threshold`: half the onset strain
+/// ([`onset_strain`]), so skin is simulated before it can wrinkle.
+pub fn default_threshold(materials: &Materials) -> f64 {
+    0.5 * onset_strain(materials)
+}
+
 /// The smaller principal stretch of triangle `now` against its rest shape `rest` (both in m):
 /// √ of the smaller eigenvalue of C = Fᵀ F, F the deformation gradient in the rest plane.
 /// 1 for a rigid motion, below 1 under compression; 1 for a degenerate rest triangle.
@@ -163,7 +170,10 @@ pub fn select_skin(
     }
     let t = Instant::now();
     let onset = onset_strain(&plan.materials);
-    let threshold = scene.skin.compression_threshold.unwrap_or(0.5 * onset);
+    let threshold = scene
+        .skin
+        .compression_threshold
+        .unwrap_or_else(|| default_threshold(&plan.materials));
     let weights = &plan.weights;
     let count = welded.mesh.positions.len();
     let triangles = welded.mesh.triangles.len();
